@@ -1,0 +1,79 @@
+"""diffcontrol: train controllers by differentiating through simulators.
+
+The public API::
+
+    import diffcontrol
+    task = diffcontrol.make("pendulum")              # a registered task
+    result = diffcontrol.train(task)                 # BPTT through its simulator
+    policy = diffcontrol.load("runs/pendulum")       # obs (NumPy) -> Gymnasium action
+"""
+
+from __future__ import annotations
+
+import os as _os
+from pathlib import Path as _Path
+
+__version__ = "0.1.0"
+
+from . import controllers, rollout, systems, tasks  # noqa: E402
+from .config import TrainConfig  # noqa: E402
+from .controllers import MLPController, straight_through_sign  # noqa: E402
+from .errors import (  # noqa: E402
+    ConfigError,
+    DiffcontrolError,
+    ModelFileError,
+    RunDirectoryError,
+    UnknownTaskError,
+)
+from .evaluation import EvalResult, evaluate  # noqa: E402
+from .io import NumpyPolicy  # noqa: E402
+from .rollout import Trajectory  # noqa: E402
+from .tasks import Task, make, register  # noqa: E402
+from .training import TrainingDiverged, TrainResult, resolve_config, train  # noqa: E402
+
+
+def load(run_dir: str | _os.PathLike) -> NumpyPolicy:
+    """Load the controller saved by ``diffcontrol train`` in ``run_dir`` (or a ``model.json``).
+
+    Returns a ``NumpyPolicy``: ``policy(obs)`` takes one Gymnasium observation (NumPy) and
+    returns a valid Gymnasium action, so it drops into a plain ``gymnasium.make(...)`` loop.
+
+    Raises:
+        ModelFileError: the file is missing, corrupt, or of an unsupported version.
+    """
+    from .io import read_model
+
+    return NumpyPolicy(read_model(_Path(run_dir)))
+
+
+def list_tasks() -> list[str]:
+    """Names of the registered tasks."""
+    return tasks.names()
+
+
+__all__ = [
+    "ConfigError",
+    "DiffcontrolError",
+    "EvalResult",
+    "MLPController",
+    "ModelFileError",
+    "NumpyPolicy",
+    "RunDirectoryError",
+    "Task",
+    "TrainConfig",
+    "TrainResult",
+    "Trajectory",
+    "TrainingDiverged",
+    "UnknownTaskError",
+    "controllers",
+    "evaluate",
+    "list_tasks",
+    "load",
+    "make",
+    "register",
+    "resolve_config",
+    "rollout",
+    "systems",
+    "tasks",
+    "train",
+]

@@ -1,0 +1,66 @@
+"""Process-wide JAX settings for the command line: the persistent compilation cache.
+
+A second run of the same command loads its compiled programs from the cache instead of
+compiling them again. JAX stores no program that contains a host callback, and Equinox's
+runtime checks (``eqx.error_if``) insert one unless ``EQX_ON_ERROR`` says otherwise, so the
+training programs of diffcontrol contain no such checks: non-finite values are detected by
+the Python driver between chunks instead. ``cache_events()`` counts hits and misses so that
+``metrics.json`` (and a test) can show that the cache really hits.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+_EVENTS = {"hits": 0, "misses": 0, "requests": 0}
+_LISTENING = False
+
+_NAMES = {
+    "/jax/compilation_cache/cache_hits": "hits",
+    "/jax/compilation_cache/cache_misses": "misses",
+    "/jax/compilation_cache/compile_requests_use_cache": "requests",
+}
+
+
+def default_cache_dir() -> Path:
+    """``$DIFFCONTROL_CACHE_DIR``, else ``$XDG_CACHE_HOME/diffcontrol/jax``, else ``~/.cache/...``."""
+    if os.environ.get("DIFFCONTROL_CACHE_DIR"):
+        return Path(os.environ["DIFFCONTROL_CACHE_DIR"])
+    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    return Path(base) / "diffcontrol" / "jax"
+
+
+def enable_compile_cache(cache_dir: str | Path | None = None) -> Path | None:
+    """Turn on JAX's persistent compilation cache in ``cache_dir`` (default above).
+
+    Returns the directory, or ``None`` if it could not be created (the run goes on uncached).
+    """
+    import jax
+    from jax import monitoring
+
+    global _LISTENING
+    path = Path(cache_dir) if cache_dir else default_cache_dir()
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError:
+        return None
+    jax.config.update("jax_compilation_cache_dir", str(path))
+    # Cache every program, however quick to compile: short runs are where it matters.
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+    jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+    if not _LISTENING:
+        monitoring.register_event_listener(_on_event)
+        _LISTENING = True
+    return path
+
+
+def _on_event(event: str, **kwargs) -> None:
+    name = _NAMES.get(event)
+    if name:
+        _EVENTS[name] += 1
+
+
+def cache_events() -> dict[str, int]:
+    """Counts of persistent-cache hits, misses and requests since the cache was enabled."""
+    return dict(_EVENTS)

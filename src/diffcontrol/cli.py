@@ -1,0 +1,362 @@
+"""The ``diffcontrol`` command line. It sits on top of everything; nothing imports it."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+import time
+from pathlib import Path
+from typing import Any, NoReturn
+
+from .config import TrainConfig, help_of
+from .errors import DiffcontrolError
+
+EXIT_USAGE = 2
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, but a usage error is one line (the problem and the fix) and exit status 2."""
+
+    def error(self, message: str) -> NoReturn:
+        sys.stderr.write(f"{self.prog}: error: {message} (see `{self.prog} --help`)\n")
+        raise SystemExit(EXIT_USAGE)
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"must be a positive integer, got {value}")
+    return value
+
+
+def _nonneg_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {value}")
+    return value
+
+
+def _finite_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be a finite number, got {text!r}")
+    return value
+
+
+def _widths(text: str) -> tuple[int, ...]:
+    try:
+        widths = tuple(int(w) for w in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected comma-separated layer widths such as 64,64, got {text!r}"
+        ) from None
+    if not widths or any(w <= 0 for w in widths):
+        raise argparse.ArgumentTypeError(f"layer widths must be positive, got {text!r}")
+    return widths
+
+
+def _param(text: str) -> tuple[str, float]:
+    name, sep, value = text.partition("=")
+    if not sep or not name:
+        raise argparse.ArgumentTypeError(f"expected NAME=VALUE such as g=9.81, got {text!r}")
+    return name.strip(), _finite_float(value)
+
+
+# TrainConfig fields exposed as options: (type, metavar). Help comes from the field docs.
+_CONFIG_OPTIONS: dict[str, tuple[Any, str]] = {
+    "seed": (int, "N"),
+    "updates": (_positive_int, "N"),
+    "batch": (_positive_int, "N"),
+    "window": (_positive_int, "STEPS"),
+    "horizon": (_nonneg_int, "STEPS"),
+    "learning_rate": (_finite_float, "LR"),
+    "lr_schedule": (str, "NAME"),
+    "lr_final_fraction": (_finite_float, "F"),
+    "grad_clip": (_finite_float, "NORM"),
+    "hidden": (_widths, "W,W"),
+    "activation": (str, "NAME"),
+    "head": (str, "NAME"),
+    "loss": (str, "NAME"),
+    "eval_every": (_positive_int, "N"),
+    "eval_episodes": (_positive_int, "N"),
+    "target_return": (float, "R"),
+}
+
+
+def _build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(
+        prog="diffcontrol",
+        description=(
+            "Train controllers by differentiating through simulators. "
+            "Start with `diffcontrol list`, then `diffcontrol train pendulum --out runs/pendulum`."
+        ),
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    sub.required = True
+
+    sub.add_parser("list", help="list the tasks, one line each", description="List the tasks.")
+
+    p = sub.add_parser(
+        "train",
+        help="train a controller and write model, metrics, plots and an animation",
+        description=(
+            "Train a controller for TASK by backpropagation through time through its "
+            "differentiable simulator, with the task's tuned defaults unless options change "
+            "them. Writes to DIR: model.json (the controller, runnable with NumPy alone), "
+            "metrics.json (timings, simulated steps and episodes, learning curve, Gymnasium "
+            "evaluation), learning_curve.png, rollout.png, rollout.gif, and checkpoint.npz "
+            "(for --resume)."
+        ),
+    )
+    p.add_argument("task", metavar="TASK", help="task name (see `diffcontrol list`)")
+    p.add_argument("--out", required=True, metavar="DIR", help="output directory (new or empty)")
+    p.add_argument(
+        "--recipe",
+        metavar="NAME",
+        help="start from a named set of settings, e.g. 'original' for the 2019 Flux recipe",
+    )
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue the interrupted run in DIR from its last checkpoint",
+    )
+    p.add_argument(
+        "--final-eval",
+        type=_nonneg_int,
+        default=100,
+        metavar="N",
+        help="Gymnasium episodes (seeds 0..N-1) to evaluate after training; 0 skips (default 100)",
+    )
+    p.add_argument("--no-animation", action="store_true", help="skip the GIF (saves a few seconds)")
+    _add_common(p)
+    group = p.add_argument_group(
+        "training settings (defaults depend on the task; see `diffcontrol list`)"
+    )
+    for name, (typ, metavar) in _CONFIG_OPTIONS.items():
+        group.add_argument(
+            "--" + name.replace("_", "-"),
+            dest=name,
+            type=typ,
+            metavar=metavar,
+            default=None,
+            help=help_of(name),
+        )
+    group.add_argument(
+        "--param",
+        dest="params",
+        type=_param,
+        action="append",
+        metavar="NAME=VALUE",
+        help="override a physical parameter of the simulator (repeatable), e.g. --param g=9.81",
+    )
+
+    p = sub.add_parser(
+        "evaluate",
+        help="run a trained controller in Gymnasium's own environment",
+        description=(
+            "Run the controller saved in DIR in Gymnasium's own environment (Pendulum-v1, "
+            "CartPole-v1) on seeds S ... S+N-1 and print the mean and std of the return."
+        ),
+    )
+    p.add_argument("run_dir", metavar="DIR", help="a directory written by `diffcontrol train`")
+    p.add_argument(
+        "--episodes", type=_positive_int, default=100, metavar="N", help="episodes (default 100)"
+    )
+    p.add_argument("--seed", type=int, default=0, metavar="S", help="first reset seed (default 0)")
+    p.add_argument("--json", action="store_true", help="print the result as JSON")
+
+    p = sub.add_parser(
+        "animate",
+        help="re-render the animation of a saved controller",
+        description="Record one Gymnasium episode of the controller in DIR and write it as a GIF.",
+    )
+    p.add_argument("run_dir", metavar="DIR", help="a directory written by `diffcontrol train`")
+    p.add_argument(
+        "--seed", type=int, default=0, metavar="S", help="reset seed of the episode (default 0)"
+    )
+    p.add_argument("--out", metavar="FILE", default=None, help="GIF path (default DIR/rollout.gif)")
+    return parser
+
+
+def _add_common(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--no-compile-cache",
+        action="store_true",
+        help="do not use JAX's persistent compilation cache (also: DIFFCONTROL_NO_COMPILE_CACHE=1)",
+    )
+    p.add_argument("--quiet", action="store_true", help="print only the final summary")
+
+
+def _cmd_list(args: argparse.Namespace) -> int:
+    from . import tasks
+
+    for name in tasks.names():
+        task = tasks.make(name)
+        losses = "/".join(task.losses)
+        recipes = ", ".join(task.recipes()) or "-"
+        print(f"{name:<20} {task.summary}  [losses: {losses}; recipes: {recipes}]")
+    return 0
+
+
+def _cmd_train(args: argparse.Namespace) -> int:
+    from . import _jax_setup, io, tasks
+    from .evaluation import evaluate, record_episode
+    from .training import resolve_config, train
+
+    task = tasks.make(args.task)
+    overrides = {name: getattr(args, name) for name in _CONFIG_OPTIONS}
+    if args.params:
+        overrides["params"] = tuple(args.params)
+    out = Path(args.out)
+    explicit = args.recipe is not None or any(v is not None for v in overrides.values())
+    if args.resume and not explicit and (out / io.RUN_FILE).exists():
+        config = TrainConfig.from_json(io.read_json(out / io.RUN_FILE, "run file")["config"])
+    else:
+        config = resolve_config(task, args.recipe, **overrides)
+
+    cache_dir = None
+    if not (args.no_compile_cache or os.environ.get("DIFFCONTROL_NO_COMPILE_CACHE")):
+        cache_dir = _jax_setup.enable_compile_cache()
+    say = (lambda line: None) if args.quiet else (lambda line: print(line, flush=True))
+    say(
+        f"training {task.name}: {config.updates} updates x window {config.window} x batch "
+        f"{config.batch} (seed {config.seed}) -> {out}"
+    )
+    try:
+        result = train(task, config, out_dir=out, resume=args.resume, progress=say)
+    except KeyboardInterrupt:
+        print(
+            f"\ninterrupted; the last checkpoint is in {out}. Continue with: "
+            f"diffcontrol train {task.name} --out {out} --resume",
+            file=sys.stderr,
+        )
+        return 130
+    metrics = result.metrics
+    metrics["compile_cache"] = {
+        "dir": str(cache_dir) if cache_dir else None,
+        **_jax_setup.cache_events(),
+    }
+    metrics["command"] = " ".join(["diffcontrol", *sys.argv[1:]])
+    metrics["created"] = io.now_iso()
+
+    from . import __version__
+
+    doc = io.controller_to_dict(
+        result.controller,
+        task,
+        {
+            "diffcontrol_version": __version__,
+            "created": metrics["created"],
+            "seed": config.seed,
+            "train_seconds": metrics["train_seconds"],
+            "config": config.to_json(),
+        },
+    )
+    io.write_json(out / "model.json", doc)
+    policy = io.NumpyPolicy(doc)
+    if args.final_eval and task.gym_id:
+        t0 = time.perf_counter()
+        ev = evaluate(policy, task, episodes=args.final_eval, seed=0)
+        metrics["gym_eval"] = {**ev.to_json(), "seconds": time.perf_counter() - t0}
+        say(
+            f"Gymnasium {ev.env_id}, seeds 0-{args.final_eval - 1}: return {ev.mean:.1f} ± {ev.std:.1f}"
+        )
+    io.write_json(out / "metrics.json", metrics)
+
+    from . import plots
+
+    plots.learning_curve(metrics, out / "learning_curve.png", task.reward_threshold)
+    files = ["model.json", "metrics.json", "learning_curve.png"]
+    if task.gym_id:
+        rec = record_episode(policy, task, seed=0)
+        plots.rollout(rec, task, out / "rollout.png")
+        files.append("rollout.png")
+        if not args.no_animation:
+            from .animation import animate
+
+            animate(rec, task, out / "rollout.gif")
+            files.append("rollout.gif")
+    print(
+        f"done in {metrics['train_seconds']:.1f} s (compile {metrics['compile_seconds']:.1f} s): "
+        f"{metrics['simulated_episodes']:.4g} simulated episodes ({metrics['simulated_steps']} steps)"
+        + (
+            f"; Gymnasium return {metrics['gym_eval']['mean_return']:.1f} ± "
+            f"{metrics['gym_eval']['std_return']:.1f}"
+            if "gym_eval" in metrics
+            else ""
+        )
+    )
+    print(f"wrote {', '.join(str(out / f) for f in files)}")
+    return 0
+
+
+def _load_run(run_dir: str):
+    from . import io, tasks
+
+    doc = io.read_model(run_dir)
+    return tasks.make(doc["task"]), io.NumpyPolicy(doc)
+
+
+def _cmd_evaluate(args: argparse.Namespace) -> int:
+    from .evaluation import evaluate
+
+    task, policy = _load_run(args.run_dir)
+    if not task.gym_id:
+        raise DiffcontrolError(f"task {task.name!r} has no Gymnasium environment to evaluate in")
+    ev = evaluate(policy, task, episodes=args.episodes, seed=args.seed)
+    if args.json:
+        print(json.dumps({"run_dir": str(args.run_dir), "task": task.name, **ev.to_json()}))
+    else:
+        print(
+            f"{ev.env_id}: return {ev.mean:.2f} ± {ev.std:.2f} over {args.episodes} episodes "
+            f"(seeds {args.seed}-{args.seed + args.episodes - 1}; min {ev.returns.min():.1f}, "
+            f"max {ev.returns.max():.1f})"
+        )
+    return 0
+
+
+def _cmd_animate(args: argparse.Namespace) -> int:
+    from .animation import animate
+    from .evaluation import record_episode
+
+    task, policy = _load_run(args.run_dir)
+    path = Path(args.out) if args.out else Path(args.run_dir) / "rollout.gif"
+    rec = record_episode(policy, task, seed=args.seed)
+    animate(rec, task, path)
+    print(f"wrote {path} (return {rec.total_return:.1f}, {len(rec.rewards)} steps)")
+    return 0
+
+
+COMMANDS = {
+    "list": _cmd_list,
+    "train": _cmd_train,
+    "evaluate": _cmd_evaluate,
+    "animate": _cmd_animate,
+}
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the ``diffcontrol`` command; returns the exit status."""
+    parser = _build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return COMMANDS[args.command](args)
+    except DiffcontrolError as e:
+        print(f"diffcontrol {args.command}: error: {e}", file=sys.stderr)
+        return EXIT_USAGE
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,142 @@
+"""Controllers: MLP policies with fixed observation scaling and bounded action heads.
+
+A controller maps one observation (a vector) to one action (a vector). It is an
+``equinox.Module``, so it is a PyTree: ``jax.grad`` of any loss of its outputs gives a
+controller-shaped gradient, and ``jax.vmap`` runs it on a batch.
+
+Action heads (the last, parameter-free stage):
+
+- ``"linear"``: the raw output (unbounded; the 2019 Pendulum original).
+- ``"tanh"``: ``low + (high - low) (tanh(z) + 1) / 2``. Bounded and smooth, so the gradient
+  does not die at an actuator clip the way ``clip(z)`` would.
+- ``"sigmoid"``: the same map with the logistic function (used for angles in ``[0, 90]``).
+- ``"sign"``: the straight-through sign of the seed post applied to ``tanh(z)``: forward
+  ``+1`` if ``tanh(z) >= 0`` else ``-1``, backward the derivative of ``tanh`` (the sign's own
+  derivative is replaced by 1). This is how a discrete push is trained by backpropagation.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float, PRNGKeyArray
+
+ACTIVATIONS = {"tanh": jnp.tanh, "relu": jax.nn.relu, "sigmoid": jax.nn.sigmoid, "elu": jax.nn.elu}
+HEADS = ("linear", "tanh", "sigmoid", "sign")
+
+
+def straight_through_sign(x: Array) -> Array:
+    """``+1`` where ``x >= 0`` and ``-1`` elsewhere, with the identity as its derivative.
+
+    Forward: ``f(x) = 1 if x >= 0 else -1``. Backward: ``df/dx := 1``. (The 2019 Julia code used
+    ``sign``, which maps 0 to 0; the post's formula, used here, maps 0 to +1, so every output
+    is a valid two-action push.)
+    """
+    hard = jnp.where(x >= 0, 1.0, -1.0).astype(x.dtype)
+    return x + jax.lax.stop_gradient(hard - x)
+
+
+def apply_head(head: str, z: Array, low: Array, high: Array) -> Array:
+    """Map the network's raw output ``z`` through an action head (see the module docstring)."""
+    if head == "linear":
+        return z
+    if head == "tanh":
+        return low + (high - low) * (jnp.tanh(z) + 1) / 2
+    if head == "sigmoid":
+        return low + (high - low) * jax.nn.sigmoid(z)
+    if head == "sign":
+        return straight_through_sign(jnp.tanh(z))
+    raise ValueError(f"unknown action head {head!r}; choose one of {HEADS}")
+
+
+class MLPController(eqx.Module):
+    """A multilayer perceptron policy ``obs -> action``.
+
+    ``action = head(W_n act(... act(W_1 ((obs - obs_offset) * obs_scale) + b_1) ...) + b_n)``.
+    The observation scaling and the action bounds are fixed (they get no gradient).
+    """
+
+    layers: tuple[eqx.nn.Linear, ...]
+    obs_offset: Float[Array, " obs"]
+    obs_scale: Float[Array, " obs"]
+    action_low: Float[Array, " act"]
+    action_high: Float[Array, " act"]
+    activation: str = eqx.field(static=True)
+    head: str = eqx.field(static=True)
+
+    def __init__(
+        self,
+        key: PRNGKeyArray,
+        obs_size: int,
+        action_size: int,
+        hidden: Sequence[int] = (64, 64),
+        *,
+        activation: str = "tanh",
+        head: str = "tanh",
+        obs_offset: Sequence[float] | None = None,
+        obs_scale: Sequence[float] | None = None,
+        action_low: Sequence[float] | None = None,
+        action_high: Sequence[float] | None = None,
+        final_scale: float = 0.1,
+    ):
+        """Build a randomly initialised controller.
+
+        Args:
+            key: PRNG key for the weights.
+            obs_size, action_size: input and output sizes.
+            hidden: widths of the hidden layers.
+            activation: one of ``"tanh"``, ``"relu"``, ``"sigmoid"``, ``"elu"``.
+            head: one of ``"linear"``, ``"tanh"``, ``"sigmoid"``, ``"sign"``.
+            obs_offset, obs_scale: the network sees ``(obs - obs_offset) * obs_scale``.
+            action_low, action_high: bounds of the ``"tanh"``/``"sigmoid"`` heads.
+            final_scale: the last layer's initial weights are multiplied by this, so the
+                untrained controller starts near the middle of its action range.
+        """
+        if activation not in ACTIVATIONS:
+            raise ValueError(
+                f"unknown activation {activation!r}; choose one of {list(ACTIVATIONS)}"
+            )
+        if head not in HEADS:
+            raise ValueError(f"unknown action head {head!r}; choose one of {HEADS}")
+        sizes = [obs_size, *hidden, action_size]
+        keys = jax.random.split(key, len(sizes) - 1)
+        layers = [eqx.nn.Linear(a, b, key=k) for a, b, k in zip(sizes[:-1], sizes[1:], keys)]
+        last = layers[-1]
+        last = eqx.tree_at(
+            lambda l: (l.weight, l.bias), last, (last.weight * final_scale, last.bias * 0)
+        )
+        self.layers = (*layers[:-1], last)
+        self.obs_offset = _vector(obs_offset, obs_size, 0.0)
+        self.obs_scale = _vector(obs_scale, obs_size, 1.0)
+        self.action_low = _vector(action_low, action_size, -1.0)
+        self.action_high = _vector(action_high, action_size, 1.0)
+        self.activation = activation
+        self.head = head
+
+    def __call__(self, obs: Float[Array, " obs"]) -> Float[Array, " act"]:
+        act = ACTIVATIONS[self.activation]
+        # The scaling and bounds are constants of the controller, not trainable weights.
+        offset, scale = jax.lax.stop_gradient((self.obs_offset, self.obs_scale))
+        low, high = jax.lax.stop_gradient((self.action_low, self.action_high))
+        h = (obs - offset) * scale
+        for layer in self.layers[:-1]:
+            h = act(layer(h))
+        return apply_head(self.head, self.layers[-1](h), low, high)
+
+    @property
+    def num_parameters(self) -> int:
+        """Number of trainable weights and biases."""
+        return sum(l.weight.size + l.bias.size for l in self.layers)
+
+
+def _vector(values: Sequence[float] | None, size: int, default: float) -> Array:
+    if values is None:
+        return jnp.full((size,), default, dtype=jnp.float32)
+    arr = np.asarray(values, dtype=np.float32).reshape(-1)
+    if arr.shape != (size,):
+        raise ValueError(f"expected {size} values, got {arr.shape[0]}: {list(arr)}")
+    return jnp.asarray(arr)

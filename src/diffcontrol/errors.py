@@ -1,0 +1,31 @@
+"""Errors raised for user mistakes.
+
+Every error a user can cause is caught at the boundary (CLI, config, file loading) and raised
+as one of these, with a message that names the bad value and says what to do. The CLI prints
+the message on one line and exits with status 2.
+"""
+
+from __future__ import annotations
+
+
+class DiffcontrolError(ValueError):
+    """Base class of every user-facing error of diffcontrol."""
+
+
+class ConfigError(DiffcontrolError):
+    """A training or evaluation setting is out of range (for example ``window <= 0``)."""
+
+
+class UnknownTaskError(DiffcontrolError, KeyError):
+    """A task name that is not registered."""
+
+    def __str__(self) -> str:  # KeyError would quote the message
+        return str(self.args[0])
+
+
+class ModelFileError(DiffcontrolError):
+    """A ``model.json`` (or checkpoint) that is missing, corrupt or of an unknown version."""
+
+
+class RunDirectoryError(DiffcontrolError):
+    """An output directory that cannot be written or already holds a different run."""

@@ -1,0 +1,397 @@
+"""Files: ``model.json``, ``metrics.json``, ``run.json`` and checkpoints, written atomically.
+
+Nothing here loads pickle: JSON for everything people read, ``.npz`` opened with
+``allow_pickle=False`` for checkpoints. Every write goes to a temporary file in the same
+directory, is flushed to disk, and replaces the target with ``os.replace``, so a crash leaves
+either the old file or the new one, never half of one.
+
+``model.json`` schema (version 1), runnable with NumPy alone (see ``NumpyPolicy``)::
+
+    {
+      "format": "diffcontrol-model", "version": 1,
+      "task": "pendulum", "gym_id": "Pendulum-v1",
+      "observation": {"size": 3, "offset": [0, 0, 0], "scale": [1, 1, 0.125]},
+      "network": {"activation": "tanh",
+                  "layers": [{"weight": [[...], ...], "bias": [...]}, ...]},
+      "action": {"size": 1, "head": "tanh", "low": [-2.0], "high": [2.0],
+                 "gym": "box"},
+      "metadata": {...}
+    }
+
+Forward pass: ``h = (obs - offset) * scale``; for every layer but the last
+``h = activation(W h + b)`` (``W`` has shape ``[out, in]``); ``z = W_last h + b_last``;
+``action = head(z)`` with ``linear: z``, ``tanh: low + (high - low) (tanh z + 1) / 2``,
+``sigmoid: low + (high - low) / (1 + exp(-z))``, ``sign: +1 if tanh(z) >= 0 else -1``.
+The Gymnasium action is the action vector for ``"gym": "box"`` and
+``1 if action[0] >= 0 else 0`` for ``"gym": "discrete_sign"`` (CartPole: 1 pushes right).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import datetime as _dt
+import io as _io
+import json
+import math
+import os
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import jax
+import numpy as np
+
+from .controllers import ACTIVATIONS, HEADS, MLPController
+from .errors import ModelFileError, RunDirectoryError
+
+MODEL_FORMAT = "diffcontrol-model"
+MODEL_VERSION = 1
+CHECKPOINT_FORMAT = "diffcontrol-checkpoint"
+CHECKPOINT_VERSION = 1
+
+# ---------------------------------------------------------------------------------------------
+# atomic writes
+
+
+@contextlib.contextmanager
+def _atomic(path: Path, mode: str) -> Iterator[Any]:
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, mode) as f:
+            yield f
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+        raise
+
+
+def write_bytes(path: str | os.PathLike, data: bytes) -> None:
+    """Write ``data`` to ``path`` atomically."""
+    with _atomic(Path(path), "wb") as f:
+        f.write(data)
+
+
+def write_json(path: str | os.PathLike, obj: Any) -> None:
+    """Write ``obj`` as indented JSON, atomically. Non-finite floats become ``null``."""
+    text = json.dumps(_finite(obj), indent=1, allow_nan=False)
+    write_bytes(path, (text + "\n").encode())
+
+
+def _finite(obj: Any) -> Any:
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_finite(v) for v in obj]
+    if isinstance(obj, np.ndarray | np.generic):
+        return _finite(obj.tolist())
+    return obj
+
+
+def read_json(path: str | os.PathLike, what: str = "file") -> Any:
+    """Read JSON, turning a missing or malformed file into a ``ModelFileError``."""
+    path = Path(path)
+    try:
+        return json.loads(path.read_text())
+    except FileNotFoundError:
+        raise ModelFileError(f"{what} {path} does not exist") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise ModelFileError(f"{what} {path} is not valid JSON ({e}); re-create it") from None
+
+
+def now_iso() -> str:
+    """The current UTC time, ISO 8601, to the second."""
+    return _dt.datetime.now(_dt.UTC).replace(microsecond=0).isoformat()
+
+
+# ---------------------------------------------------------------------------------------------
+# model.json
+
+
+def controller_to_dict(controller: MLPController, task: Any, metadata: dict | None = None) -> dict:
+    """The ``model.json`` document of a trained ``MLPController`` for ``task``."""
+    gym_kind = "discrete_sign" if controller.head == "sign" else "box"
+    layers = [
+        {"weight": np.asarray(l.weight).tolist(), "bias": np.asarray(l.bias).tolist()}
+        for l in controller.layers
+    ]
+    bounded = controller.head in ("tanh", "sigmoid")
+    return {
+        "format": MODEL_FORMAT,
+        "version": MODEL_VERSION,
+        "task": task.name,
+        "gym_id": task.gym_id,
+        "observation": {
+            "size": int(controller.obs_offset.shape[0]),
+            "offset": np.asarray(controller.obs_offset).tolist(),
+            "scale": np.asarray(controller.obs_scale).tolist(),
+        },
+        "network": {"activation": controller.activation, "layers": layers},
+        "action": {
+            "size": int(controller.action_low.shape[0]),
+            "head": controller.head,
+            "low": np.asarray(controller.action_low).tolist() if bounded else None,
+            "high": np.asarray(controller.action_high).tolist() if bounded else None,
+            "gym": gym_kind,
+        },
+        "metadata": dict(metadata or {}),
+    }
+
+
+def _check_model(doc: Any, path: Path) -> None:
+    def bad(problem: str) -> ModelFileError:
+        return ModelFileError(
+            f"{path} is not a usable model.json: {problem}; re-create it with `diffcontrol train`"
+        )
+
+    if not isinstance(doc, dict) or doc.get("format") != MODEL_FORMAT:
+        raise bad(f"'format' is not {MODEL_FORMAT!r}")
+    if doc.get("version") != MODEL_VERSION:
+        raise bad(f"version {doc.get('version')!r} is not supported (this diffcontrol reads 1)")
+    try:
+        obs, net, act = doc["observation"], doc["network"], doc["action"]
+        if net["activation"] not in ACTIVATIONS:
+            raise bad(f"unknown activation {net['activation']!r}")
+        if act["head"] not in HEADS:
+            raise bad(f"unknown action head {act['head']!r}")
+        size = obs["size"]
+        if len(obs["offset"]) != size or len(obs["scale"]) != size:
+            raise bad("observation offset/scale do not match its size")
+        for i, layer in enumerate(net["layers"]):
+            w, b = np.asarray(layer["weight"], float), np.asarray(layer["bias"], float)
+            if w.ndim != 2 or w.shape[1] != size or b.shape != (w.shape[0],):
+                raise bad(f"layer {i} has weight {w.shape} and bias {b.shape}, inconsistent")
+            if not (np.all(np.isfinite(w)) and np.all(np.isfinite(b))):
+                raise bad(f"layer {i} holds non-finite weights")
+            size = w.shape[0]
+        if size != act["size"]:
+            raise bad(f"the network outputs {size} values but the action has {act['size']}")
+    except (KeyError, TypeError, ValueError) as e:
+        if isinstance(e, ModelFileError):
+            raise
+        raise bad(f"missing or malformed field ({e!r})") from None
+
+
+def read_model(path: str | os.PathLike) -> dict:
+    """Read and validate a ``model.json`` (a file or a run directory holding one)."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / "model.json"
+    doc = read_json(path, "model file")
+    _check_model(doc, path)
+    return doc
+
+
+_NP_ACT = {
+    "tanh": np.tanh,
+    "relu": lambda x: np.maximum(x, 0.0),
+    "sigmoid": lambda x: 1.0 / (1.0 + np.exp(-x)),
+    "elu": lambda x: np.where(x > 0, x, np.expm1(np.minimum(x, 0.0))),
+}
+
+
+class NumpyPolicy:
+    """A ``model.json`` controller run with NumPy alone.
+
+    ``policy(obs)`` takes one Gymnasium observation and returns a valid Gymnasium action, so
+    it drops into a plain ``gymnasium.make(...)`` loop. ``policy.action(obs)`` returns the
+    controller's continuous action vector (the push multiplier ``+-1`` for CartPole).
+    """
+
+    def __init__(self, doc: dict):
+        _check_model(doc, Path("<model>"))
+        self.doc = doc
+        self.task = doc["task"]
+        self.gym_id = doc.get("gym_id")
+        self._offset = np.asarray(doc["observation"]["offset"], np.float64)
+        self._scale = np.asarray(doc["observation"]["scale"], np.float64)
+        self._layers = [
+            (np.asarray(l["weight"], np.float64), np.asarray(l["bias"], np.float64))
+            for l in doc["network"]["layers"]
+        ]
+        self._act = _NP_ACT[doc["network"]["activation"]]
+        a = doc["action"]
+        self._head, self._gym = a["head"], a["gym"]
+        self._low = None if a.get("low") is None else np.asarray(a["low"], np.float64)
+        self._high = None if a.get("high") is None else np.asarray(a["high"], np.float64)
+
+    def action(self, obs: np.ndarray) -> np.ndarray:
+        """The controller's action vector for one observation (or a batch, leading axis)."""
+        h = (np.asarray(obs, np.float64) - self._offset) * self._scale
+        for w, b in self._layers[:-1]:
+            h = self._act(h @ w.T + b)
+        w, b = self._layers[-1]
+        z = h @ w.T + b
+        if self._head == "linear":
+            return z
+        if self._head == "tanh":
+            return self._low + (self._high - self._low) * (np.tanh(z) + 1) / 2
+        if self._head == "sigmoid":
+            return self._low + (self._high - self._low) / (1 + np.exp(-z))
+        return np.where(np.tanh(z) >= 0, 1.0, -1.0)
+
+    def __call__(self, obs: np.ndarray) -> Any:
+        a = self.action(obs)
+        if self._gym == "discrete_sign":
+            return int(a.reshape(-1)[0] >= 0)
+        if self._low is not None:
+            a = np.clip(a, self._low, self._high)
+        return a.astype(np.float32)
+
+    def __repr__(self) -> str:
+        sizes = [self._layers[0][0].shape[1]] + [w.shape[0] for w, _ in self._layers]
+        return f"NumpyPolicy(task={self.task!r}, sizes={sizes}, head={self._head!r})"
+
+
+def controller_from_dict(doc: dict) -> MLPController:
+    """Rebuild the JAX ``MLPController`` of a ``model.json`` document."""
+    _check_model(doc, Path("<model>"))
+    import jax.numpy as jnp
+
+    layers_doc = doc["network"]["layers"]
+    hidden = tuple(len(l["bias"]) for l in layers_doc[:-1])
+    a = doc["action"]
+    ctrl = MLPController(
+        jax.random.PRNGKey(0),
+        doc["observation"]["size"],
+        a["size"],
+        hidden,
+        activation=doc["network"]["activation"],
+        head=a["head"],
+        obs_offset=doc["observation"]["offset"],
+        obs_scale=doc["observation"]["scale"],
+        action_low=a.get("low"),
+        action_high=a.get("high"),
+    )
+    new_layers = tuple(
+        eqx_replace_linear(
+            l, jnp.asarray(d["weight"], jnp.float32), jnp.asarray(d["bias"], jnp.float32)
+        )
+        for l, d in zip(ctrl.layers, layers_doc)
+    )
+    import equinox as eqx
+
+    return eqx.tree_at(lambda c: c.layers, ctrl, new_layers)
+
+
+def eqx_replace_linear(layer, weight, bias):
+    import equinox as eqx
+
+    return eqx.tree_at(lambda l: (l.weight, l.bias), layer, (weight, bias))
+
+
+# ---------------------------------------------------------------------------------------------
+# checkpoints: one .npz of arrays plus a JSON header, no pickle
+
+
+def save_checkpoint(path: str | os.PathLike, tree: Any, meta: dict) -> None:
+    """Save the array leaves of ``tree`` and a JSON-able ``meta`` dict to ``path`` atomically."""
+    leaves = jax.tree.leaves(tree)
+    header = {"format": CHECKPOINT_FORMAT, "version": CHECKPOINT_VERSION, "leaves": len(leaves)}
+    header["meta"] = _finite(meta)
+    arrays = {f"leaf_{i:04d}": np.asarray(x) for i, x in enumerate(leaves)}
+    arrays["header"] = np.frombuffer(json.dumps(header).encode(), dtype=np.uint8)
+    buf = _io.BytesIO()
+    np.savez(buf, **arrays)
+    write_bytes(path, buf.getvalue())
+
+
+def load_checkpoint(path: str | os.PathLike, like: Any) -> tuple[Any, dict]:
+    """Load a checkpoint into the structure of ``like``; returns ``(tree, meta)``.
+
+    Raises:
+        ModelFileError: the file is missing, corrupt, or does not fit ``like`` (a different
+            run's checkpoint).
+    """
+    path = Path(path)
+    leaves_like, treedef = jax.tree.flatten(like)
+
+    def bad(problem: str) -> ModelFileError:
+        return ModelFileError(f"checkpoint {path} {problem}; start a new run in a new directory")
+
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            header = json.loads(bytes(data["header"]).decode())
+            if (
+                header.get("format") != CHECKPOINT_FORMAT
+                or header.get("version") != CHECKPOINT_VERSION
+            ):
+                raise bad("has an unknown format or version")
+            if header["leaves"] != len(leaves_like):
+                raise bad("does not match this run's configuration")
+            leaves = []
+            for i, ref in enumerate(leaves_like):
+                arr = data[f"leaf_{i:04d}"]
+                ref_arr = np.asarray(ref)
+                if arr.shape != ref_arr.shape or arr.dtype != ref_arr.dtype:
+                    raise bad("does not match this run's configuration")
+                leaves.append(jax.numpy.asarray(arr))
+    except FileNotFoundError:
+        raise bad("does not exist") from None
+    except (OSError, ValueError, KeyError, json.JSONDecodeError) as e:
+        if isinstance(e, ModelFileError):
+            raise
+        raise bad(f"is corrupt ({e})") from None
+    return jax.tree.unflatten(treedef, leaves), header["meta"]
+
+
+# ---------------------------------------------------------------------------------------------
+# run directories
+
+RUN_FILE = "run.json"
+
+
+def prepare_run_dir(out_dir: str | os.PathLike, run: dict, resume: bool) -> Path:
+    """Check that ``out_dir`` can take this run, create it, and write ``run.json``.
+
+    ``run`` identifies the run (task and config). Without ``resume`` the directory must be
+    new or empty; with it, it must hold the same run. Nothing existing is overwritten.
+
+    Raises:
+        RunDirectoryError: the directory is not writable, holds something else, or holds a
+            different run.
+    """
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise RunDirectoryError(f"--out {out} is a file, not a directory; choose a directory")
+    existing = out / RUN_FILE
+    if existing.exists():
+        old = read_json(existing, "run file")
+        if not resume:
+            raise RunDirectoryError(
+                f"{out} already holds a run (task {old.get('task')!r}, seed "
+                f"{old.get('config', {}).get('seed')!r}); pass --resume to continue it or "
+                "choose a new --out"
+            )
+        if old.get("task") != run["task"] or old.get("config") != run["config"]:
+            changed = sorted(
+                k
+                for k in set(old.get("config", {})) | set(run["config"])
+                if old.get("config", {}).get(k) != run["config"].get(k)
+            )
+            what = "task" if old.get("task") != run["task"] else ", ".join(changed)
+            raise RunDirectoryError(
+                f"{out} holds a different run (differs in: {what}); resume it with the same "
+                "options or choose a new --out"
+            )
+        return out
+    if resume:
+        raise RunDirectoryError(f"nothing to resume: {out} holds no {RUN_FILE}; drop --resume")
+    if out.exists() and any(out.iterdir()):
+        raise RunDirectoryError(
+            f"{out} is not empty and holds no diffcontrol run; choose a new or empty --out"
+        )
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        write_json(existing, run)
+    except OSError as e:
+        raise RunDirectoryError(
+            f"cannot write to {out} ({e.strerror}); choose a writable --out"
+        ) from None
+    return out

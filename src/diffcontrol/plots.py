@@ -1,0 +1,83 @@
+"""PNG plots: the learning curve, and the states and actions of one rollout."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from .evaluation import Recording  # noqa: E402
+from .tasks import Task  # noqa: E402
+
+
+def _save(fig: Any, path: str | Path) -> Path:
+    import io as _io
+
+    from .io import write_bytes
+
+    buf = _io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110)
+    plt.close(fig)
+    write_bytes(path, buf.getvalue())
+    return Path(path)
+
+
+def learning_curve(
+    metrics: dict[str, Any], path: str | Path, threshold: float | None = None
+) -> Path:
+    """Evaluation return (with its spread) and training loss against simulated episodes."""
+    curve = metrics["curve"]
+    episodes = np.array([p["simulated_episodes"] for p in curve])
+    ret = np.array([p["eval_return"] for p in curve])
+    std = np.array([p["eval_return_std"] for p in curve])
+    loss = np.array([p["loss"] for p in curve], dtype=float)
+    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
+    ax1.plot(episodes, ret, "o-", color="C0", label="evaluation return (simulator)")
+    ax1.fill_between(episodes, ret - std, ret + std, color="C0", alpha=0.2)
+    if threshold is not None:
+        ax1.axhline(threshold, color="k", ls="--", lw=1, label=f"threshold {threshold:g}")
+    ax1.set_ylabel("return")
+    ax1.legend(loc="lower right")
+    ax1.set_title(
+        f"{metrics['task']}: {metrics['simulated_episodes']:.4g} simulated episodes, "
+        f"{metrics['train_seconds']:.1f} s (compile {metrics['compile_seconds']:.1f} s)"
+    )
+    ok = np.isfinite(loss)
+    ax2.plot(episodes[ok], loss[ok], "o-", color="C1")
+    ax2.set_ylabel("training loss (window mean)")
+    if ok.any() and np.all(loss[ok] > 0):
+        ax2.set_yscale("log")
+    ax2.set_xlabel("simulated episodes (standard length)")
+    for ax in (ax1, ax2):
+        ax.grid(alpha=0.3)
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def rollout(recording: Recording, task: Task, path: str | Path) -> Path:
+    """States and actions of one recorded episode against time."""
+    states, actions = recording.states, recording.actions
+    t = np.arange(states.shape[0]) * recording.dt
+    labels = list(task.state_labels) or [f"state {i}" for i in range(states.shape[1])]
+    alabels = list(task.action_labels) or [f"action {i}" for i in range(actions.shape[1])]
+    n = states.shape[1] + actions.shape[1]
+    fig, axes = plt.subplots(n, 1, figsize=(7, 1.6 * n + 0.6), sharex=True)
+    for i, ax in enumerate(axes[: states.shape[1]]):
+        ax.plot(t, states[:, i], color=f"C{i}")
+        ax.set_ylabel(labels[i], fontsize=8)
+    for j, ax in enumerate(axes[states.shape[1] :]):
+        ax.step(t[:-1], actions[:, j], where="post", color="k")
+        ax.set_ylabel(alabels[j], fontsize=8)
+    for ax in axes:
+        ax.grid(alpha=0.3)
+    axes[-1].set_xlabel("time (s)")
+    axes[0].set_title(
+        f"{recording.env_id} (Gymnasium), one episode: return {recording.total_return:.1f}"
+    )
+    fig.tight_layout()
+    return _save(fig, path)

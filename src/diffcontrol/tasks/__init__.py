@@ -1,0 +1,57 @@
+"""Tasks: a system plus its losses, initial-state distribution and horizon, in a registry.
+
+``make("pendulum")`` and the CLI share the registry, so a task registered from user code with
+``register`` is trainable from Python exactly like the built-in ones.
+"""
+
+from __future__ import annotations
+
+from ..errors import UnknownTaskError
+from ._base import StepLoss, Task
+from .cartpole import CartPole
+from .pendulum import Pendulum, PendulumUnclipped
+
+_REGISTRY: dict[str, Task] = {}
+
+
+def register(task: Task) -> Task:
+    """Add a task instance to the registry under ``task.name``; returns it."""
+    if task.name in _REGISTRY and type(_REGISTRY[task.name]) is not type(task):
+        raise ValueError(f"a different task is already registered as {task.name!r}")
+    _REGISTRY[task.name] = task
+    return task
+
+
+def make(name: str) -> Task:
+    """The registered task called ``name``.
+
+    Raises:
+        UnknownTaskError: no task has that name (the message lists those that do).
+    """
+    try:
+        return _REGISTRY[name]
+    except KeyError:
+        raise UnknownTaskError(
+            f"unknown task {name!r}; choose one of: {', '.join(sorted(_REGISTRY))} "
+            "(`diffcontrol list` describes them)"
+        ) from None
+
+
+def names() -> list[str]:
+    """Names of the registered tasks, in registration order."""
+    return list(_REGISTRY)
+
+
+for _task in (Pendulum(), PendulumUnclipped(), CartPole()):
+    register(_task)
+
+__all__ = [
+    "Task",
+    "StepLoss",
+    "make",
+    "names",
+    "register",
+    "Pendulum",
+    "PendulumUnclipped",
+    "CartPole",
+]

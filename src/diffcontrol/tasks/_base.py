@@ -1,0 +1,115 @@
+"""What a task is: a system, its losses, its initial-state distribution and its horizon."""
+
+from __future__ import annotations
+
+import abc
+from collections.abc import Callable
+from typing import Any, ClassVar
+
+import numpy as np
+from jaxtyping import Array, PRNGKeyArray, PyTree
+
+StepLoss = Callable[[PyTree, Array, Array, Array, Array], Array]
+"""``loss(params, state, action, next_state, reward) -> scalar``: the training loss of one step."""
+
+
+class Task(abc.ABC):
+    """A discrete-time control task.
+
+    Subclasses are stateless singletons: everything that varies between calls (physical
+    parameters, states, keys) is an argument, so every method is a pure function that can be
+    ``jit``ted, ``vmap``ped and differentiated.
+
+    Class attributes:
+        name: the registry name (``diffcontrol list``).
+        summary: one line for ``diffcontrol list``.
+        gym_id: the Gymnasium environment the task is evaluated in, or ``None``.
+        episode_length: the standard episode length (Gymnasium's ``max_episode_steps``);
+            ``simulated_episodes`` in ``metrics.json`` is counted in these.
+        observation_size, action_size: vector sizes the controller sees and produces.
+        action_head: the controller head that makes actions valid (``"tanh"``, ``"sign"``).
+        action_low, action_high: bounds for bounded heads.
+        obs_offset, obs_scale: the fixed observation normalisation of controllers.
+        reward_threshold: the return at which the task counts as solved.
+        losses: the names of the built-in training losses; the first is the default.
+        state_labels, action_labels: names with units, for plots.
+    """
+
+    name: ClassVar[str]
+    summary: ClassVar[str]
+    gym_id: ClassVar[str | None] = None
+    episode_length: ClassVar[int]
+    observation_size: ClassVar[int]
+    action_size: ClassVar[int]
+    action_head: ClassVar[str]
+    action_low: ClassVar[tuple[float, ...] | None] = None
+    action_high: ClassVar[tuple[float, ...] | None] = None
+    obs_offset: ClassVar[tuple[float, ...] | None] = None
+    obs_scale: ClassVar[tuple[float, ...] | None] = None
+    reward_threshold: ClassVar[float | None] = None
+    losses: ClassVar[tuple[str, ...]]
+    state_labels: ClassVar[tuple[str, ...]] = ()
+    action_labels: ClassVar[tuple[str, ...]] = ()
+
+    # --- the differentiable simulator -------------------------------------------------------
+
+    @abc.abstractmethod
+    def default_params(self) -> PyTree:
+        """The nominal physical parameters (a PyTree of floats)."""
+
+    @abc.abstractmethod
+    def reset(self, key: PRNGKeyArray, params: PyTree) -> Array:
+        """Sample an initial state from the task's reset distribution."""
+
+    @abc.abstractmethod
+    def step(self, params: PyTree, state: Array, action: Array) -> tuple[Array, Array, Array]:
+        """Advance one step: returns ``(next_state, reward, terminated)``.
+
+        Differentiable in ``params``, ``state`` and ``action`` wherever the system is.
+        ``terminated`` is a boolean with no derivative.
+        """
+
+    @abc.abstractmethod
+    def observe(self, state: Array) -> Array:
+        """The observation the controller sees (Gymnasium's observation)."""
+
+    @abc.abstractmethod
+    def step_loss(self, name: str) -> StepLoss:
+        """The built-in training loss ``name`` (one of ``losses``) of one step."""
+
+    # --- configuration and the outside world ------------------------------------------------
+
+    @abc.abstractmethod
+    def default_config(self) -> Any:
+        """The ``TrainConfig`` that ``diffcontrol train NAME`` uses by default."""
+
+    def recipes(self) -> dict[str, dict[str, Any]]:
+        """Named sets of ``TrainConfig`` overrides (``--recipe``), e.g. the 2019 original."""
+        return {}
+
+    def gym_action(self, action: np.ndarray) -> Any:
+        """Convert a controller output to a valid action of ``gym_id``."""
+        return np.asarray(action, dtype=np.float32)
+
+    def make_gym_env(self, **kwargs: Any):
+        """``gymnasium.make(gym_id, **kwargs)``; raises if the task has no Gymnasium twin."""
+        import gymnasium
+
+        if self.gym_id is None:
+            raise ValueError(f"task {self.name!r} has no Gymnasium environment")
+        return gymnasium.make(self.gym_id, **kwargs)
+
+    def controller_kwargs(self) -> dict[str, Any]:
+        """Keyword arguments that make an ``MLPController`` fit this task."""
+        return dict(
+            obs_size=self.observation_size,
+            action_size=self.action_size,
+            head=self.action_head,
+            obs_offset=self.obs_offset,
+            obs_scale=self.obs_scale,
+            action_low=self.action_low,
+            action_high=self.action_high,
+        )
+
+    def __repr__(self) -> str:
+        return f"<task {self.name}>"

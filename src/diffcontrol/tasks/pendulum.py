@@ -1,0 +1,136 @@
+"""Pendulum swing-up: Gymnasium's ``Pendulum-v1``, and the unclipped variant of the 2019 original."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import jax.numpy as jnp
+import numpy as np
+
+from ..config import TrainConfig
+from ..systems import pendulum as pend
+from ._base import StepLoss, Task
+
+
+class Pendulum(Task):
+    """Swing a pendulum up and hold it there with at most 2 N m of torque (``Pendulum-v1``).
+
+    Training losses (per step, averaged over a window and the batch):
+
+    - ``cost``: Gymnasium's cost ``wrap(theta)^2 + 0.1 theta_dot^2 + 0.001 u^2``, so the
+      training objective is exactly minus the return.
+    - ``squared_cost``: the cost squared, as in the 2019 Flux original (``mse(r, 0)``).
+    """
+
+    name = "pendulum"
+    summary = "Pendulum-v1 swing-up by BPTT through the exact Gymnasium dynamics (torque |u| <= 2)"
+    gym_id = "Pendulum-v1"
+    episode_length = pend.EPISODE_LENGTH
+    observation_size = 3
+    action_size = 1
+    action_head = "tanh"
+    action_low = (-2.0,)
+    action_high = (2.0,)
+    obs_scale = (1.0, 1.0, 1.0 / 8.0)
+    reward_threshold = -200.0
+    losses = ("cost", "squared_cost")
+    state_labels = ("angle θ (rad, 0 = up)", "angular speed θ̇ (rad/s)")
+    action_labels = ("torque (N m)",)
+
+    def default_params(self) -> pend.PendulumParams:
+        return pend.PendulumParams()
+
+    def reset(self, key, params):
+        return pend.reset(key, params)
+
+    def step(self, params, state, action):
+        torque = action[0]
+        reward = -pend.cost(params, state, torque)
+        return pend.step(params, state, torque), reward, jnp.asarray(False)
+
+    def observe(self, state):
+        return pend.observe(state)
+
+    def step_loss(self, name: str) -> StepLoss:
+        if name == "cost":
+            return lambda params, state, action, next_state, reward: -reward
+        if name == "squared_cost":
+            return lambda params, state, action, next_state, reward: reward**2
+        raise KeyError(name)
+
+    def default_config(self) -> TrainConfig:
+        return TrainConfig(
+            updates=300,
+            batch=64,
+            window=100,
+            horizon=200,
+            learning_rate=5e-3,
+            lr_schedule="cosine",
+            grad_clip=1.0,
+            hidden=(64, 64),
+            eval_every=25,
+            target_return=float("nan"),
+        )
+
+    def recipes(self) -> dict[str, dict[str, Any]]:
+        return {
+            # pendulum/DiffRL.jl@10bd26c: Dense(3,24,relu)-Dense(24,48,relu)-Dense(48,1), ADAM
+            # 0.03, mse of the cost over 4-step windows, one update per window, one episode.
+            "original": dict(
+                updates=self.episode_length // 4,
+                batch=1,
+                window=4,
+                horizon=self.episode_length,
+                learning_rate=0.03,
+                lr_schedule="constant",
+                grad_clip=0.0,
+                hidden=(24, 48),
+                activation="relu",
+                head="linear",
+                loss="squared_cost",
+                eval_every=self.episode_length // 4,
+            )
+        }
+
+
+class PendulumUnclipped(Pendulum):
+    """The 2019 original's variant: no torque clip, 1000-step episodes, unbounded controller.
+
+    Evaluated in Gymnasium's own ``PendulumEnv`` with its ``max_torque`` set to infinity and a
+    1000-step time limit, so the figures are comparable to the original's, not to the
+    ``Pendulum-v1`` leaderboard.
+    """
+
+    name = "pendulum-unclipped"
+    summary = "the 2019 original's Pendulum: unclipped torque, 1000-step episodes"
+    episode_length = 1000
+    action_head = "linear"
+    action_low = None
+    action_high = None
+    reward_threshold = None
+
+    def default_params(self) -> pend.PendulumParams:
+        return pend.PendulumParams(max_torque=float("inf"))
+
+    def default_config(self) -> TrainConfig:
+        return super().default_config().replace(horizon=200, head="linear")
+
+    def recipes(self) -> dict[str, dict[str, Any]]:
+        recipe = dict(super().recipes()["original"])
+        recipe.update(updates=self.episode_length // 4, horizon=self.episode_length, eval_every=50)
+        return {"original": recipe}
+
+    def gym_action(self, action: np.ndarray) -> Any:
+        return np.asarray(action, dtype=np.float64)
+
+    def make_gym_env(self, **kwargs: Any):
+        import gymnasium
+
+        env = gymnasium.make(
+            "Pendulum-v1",
+            max_episode_steps=self.episode_length,
+            disable_env_checker=True,  # actions beyond +-2 are the point of this variant
+            **kwargs,
+        )
+        env.unwrapped.max_torque = np.inf
+        return env

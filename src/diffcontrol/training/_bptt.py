@@ -1,0 +1,187 @@
+"""Windowed backpropagation through time: the pure, jitted part of the trainer.
+
+One *update* runs every simulation in the batch forward ``window`` steps from its carried
+state, differentiates the mean step loss through the simulator and the controller, clips the
+gradient, and takes one optimiser step. The simulator states come out of the window as plain
+values, so the next window starts from them without their history: truncated BPTT, written
+out rather than hidden in a ``stop_gradient``. A *chunk* is ``lax.scan`` over a fixed number of
+updates under one ``jit``; the Python driver calls the same compiled chunk again and again.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import optax
+from jaxtyping import Array, Float, Int, PRNGKeyArray, PyTree
+
+from ..config import TrainConfig
+from ..controllers import MLPController
+from ..rollout import batch_returns
+from ..tasks import StepLoss, Task
+
+
+class TrainState(eqx.Module):
+    """Everything a training run carries from one update to the next (and checkpoints)."""
+
+    controller: MLPController
+    opt_state: PyTree
+    env_state: Float[Array, "batch state"]
+    env_time: Int[Array, " batch"]
+    episode_return: Float[Array, " batch"]
+    key: PRNGKeyArray
+    update: Int[Array, ""]
+    finished_episodes: Int[Array, ""]
+    finished_return_sum: Float[Array, ""]
+
+
+class UpdateStats(eqx.Module):
+    """Per-update diagnostics, stacked over a chunk."""
+
+    loss: Float[Array, ""]
+    grad_norm: Float[Array, ""]
+
+
+def make_optimizer(config: TrainConfig) -> optax.GradientTransformation:
+    """Adam with the configured schedule, after optional global-norm gradient clipping."""
+    lr = config.learning_rate
+    final = lr * config.lr_final_fraction
+    if config.lr_schedule == "constant":
+        schedule: optax.Schedule | float = lr
+    elif config.lr_schedule == "cosine":
+        schedule = optax.cosine_decay_schedule(lr, config.updates, alpha=config.lr_final_fraction)
+    else:
+        warmup = max(1, config.updates // 20)
+        schedule = optax.warmup_cosine_decay_schedule(
+            0.0, lr, warmup, max(config.updates, warmup + 1), end_value=final
+        )
+    parts = [optax.clip_by_global_norm(config.grad_clip)] if config.grad_clip > 0 else []
+    return optax.chain(*parts, optax.adam(schedule))
+
+
+class Trainer(eqx.Module):
+    """The pure functions of one training configuration (built once, compiled once)."""
+
+    task: Task = eqx.field(static=True)
+    config: TrainConfig = eqx.field(static=True)
+    step_loss: StepLoss = eqx.field(static=True)
+    optimizer: optax.GradientTransformation = eqx.field(static=True)
+    horizon: int = eqx.field(static=True)
+
+    def init(self, key: PRNGKeyArray, params: PyTree) -> TrainState:
+        """A fresh training state: a random controller and ``batch`` reset simulations."""
+        k_ctrl, k_env, k_run = jax.random.split(key, 3)
+        cfg = self.config
+        kwargs = self.task.controller_kwargs()
+        if cfg.head:
+            kwargs["head"] = cfg.head
+        controller = MLPController(k_ctrl, hidden=cfg.hidden, activation=cfg.activation, **kwargs)
+        env_state = jax.vmap(lambda k: self.task.reset(k, params))(
+            jax.random.split(k_env, cfg.batch)
+        )
+        zero = jnp.zeros((), jnp.int32)
+        return TrainState(
+            controller=controller,
+            opt_state=self.optimizer.init(eqx.filter(controller, eqx.is_inexact_array)),
+            env_state=env_state,
+            env_time=jnp.zeros((cfg.batch,), jnp.int32),
+            episode_return=jnp.zeros((cfg.batch,), env_state.dtype),
+            key=k_run,
+            update=zero,
+            finished_episodes=zero,
+            finished_return_sum=jnp.zeros((), env_state.dtype),
+        )
+
+    def window_loss(self, controller, params, env_state, env_time, episode_return, keys):
+        """Mean step loss over one window and the batch, and the carried-out states."""
+        task, horizon, step_loss = self.task, self.horizon, self.step_loss
+
+        def one_env(state, time, ret, env_keys):
+            def body(carry, key):
+                state, time, ret = carry
+                action = controller(task.observe(state))
+                next_state, reward, term = task.step(params, state, action)
+                loss = step_loss(params, state, action, next_state, reward)
+                time, ret = time + 1, ret + reward
+                done = term | (time >= horizon)
+                # An explicit restart: the new episode's state does not depend on the old one.
+                carried = jnp.where(done, task.reset(key, params), next_state)
+                out = (loss, done, ret)
+                return (carried, jnp.where(done, 0, time), jnp.where(done, 0.0, ret)), out
+
+            carry, (losses, done, rets) = jax.lax.scan(body, (state, time, ret), env_keys)
+            return carry, (jnp.mean(losses), jnp.sum(done), jnp.sum(jnp.where(done, rets, 0.0)))
+
+        carry, (losses, n_done, ret_sum) = jax.vmap(one_env, in_axes=(0, 0, 0, 1))(
+            env_state, env_time, episode_return, keys
+        )
+        return jnp.mean(losses), (carry, jnp.sum(n_done), jnp.sum(ret_sum))
+
+    def update(self, ts: TrainState, params: PyTree) -> tuple[TrainState, UpdateStats]:
+        """One truncated-BPTT update (one window)."""
+        cfg = self.config
+        key, k_win = jax.random.split(ts.key)
+        keys = jax.random.split(k_win, (cfg.window, cfg.batch))
+
+        grad_fn = eqx.filter_value_and_grad(self.window_loss, has_aux=True)
+        (loss, (carry, n_done, ret_sum)), grads = grad_fn(
+            ts.controller, params, ts.env_state, ts.env_time, ts.episode_return, keys
+        )
+        updates, opt_state = self.optimizer.update(
+            grads, ts.opt_state, eqx.filter(ts.controller, eqx.is_inexact_array)
+        )
+        controller = eqx.apply_updates(ts.controller, updates)
+        env_state, env_time, episode_return = carry
+        new = TrainState(
+            controller=controller,
+            opt_state=opt_state,
+            env_state=env_state,
+            env_time=env_time,
+            episode_return=episode_return,
+            key=key,
+            update=ts.update + 1,
+            finished_episodes=ts.finished_episodes + n_done.astype(jnp.int32),
+            finished_return_sum=ts.finished_return_sum + ret_sum,
+        )
+        return new, UpdateStats(loss=loss, grad_norm=optax.global_norm(grads))
+
+    def chunk(self, ts: TrainState, params: PyTree, total_updates: Array):
+        """``eval_every`` updates under one ``lax.scan``; updates past ``total_updates`` are skipped.
+
+        Skipping (rather than a shorter last chunk) keeps one compiled program for the run.
+        """
+
+        def body(ts, _):
+            def skip(ts, params):
+                nan = jnp.full((), jnp.nan, ts.finished_return_sum.dtype)
+                return ts, UpdateStats(loss=nan, grad_norm=nan)
+
+            return jax.lax.cond(ts.update < total_updates, self.update, skip, ts, params)
+
+        return jax.lax.scan(body, ts, None, length=self.config.eval_every)
+
+    def evaluate(self, controller: MLPController, params: PyTree, key: PRNGKeyArray) -> Array:
+        """Returns of ``eval_episodes`` standard-length episodes in the simulator."""
+        keys = jax.random.split(key, self.config.eval_episodes)
+        return batch_returns(self.task, params, controller, keys, self.task.episode_length)
+
+
+def make_trainer(task: Task, config: TrainConfig, step_loss: StepLoss | None = None) -> Trainer:
+    """Build the ``Trainer`` for ``task`` and ``config`` (validating the loss name)."""
+    from ..errors import ConfigError
+
+    if step_loss is None:
+        name = config.loss or task.losses[0]
+        if name not in task.losses:
+            raise ConfigError(
+                f"unknown loss {name!r} for task {task.name!r}; choose one of {', '.join(task.losses)}"
+            )
+        step_loss = task.step_loss(name)
+    return Trainer(
+        task=task,
+        config=config,
+        step_loss=step_loss,
+        optimizer=make_optimizer(config),
+        horizon=config.horizon or task.episode_length,
+    )
