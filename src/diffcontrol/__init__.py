@@ -17,7 +17,7 @@ __version__ = "0.1.0"
 
 from . import controllers, rollout, systems, tasks  # noqa: E402
 from .config import TrainConfig  # noqa: E402
-from .controllers import MLPController, straight_through_sign  # noqa: E402
+from .controllers import MLPController, straight_through_sign  # noqa: E402, F401
 from .errors import (  # noqa: E402
     ConfigError,
     DiffcontrolError,
