@@ -78,12 +78,12 @@ class CartPole(Task):
 
     def default_config(self) -> TrainConfig:
         return TrainConfig(
-            updates=120,
+            updates=150,  # 150 x 8 x 4 = 4,800 steps: 9.6 episodes of 500 steps
             batch=4,
             window=8,
             horizon=500,
             learning_rate=0.01,
-            lr_schedule="constant",
+            lr_schedule="cosine",
             grad_clip=1.0,
             hidden=(24, 48),
             activation="relu",
