@@ -151,7 +151,7 @@ def _build_parser() -> argparse.ArgumentParser:
             type=typ,
             metavar=metavar,
             default=None,
-            help=help_of(name),
+            help=help_of(name).replace("%", "%%"),
         )
     group.add_argument(
         "--param",

@@ -144,7 +144,7 @@ class Trainer(eqx.Module):
             finished_episodes=ts.finished_episodes + n_done.astype(jnp.int32),
             finished_return_sum=ts.finished_return_sum + ret_sum,
         )
-        return new, UpdateStats(loss=loss, grad_norm=optax.global_norm(grads))
+        return new, UpdateStats(loss=loss, grad_norm=optax.tree_utils.tree_norm(grads))
 
     def chunk(self, ts: TrainState, params: PyTree, total_updates: Array):
         """``eval_every`` updates under one ``lax.scan``; updates past ``total_updates`` are skipped.

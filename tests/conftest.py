@@ -1,0 +1,34 @@
+"""Shared test setup: a private compilation cache, and small trained runs shared by tests."""
+
+from __future__ import annotations
+
+import os
+import tempfile
+
+# A private persistent compilation cache for the whole test session, set before any
+# diffcontrol import reads it; the user's own cache is never touched by the tests.
+os.environ.setdefault("DIFFCONTROL_CACHE_DIR", tempfile.mkdtemp(prefix="diffcontrol-test-cache-"))
+
+import pytest  # noqa: E402
+
+from diffcontrol.cli import main  # noqa: E402
+
+TINY_CARTPOLE = ["--updates", "20", "--eval-every", "10", "--eval-episodes", "4", "--final-eval", "3"]
+
+
+@pytest.fixture(scope="session")
+def cartpole_run(tmp_path_factory):
+    """A CartPole run trained by the CLI on a tiny budget (shared, read-only)."""
+    out = tmp_path_factory.mktemp("runs") / "cartpole"
+    assert main(["train", "cartpole", "--out", str(out), "--quiet", *TINY_CARTPOLE]) == 0
+    return out
+
+
+@pytest.fixture(scope="session")
+def pendulum_run(tmp_path_factory):
+    """A Pendulum run trained by the CLI on a tiny budget (shared, read-only)."""
+    out = tmp_path_factory.mktemp("runs") / "pendulum"
+    args = ["--updates", "10", "--window", "10", "--batch", "4", "--eval-every", "5"]
+    args += ["--eval-episodes", "2", "--final-eval", "2"]
+    assert main(["train", "pendulum", "--out", str(out), "--quiet", *args]) == 0
+    return out
