@@ -11,7 +11,11 @@ os.environ.setdefault("DIFFCONTROL_CACHE_DIR", tempfile.mkdtemp(prefix="diffcont
 
 import pytest  # noqa: E402
 
+from diffcontrol._jax_setup import enable_compile_cache  # noqa: E402
 from diffcontrol.cli import main  # noqa: E402
+
+# Tests that train the same small configurations share compiled programs through the cache.
+enable_compile_cache()
 
 TINY_CARTPOLE = ["--updates", "20", "--eval-every", "10", "--eval-episodes", "4", "--final-eval", "3"]
 

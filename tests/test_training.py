@@ -1,0 +1,182 @@
+"""The trainer: learning with real thresholds, exact resume, one compilation, the cache."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import equinox as eqx
+import gymnasium
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from jax import monitoring
+
+import diffcontrol
+from diffcontrol import io
+from diffcontrol.evaluation import evaluate
+from diffcontrol.training import TrainingDiverged, resolve_config, train
+
+
+def _weights(controller):
+    return jax.tree.leaves(eqx.filter(controller, eqx.is_inexact_array))
+
+
+def test_cartpole_defaults_learn_to_balance():
+    """The default CartPole recipe (<= 10 simulated episodes) balances on Gymnasium seeds."""
+    task = diffcontrol.make("cartpole")
+    result = train(task)
+    assert result.metrics["simulated_episodes"] <= 10
+    policy = io.NumpyPolicy(io.controller_to_dict(result.controller, task))
+    ev = evaluate(policy, task, episodes=20, seed=0)
+    assert ev.mean >= 475, ev.returns
+
+
+def test_pendulum_learns_on_a_small_budget():
+    """A few hundred short-window updates take the return from about -1300 far up."""
+    task = diffcontrol.make("pendulum")
+    cfg = resolve_config(task, updates=200, batch=32, window=20, hidden=(64, 64), eval_every=100)
+    cfg = cfg.replace(learning_rate=1e-2, eval_episodes=32)
+    result = train(task, cfg)
+    first, last = result.curve[0]["eval_return"], result.curve[-1]["eval_return"]
+    assert first < -1000
+    assert last > -700, (first, last)
+
+
+def test_resume_continues_exactly(tmp_path):
+    """A run interrupted after a checkpoint and resumed ends with the same weights."""
+    task = diffcontrol.make("cartpole")
+    cfg = resolve_config(task, updates=30, eval_every=10, eval_episodes=2)
+    whole = train(task, cfg)
+
+    calls = []
+
+    def interrupt_at_third_point(line):
+        calls.append(line)
+        if len(calls) == 3:  # points at updates 0, 10, 20: checkpoint at 10 exists
+            raise KeyboardInterrupt
+
+    out = tmp_path / "run"
+    with pytest.raises(KeyboardInterrupt):
+        train(task, cfg, out_dir=out, progress=interrupt_at_third_point)
+    with np.load(out / "checkpoint.npz", allow_pickle=False) as data:
+        meta = json.loads(bytes(data["header"]).decode())["meta"]
+    assert meta["curve"][-1]["update"] == 10
+    resumed = train(task, cfg, out_dir=out, resume=True)
+    for a, b in zip(_weights(whole.controller), _weights(resumed.controller), strict=True):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    assert [p["update"] for p in resumed.curve] == [0, 10, 20, 30]
+    assert resumed.metrics["simulated_steps"] == whole.metrics["simulated_steps"]
+
+
+def test_same_seed_same_run_and_different_seed_differs():
+    task = diffcontrol.make("pendulum")
+    cfg = resolve_config(task, updates=4, batch=2, window=5, eval_every=2, eval_episodes=2)
+    a, b = train(task, cfg), train(task, cfg)
+    c = train(task, cfg.replace(seed=1))
+    wa, wb, wc = (np.concatenate([np.ravel(x) for x in _weights(r.controller)]) for r in (a, b, c))
+    np.testing.assert_array_equal(wa, wb)
+    assert not np.allclose(wa, wc)
+
+
+def test_chunks_are_compiled_once():
+    """After the first chunk, further chunks compile nothing: one compiled chunk is reused."""
+    task = diffcontrol.make("pendulum")
+    compiles = []
+    at_point = []
+
+    def listener(event, duration, **kwargs):
+        if event == "/jax/core/compile/backend_compile_duration":
+            compiles.append(duration)
+
+    cfg = resolve_config(task, updates=12, batch=2, window=3, eval_every=3, eval_episodes=2)
+    monitoring.register_event_duration_secs_listener(listener)
+    try:
+        train(task, cfg.replace(hidden=(7,)), progress=lambda line: at_point.append(len(compiles)))
+    finally:
+        monitoring.unregister_event_duration_listener(listener)
+    assert len(at_point) == 5  # updates 0, 3, 6, 9, 12
+    assert at_point[0] > 0  # the chunk was compiled (a shape no other test uses)
+    assert at_point[2:] == [at_point[1]] * 3, at_point
+
+
+def test_divergence_is_reported_not_hidden():
+    """A non-finite loss stops the run with a message naming the fix."""
+    task = diffcontrol.make("pendulum")
+    cfg = resolve_config(task, updates=4, batch=2, window=3, eval_every=2, eval_episodes=2)
+
+    def nan_loss(params, state, action, next_state, reward):
+        return jnp.sqrt(-1.0 - reward**2)  # nan
+
+    with pytest.raises(TrainingDiverged, match="learning-rate"):
+        train(task, cfg, step_loss=nan_loss)
+
+
+def test_user_loss_changes_what_is_learned():
+    """A user-supplied loss from Python replaces the task's (here: push the cart right)."""
+    task = diffcontrol.make("cartpole")
+    cfg = resolve_config(task, updates=20, eval_every=20, eval_episodes=2, learning_rate=0.05)
+
+    def go_right(params, state, action, next_state, reward):
+        return -next_state[1]  # maximise the cart's speed to the right
+
+    result = train(task, cfg, step_loss=go_right)
+    obs = jax.vmap(lambda k: task.reset(k, None))(jax.random.split(jax.random.PRNGKey(0), 64))
+    pushes = jax.vmap(result.controller)(obs)
+    assert float(jnp.mean(pushes)) > 0.9
+
+
+def test_load_drops_into_a_plain_gymnasium_loop(cartpole_run, pendulum_run):
+    for run, env_id in ((cartpole_run, "CartPole-v1"), (pendulum_run, "Pendulum-v1")):
+        policy = diffcontrol.load(run)
+        env = gymnasium.make(env_id)
+        obs, _ = env.reset(seed=0)
+        for _ in range(20):
+            action = policy(obs)
+            assert env.action_space.contains(action), action
+            obs, _, term, trunc, _ = env.step(action)
+            if term or trunc:
+                break
+
+
+def test_numpy_policy_matches_the_jax_controller(pendulum_run, cartpole_run):
+    for run in (pendulum_run, cartpole_run):
+        doc = io.read_model(run)
+        ctrl = io.controller_from_dict(doc)
+        policy = io.NumpyPolicy(doc)
+        obs = np.random.default_rng(0).normal(size=(50, doc["observation"]["size"]))
+        np.testing.assert_allclose(
+            policy.action(obs), np.asarray(jax.vmap(ctrl)(jnp.asarray(obs, jnp.float32))), atol=1e-5
+        )
+
+
+def test_corrupt_checkpoint_is_a_clear_error(tmp_path):
+    task = diffcontrol.make("cartpole")
+    cfg = resolve_config(task, updates=2, eval_every=2, eval_episodes=2)
+    out = tmp_path / "run"
+    train(task, cfg, out_dir=out)
+    (out / "checkpoint.npz").write_bytes(b"garbage")
+    with pytest.raises(diffcontrol.ModelFileError, match="corrupt"):
+        train(task, cfg, out_dir=out, resume=True)
+
+
+def test_persistent_compile_cache_hits_on_a_second_run(tmp_path):
+    """A second identical command loads every program from the cache and compiles nothing.
+
+    JAX refuses to cache programs with host callbacks (such as Equinox's runtime checks), so
+    this also guards against one sneaking into the training programs.
+    """
+    env = dict(os.environ, DIFFCONTROL_CACHE_DIR=str(tmp_path / "cache"))
+    args = ["train", "cartpole", "--updates", "4", "--eval-every", "2", "--eval-episodes", "2"]
+    args += ["--final-eval", "1", "--no-animation", "--quiet", "--hidden", "5,5"]
+    caches = []
+    for i in range(2):
+        cmd = [sys.executable, "-m", "diffcontrol.cli", *args, "--out", str(tmp_path / f"r{i}")]
+        subprocess.run(cmd, check=True, env=env, capture_output=True)
+        caches.append(json.loads((tmp_path / f"r{i}" / "metrics.json").read_text())["compile_cache"])
+    assert caches[0]["misses"] >= 2 and caches[0]["hits"] == 0
+    assert caches[1]["misses"] == 0
+    assert caches[1]["hits"] >= caches[0]["misses"]
