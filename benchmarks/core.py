@@ -1,0 +1,135 @@
+"""Benchmark of the core demos: Pendulum and CartPole trained with `diffcontrol train` defaults.
+
+Each run is the real command line, `diffcontrol train TASK --out DIR --seed S`, in a fresh
+process pinned to one core (`taskset -c 0`) with the persistent compilation cache turned off,
+so `train_seconds` includes compiling everything from scratch. Each trained controller is
+then evaluated in Gymnasium's own environment on reset seeds 0-99.
+
+    python benchmarks/core.py                 # defaults, 5 training seeds per task
+    python benchmarks/core.py --original      # also the 2019 single-episode recipes
+    python benchmarks/core.py --seeds 1 --tasks cartpole
+
+Prints a table and writes benchmarks/results/core.json (machine, date, every figure).
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import json
+import os
+import platform
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+
+
+def run_train(task: str, seed: int, extra: list[str], workdir: Path) -> dict:
+    out = workdir / f"{task}-{seed}-{abs(hash(tuple(extra))) % 10**6}"
+    cmd = [sys.executable, "-m", "diffcontrol.cli", "train", task, "--out", str(out)]
+    cmd += ["--seed", str(seed), "--quiet", "--no-animation", "--final-eval", "100", *extra]
+    if shutil.which("taskset"):
+        cmd = ["taskset", "-c", "0", *cmd]
+    env = dict(os.environ, DIFFCONTROL_NO_COMPILE_CACHE="1")
+    subprocess.run(cmd, check=True, env=env, stdout=subprocess.DEVNULL)
+    metrics = json.loads((out / "metrics.json").read_text())
+    return {
+        "task": task,
+        "recipe": " ".join(extra) or "defaults",
+        "seed": seed,
+        "simulated_episodes": metrics["simulated_episodes"],
+        "simulated_steps": metrics["simulated_steps"],
+        "train_seconds": metrics["train_seconds"],
+        "compile_seconds": metrics["compile_seconds"],
+        "gym_env": metrics["gym_eval"]["env_id"],
+        "eval_mean": metrics["gym_eval"]["mean_return"],
+        "eval_std": metrics["gym_eval"]["std_return"],
+        "eval_episodes": metrics["gym_eval"]["episodes"],
+    }
+
+
+def machine() -> dict:
+    cpu = platform.processor() or "unknown"
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    import jax
+
+    return {
+        "cpu": cpu,
+        "cores_used": 1 if shutil.which("taskset") else os.cpu_count(),
+        "python": platform.python_version(),
+        "jax": jax.__version__,
+        "date": dt.date.today().isoformat(),
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--seeds", type=int, default=5, help="training seeds per task (default 5)")
+    parser.add_argument("--tasks", nargs="+", default=["pendulum", "cartpole"])
+    parser.add_argument("--original", action="store_true", help="also run the 2019 recipes")
+    parser.add_argument("--out", type=Path, default=HERE / "results" / "core.json")
+    args = parser.parse_args()
+
+    configs = [(task, []) for task in args.tasks]
+    if args.original:
+        configs += [
+            ("pendulum", ["--recipe", "original"]),
+            ("pendulum-unclipped", ["--recipe", "original"]),
+            ("cartpole", ["--recipe", "original"]),
+        ]
+    rows = []
+    header = f"{'task':<19} {'recipe':<18} {'seed':>4} {'episodes':>9} {'steps':>9} {'wall s':>7} {'compile s':>9}  {'Gymnasium return (100 seeds)':<28}"
+    print(header)
+    print("-" * len(header))
+    with tempfile.TemporaryDirectory() as tmp:
+        for task, extra in configs:
+            for seed in range(args.seeds):
+                r = run_train(task, seed, extra, Path(tmp))
+                rows.append(r)
+                print(
+                    f"{r['task']:<19} {r['recipe']:<18} {seed:>4} {r['simulated_episodes']:>9.4g} "
+                    f"{r['simulated_steps']:>9} {r['train_seconds']:>7.1f} {r['compile_seconds']:>9.1f}  "
+                    f"{r['eval_mean']:>9.1f} ± {r['eval_std']:<6.1f} ({r['gym_env']})",
+                    flush=True,
+                )
+    summary = []
+    for task, extra in configs:
+        group = [r for r in rows if r["task"] == task and r["recipe"] == (" ".join(extra) or "defaults")]
+        means = [r["eval_mean"] for r in group]
+        summary.append(
+            {
+                "task": task,
+                "recipe": group[0]["recipe"],
+                "seeds": len(group),
+                "median_eval_mean": statistics.median(means),
+                "worst_eval_mean": min(means),
+                "median_train_seconds": statistics.median(r["train_seconds"] for r in group),
+                "max_train_seconds": max(r["train_seconds"] for r in group),
+                "simulated_episodes": group[0]["simulated_episodes"],
+            }
+        )
+    print()
+    print(f"{'task':<19} {'recipe':<18} {'seeds':>5} {'median return':>13} {'worst':>8} {'median s':>8} {'max s':>6}")
+    for s in summary:
+        print(
+            f"{s['task']:<19} {s['recipe']:<18} {s['seeds']:>5} {s['median_eval_mean']:>13.1f} "
+            f"{s['worst_eval_mean']:>8.1f} {s['median_train_seconds']:>8.1f} {s['max_train_seconds']:>6.1f}"
+        )
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps({"machine": machine(), "runs": rows, "summary": summary}, indent=1) + "\n")
+    print(f"\nwrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
