@@ -74,7 +74,9 @@ def machine() -> dict:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--seeds", type=int, default=5, help="training seeds per task (default 5)")
     parser.add_argument("--tasks", nargs="+", default=["pendulum", "cartpole"])
     parser.add_argument("--original", action="store_true", help="also run the 2019 recipes")
@@ -105,7 +107,9 @@ def main() -> None:
                 )
     summary = []
     for task, extra in configs:
-        group = [r for r in rows if r["task"] == task and r["recipe"] == (" ".join(extra) or "defaults")]
+        group = [
+            r for r in rows if r["task"] == task and r["recipe"] == (" ".join(extra) or "defaults")
+        ]
         means = [r["eval_mean"] for r in group]
         summary.append(
             {
@@ -120,14 +124,18 @@ def main() -> None:
             }
         )
     print()
-    print(f"{'task':<19} {'recipe':<18} {'seeds':>5} {'median return':>13} {'worst':>8} {'median s':>8} {'max s':>6}")
+    print(
+        f"{'task':<19} {'recipe':<18} {'seeds':>5} {'median return':>13} {'worst':>8} {'median s':>8} {'max s':>6}"
+    )
     for s in summary:
         print(
             f"{s['task']:<19} {s['recipe']:<18} {s['seeds']:>5} {s['median_eval_mean']:>13.1f} "
             f"{s['worst_eval_mean']:>8.1f} {s['median_train_seconds']:>8.1f} {s['max_train_seconds']:>6.1f}"
         )
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps({"machine": machine(), "runs": rows, "summary": summary}, indent=1) + "\n")
+    args.out.write_text(
+        json.dumps({"machine": machine(), "runs": rows, "summary": summary}, indent=1) + "\n"
+    )
     print(f"\nwrote {args.out}")
 
 

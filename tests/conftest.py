@@ -17,7 +17,16 @@ from diffcontrol.cli import main  # noqa: E402
 # Tests that train the same small configurations share compiled programs through the cache.
 enable_compile_cache()
 
-TINY_CARTPOLE = ["--updates", "20", "--eval-every", "10", "--eval-episodes", "4", "--final-eval", "3"]
+TINY_CARTPOLE = [
+    "--updates",
+    "20",
+    "--eval-every",
+    "10",
+    "--eval-episodes",
+    "4",
+    "--final-eval",
+    "3",
+]
 
 
 @pytest.fixture(scope="session")

@@ -32,14 +32,29 @@ def test_help_explains_each_command(capsys):
     with pytest.raises(SystemExit):
         main(["train", "--help"])
     out = capsys.readouterr().out
-    for option in ("--window", "--horizon", "--batch", "--grad-clip", "--lr-schedule", "--resume", "--seed"):
+    for option in (
+        "--window",
+        "--horizon",
+        "--batch",
+        "--grad-clip",
+        "--lr-schedule",
+        "--resume",
+        "--seed",
+    ):
         assert option in out
 
 
 @pytest.mark.parametrize("run", ["cartpole_run", "pendulum_run"])
 def test_train_writes_every_output(run, request):
     out = request.getfixturevalue(run)
-    for name in ("model.json", "metrics.json", "learning_curve.png", "rollout.png", "rollout.gif", "run.json"):
+    for name in (
+        "model.json",
+        "metrics.json",
+        "learning_curve.png",
+        "rollout.png",
+        "rollout.gif",
+        "run.json",
+    ):
         assert (out / name).stat().st_size > 0, name
     metrics = json.loads((out / "metrics.json").read_text())
     cfg = metrics["config"]
@@ -112,7 +127,9 @@ def _usage_fails_cleanly(capsys, argv, *needles):
 
 
 def test_unknown_task(capsys, tmp_path):
-    _fails_cleanly(capsys, ["train", "pendulm", "--out", str(tmp_path / "x")], "'pendulm'", "pendulum")
+    _fails_cleanly(
+        capsys, ["train", "pendulm", "--out", str(tmp_path / "x")], "'pendulm'", "pendulum"
+    )
     assert not (tmp_path / "x").exists()
 
 
@@ -130,7 +147,9 @@ def test_unknown_task(capsys, tmp_path):
     ],
 )
 def test_bad_option_values(capsys, tmp_path, option, value, needle):
-    _usage_fails_cleanly(capsys, ["train", "pendulum", "--out", str(tmp_path / "x"), option, value], needle)
+    _usage_fails_cleanly(
+        capsys, ["train", "pendulum", "--out", str(tmp_path / "x"), option, value], needle
+    )
     assert not (tmp_path / "x").exists()
 
 
@@ -167,14 +186,18 @@ def test_out_dir_not_writable(capsys, tmp_path):
 
 def test_out_dir_with_a_different_run_is_left_alone(capsys, cartpole_run):
     before = {p.name: p.read_bytes() for p in cartpole_run.iterdir()}
-    _fails_cleanly(capsys, ["train", "cartpole", "--out", str(cartpole_run)], "already holds a run", "--resume")
+    _fails_cleanly(
+        capsys, ["train", "cartpole", "--out", str(cartpole_run)], "already holds a run", "--resume"
+    )
     _fails_cleanly(
         capsys,
         ["train", "cartpole", "--out", str(cartpole_run), "--resume", "--window", "4"],
         "different run",
         "window",
     )
-    _fails_cleanly(capsys, ["train", "pendulum", "--out", str(cartpole_run), "--resume"], "different run")
+    _fails_cleanly(
+        capsys, ["train", "pendulum", "--out", str(cartpole_run), "--resume"], "different run"
+    )
     after = {p.name: p.read_bytes() for p in cartpole_run.iterdir()}
     assert before == after
 
@@ -186,15 +209,24 @@ def test_out_dir_with_other_files(capsys, tmp_path):
 
 
 def test_resume_without_a_run(capsys, tmp_path):
-    _fails_cleanly(capsys, ["train", "cartpole", "--out", str(tmp_path / "new"), "--resume"], "nothing to resume")
+    _fails_cleanly(
+        capsys,
+        ["train", "cartpole", "--out", str(tmp_path / "new"), "--resume"],
+        "nothing to resume",
+    )
 
 
 def test_resume_of_a_finished_run_keeps_its_result(capsys, tmp_path):
     out = tmp_path / "run"
-    assert main(["train", "cartpole", "--out", str(out), "--quiet", "--no-animation", *TINY_CARTPOLE]) == 0
+    assert (
+        main(["train", "cartpole", "--out", str(out), "--quiet", "--no-animation", *TINY_CARTPOLE])
+        == 0
+    )
     model = (out / "model.json").read_text()
     capsys.readouterr()
-    assert main(["train", "cartpole", "--out", str(out), "--resume", "--quiet", "--no-animation"]) == 0
+    assert (
+        main(["train", "cartpole", "--out", str(out), "--resume", "--quiet", "--no-animation"]) == 0
+    )
     assert json.loads((out / "model.json").read_text())["network"] == json.loads(model)["network"]
 
 

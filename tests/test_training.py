@@ -176,7 +176,9 @@ def test_persistent_compile_cache_hits_on_a_second_run(tmp_path):
     for i in range(2):
         cmd = [sys.executable, "-m", "diffcontrol.cli", *args, "--out", str(tmp_path / f"r{i}")]
         subprocess.run(cmd, check=True, env=env, capture_output=True)
-        caches.append(json.loads((tmp_path / f"r{i}" / "metrics.json").read_text())["compile_cache"])
+        caches.append(
+            json.loads((tmp_path / f"r{i}" / "metrics.json").read_text())["compile_cache"]
+        )
     assert caches[0]["misses"] >= 2 and caches[0]["hits"] == 0
     assert caches[1]["misses"] == 0
     assert caches[1]["hits"] >= caches[0]["misses"]

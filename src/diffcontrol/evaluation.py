@@ -83,7 +83,7 @@ def evaluate(
             lengths.append(n)
     finally:
         env.close()
-    return EvalResult(task.gym_id or task.name, seed, np.asarray(returns), np.asarray(lengths))
+    return EvalResult(task.gym_label, seed, np.asarray(returns), np.asarray(lengths))
 
 
 def record_episode(policy: Any, task: Task, seed: int = 0) -> Recording:
@@ -104,7 +104,7 @@ def record_episode(policy: Any, task: Task, seed: int = 0) -> Recording:
     finally:
         env.close()
     return Recording(
-        env_id=task.gym_id or task.name,
+        env_id=task.gym_label,
         dt=dt,
         states=np.stack(states),
         actions=np.stack(actions),

@@ -87,6 +87,11 @@ class Task(abc.ABC):
         """Named sets of ``TrainConfig`` overrides (``--recipe``), e.g. the 2019 original."""
         return {}
 
+    @property
+    def gym_label(self) -> str:
+        """How evaluation results name the environment (``gym_id`` plus any changes)."""
+        return self.gym_id or self.name
+
     def gym_action(self, action: np.ndarray) -> Any:
         """Convert a controller output to a valid action of ``gym_id``."""
         return np.asarray(action, dtype=np.float32)

@@ -120,6 +120,8 @@ class PendulumUnclipped(Pendulum):
         recipe.update(updates=self.episode_length // 4, horizon=self.episode_length, eval_every=50)
         return {"original": recipe}
 
+    gym_label = "Pendulum-v1 (max_torque=inf, 1000-step limit)"
+
     def gym_action(self, action: np.ndarray) -> Any:
         return np.asarray(action, dtype=np.float64)
 
