@@ -29,15 +29,23 @@ ACTIVATIONS = {"tanh": jnp.tanh, "relu": jax.nn.relu, "sigmoid": jax.nn.sigmoid,
 HEADS = ("linear", "tanh", "sigmoid", "sign")
 
 
+@jax.custom_jvp
 def straight_through_sign(x: Array) -> Array:
     """``+1`` where ``x >= 0`` and ``-1`` elsewhere, with the identity as its derivative.
 
     Forward: ``f(x) = 1 if x >= 0 else -1``. Backward: ``df/dx := 1``. (The 2019 Julia code used
     ``sign``, which maps 0 to 0; the post's formula, used here, maps 0 to +1, so every output
-    is a valid two-action push.)
+    is a valid two-action push.) Written as a ``custom_jvp`` rather than the usual
+    ``x + stop_gradient(hard - x)``, whose forward value is off by rounding for large ``|x|``
+    and ``nan`` at infinity.
     """
-    hard = jnp.where(x >= 0, 1.0, -1.0).astype(x.dtype)
-    return x + jax.lax.stop_gradient(hard - x)
+    return jnp.where(x >= 0, 1.0, -1.0).astype(jnp.result_type(x, float))
+
+
+@straight_through_sign.defjvp
+def _straight_through_sign_jvp(primals, tangents):
+    (x,), (dx,) = primals, tangents
+    return straight_through_sign(x), dx
 
 
 def apply_head(head: str, z: Array, low: Array, high: Array) -> Array:
