@@ -144,6 +144,7 @@ def test_unknown_task(capsys, tmp_path):
         ("--learning-rate", "inf", "--learning-rate"),
         ("--hidden", "64,x", "--hidden"),
         ("--param", "g", "--param"),
+        ("--keep-best", "maybe", "--keep-best"),
     ],
 )
 def test_bad_option_values(capsys, tmp_path, option, value, needle):

@@ -328,7 +328,9 @@ def test_cartpole_episodes(x64):
             lengths.append(n)
             push = jnp.asarray(2.0 * actions[:, None] - 1.0, dtype)
             states, rewards, terms = run(jnp.asarray(state0, dtype), push)
-            np.testing.assert_allclose(np.asarray(states)[:n], np.array(gym_states), atol=tol, rtol=0)
+            np.testing.assert_allclose(
+                np.asarray(states)[:n], np.array(gym_states), atol=tol, rtol=0
+            )
             np.testing.assert_array_equal(np.asarray(rewards)[:n], 1.0)
             terms = np.asarray(terms)[:n]
             assert terms[-1] and not terms[:-1].any(), f"episode {episode}: {terms}"
@@ -351,7 +353,9 @@ def test_reset_distribution(task_name, high):
     """Inside Gymnasium's box, and filling it: min/max near the bounds, quartiles at +-high/2."""
     task = diffcontrol.tasks.make(task_name)
     keys = jax.random.split(jax.random.key(7), N_RESETS)
-    samples = np.asarray(jax.jit(jax.vmap(task.reset, in_axes=(0, None)))(keys, task.default_params()))
+    samples = np.asarray(
+        jax.jit(jax.vmap(task.reset, in_axes=(0, None)))(keys, task.default_params())
+    )
     high = np.asarray(high)
     assert samples.shape == (N_RESETS, len(high))
     assert np.all(samples >= -high) and np.all(samples <= high)

@@ -67,6 +67,15 @@ def _widths(text: str) -> tuple[int, ...]:
     return widths
 
 
+def _yes_no(text: str) -> bool:
+    value = text.strip().lower()
+    if value in ("yes", "true", "1", "on"):
+        return True
+    if value in ("no", "false", "0", "off"):
+        return False
+    raise argparse.ArgumentTypeError(f"expected yes or no, got {text!r}")
+
+
 def _param(text: str) -> tuple[str, float]:
     name, sep, value = text.partition("=")
     if not sep or not name:
@@ -92,6 +101,7 @@ _CONFIG_OPTIONS: dict[str, tuple[Any, str]] = {
     "eval_every": (_positive_int, "N"),
     "eval_episodes": (_positive_int, "N"),
     "target_return": (float, "R"),
+    "keep_best": (_yes_no, "yes|no"),
 }
 
 

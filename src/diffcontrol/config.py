@@ -62,6 +62,12 @@ class TrainConfig:
         "Stop early once the in-simulator evaluation return reaches this; nan disables.",
         default=math.nan,
     )
+    keep_best: bool = _opt(
+        "Return the controller of the evaluation point with the best in-simulator return "
+        "(a held-out set of simulated starts, not the Gymnasium seeds) instead of the last one. "
+        "It ranks by the task's return: turn it off when a custom loss aims at something else.",
+        default=True,
+    )
     params: tuple[tuple[str, float], ...] = _opt(
         "Overrides of the simulator's physical parameters, as (name, value) pairs.",
         default=(),
@@ -81,6 +87,8 @@ class TrainConfig:
             raise ConfigError(
                 f"learning_rate must be a positive finite number, got {self.learning_rate!r}"
             )
+        if not isinstance(self.keep_best, bool):
+            raise ConfigError(f"keep_best must be true or false, got {self.keep_best!r}")
         if not (math.isfinite(self.grad_clip) and self.grad_clip >= 0):
             raise ConfigError(f"grad_clip must be >= 0 (0 disables), got {self.grad_clip!r}")
         if not (0 <= self.lr_final_fraction <= 1):

@@ -104,6 +104,7 @@ class CartPole(Task):
                 hidden=(24, 48),
                 activation="relu",
                 loss="shaped",
+                keep_best=False,  # the original keeps the last weights
             )
         }
 

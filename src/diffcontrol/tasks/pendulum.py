@@ -59,17 +59,25 @@ class Pendulum(Task):
         raise KeyError(name)
 
     def default_config(self) -> TrainConfig:
+        # Truncated BPTT over 20-step windows with carried state: shorter windows (10-15) are
+        # too myopic to learn the swing-up, longer ones (>= 22-25) fall into the constant-torque
+        # local minimum (about -830). A run occasionally drifts late into a "hold it at the
+        # side" trap for starts near the bottom, so training stops early once the in-simulator
+        # evaluation on 256 episodes reaches -145 (about -140..-147 on Gymnasium's seeds 0-99).
         return TrainConfig(
-            updates=300,
+            updates=3000,
             batch=64,
-            window=100,
+            window=20,
             horizon=200,
-            learning_rate=5e-3,
-            lr_schedule="cosine",
+            learning_rate=1e-2,
+            lr_schedule="warmup_cosine",
+            lr_final_fraction=0.05,
             grad_clip=1.0,
-            hidden=(64, 64),
-            eval_every=25,
-            target_return=float("nan"),
+            hidden=(128, 128),
+            activation="tanh",
+            eval_every=50,
+            eval_episodes=256,
+            target_return=-145.0,
         )
 
     def recipes(self) -> dict[str, dict[str, Any]]:
@@ -89,6 +97,9 @@ class Pendulum(Task):
                 head="linear",
                 loss="squared_cost",
                 eval_every=self.episode_length // 4,
+                eval_episodes=32,
+                target_return=float("nan"),
+                keep_best=False,  # the original keeps the last weights
             )
         }
 

@@ -103,9 +103,11 @@ def train(
         progress: called with one human-readable line per evaluation point.
 
     Returns:
-        A ``TrainResult``; ``metrics`` holds ``train_seconds`` (wall clock, compilation and
+        A ``TrainResult`` whose controller is the one of the best evaluation point when
+        ``config.keep_best`` (the default), else the last; ``metrics`` holds ``train_seconds`` (wall clock, compilation and
         evaluation included), ``compile_seconds``, ``simulated_steps``,
-        ``simulated_episodes`` (in the task's standard episode length) and the ``curve``.
+        ``simulated_episodes`` (in the task's standard episode length), the ``curve``, and
+        ``returned_update`` with ``final_eval_return`` (the returned controller's).
 
     Raises:
         ConfigError, RunDirectoryError, ModelFileError: bad settings or directories.
@@ -122,16 +124,22 @@ def train(
     key = jax.random.PRNGKey(config.seed)
     k_train, k_eval = jax.random.split(key)
     ts = trainer.init(k_train, params)
+    best = ts.controller  # the controller of the best evaluation point so far
     steps_per_update = config.window * config.batch
 
     out = None
-    meta: dict[str, Any] = {"curve": [], "seconds_before": 0.0, "compile_seconds_before": 0.0}
+    meta: dict[str, Any] = {
+        "curve": [],
+        "seconds_before": 0.0,
+        "compile_seconds_before": 0.0,
+        "best_index": 0,
+    }
     if out_dir is not None:
         run = {"format": "diffcontrol-run", "task": task.name, "config": config.to_json()}
         out = io.prepare_run_dir(out_dir, run, resume)
         ckpt = out / CHECKPOINT_FILE
         if resume and ckpt.exists():
-            ts, meta = io.load_checkpoint(ckpt, ts)
+            (ts, best), meta = io.load_checkpoint(ckpt, (ts, ts.controller))
             say(f"resuming {task.name} from update {int(ts.update)} ({ckpt})")
 
     # Compile once, ahead of time, so that compile time is measured apart from training time.
@@ -145,8 +153,10 @@ def train(
     seconds_before = float(meta["seconds_before"])
     eval_seconds = 0.0
 
+    best_index = int(meta["best_index"])
+
     def record(ts: TrainState, loss: float, grad_norm: float) -> dict[str, Any]:
-        nonlocal eval_seconds
+        nonlocal eval_seconds, best, best_index
         t_eval = time.perf_counter()
         returns = np.asarray(evaluate(ts.controller, params, k_eval))
         eval_seconds += time.perf_counter() - t_eval
@@ -166,6 +176,10 @@ def train(
             "train_return_mean": float(ts.finished_return_sum) / n_fin if n_fin else math.nan,
         }
         curve.append(point)
+        # ">=": among equal returns (CartPole's 500s) the later, longer-trained controller.
+        so_far = curve[best_index]["eval_return"]
+        if len(curve) == 1 or math.isnan(so_far) or point["eval_return"] >= so_far:
+            best, best_index = ts.controller, len(curve) - 1
         say(_progress_line(point, config.updates))
         return point
 
@@ -196,9 +210,10 @@ def train(
         if out is not None:
             io.save_checkpoint(
                 out / CHECKPOINT_FILE,
-                ts,
+                (ts, best),
                 {
                     "curve": curve,
+                    "best_index": best_index,
                     "seconds_before": seconds_before + time.perf_counter() - t_start,
                     "compile_seconds_before": float(meta["compile_seconds_before"])
                     + compile_seconds,
@@ -208,6 +223,7 @@ def train(
     updates_done = int(ts.update)
     steps = updates_done * steps_per_update
     wall = seconds_before + time.perf_counter() - t_start
+    chosen = curve[best_index] if config.keep_best else curve[-1]
     metrics = {
         "task": task.name,
         "gym_id": task.gym_id,
@@ -220,8 +236,9 @@ def train(
         "simulated_episodes": steps / task.episode_length,
         "episode_length": task.episode_length,
         "stopped_early": stopped_early,
-        "final_eval_return": curve[-1]["eval_return"],
-        "final_eval_return_std": curve[-1]["eval_return_std"],
+        "returned_update": chosen["update"],
+        "final_eval_return": chosen["eval_return"],
+        "final_eval_return_std": chosen["eval_return_std"],
         "eval_episodes": config.eval_episodes,
         "num_parameters": ts.controller.num_parameters,
         "curve": curve,
@@ -229,6 +246,7 @@ def train(
         "jax_version": jax.__version__,
         "device": str(jax.devices()[0].platform),
     }
+    controller = best if config.keep_best else ts.controller
     return TrainResult(
-        task=task, config=config, params=params, controller=ts.controller, metrics=metrics
+        task=task, config=config, params=params, controller=controller, metrics=metrics
     )
