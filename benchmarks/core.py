@@ -6,7 +6,7 @@ so `train_seconds` includes compiling everything from scratch. Each trained cont
 then evaluated in Gymnasium's own environment on reset seeds 0-99.
 
     python benchmarks/core.py                 # defaults, 5 training seeds per task
-    python benchmarks/core.py --original      # also the 2019 single-episode recipes
+    python benchmarks/core.py --original      # also the 2019 recipes, swept over 1-20 episodes
     python benchmarks/core.py --seeds 1 --tasks cartpole
 
 Prints a table and writes benchmarks/results/core.json (machine, date, every figure).
@@ -27,9 +27,21 @@ import tempfile
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
+# The issue's quality bars, for "first reached" columns (in-simulator evaluation curve).
+THRESHOLDS = {"pendulum": -150.0, "cartpole": 475.0}
+# Updates per training episode of the original recipes (window 4, batch 1).
+ORIGINAL_UPDATES_PER_EPISODE = {"pendulum": 200 // 4, "pendulum-unclipped": 1000 // 4}
 
 
-def run_train(task: str, seed: int, extra: list[str], workdir: Path) -> dict:
+def first_reached(curve: list[dict], threshold: float | None) -> dict:
+    """Simulated episodes and seconds at the first evaluation point at or above threshold."""
+    for point in curve if threshold is not None else []:
+        if point["eval_return"] >= threshold:
+            return {"episodes": point["simulated_episodes"], "seconds": point["seconds"]}
+    return {"episodes": None, "seconds": None}
+
+
+def run_train(task: str, seed: int, label: str, extra: list[str], workdir: Path) -> dict:
     out = workdir / f"{task}-{seed}-{abs(hash(tuple(extra))) % 10**6}"
     cmd = [sys.executable, "-m", "diffcontrol.cli", "train", task, "--out", str(out)]
     cmd += ["--seed", str(seed), "--quiet", "--no-animation", "--final-eval", "100", *extra]
@@ -38,9 +50,11 @@ def run_train(task: str, seed: int, extra: list[str], workdir: Path) -> dict:
     env = dict(os.environ, DIFFCONTROL_NO_COMPILE_CACHE="1")
     subprocess.run(cmd, check=True, env=env, stdout=subprocess.DEVNULL)
     metrics = json.loads((out / "metrics.json").read_text())
+    reached = first_reached(metrics["curve"], THRESHOLDS.get(task))
     return {
         "task": task,
-        "recipe": " ".join(extra) or "defaults",
+        "recipe": label,
+        "args": extra,
         "seed": seed,
         "simulated_episodes": metrics["simulated_episodes"],
         "simulated_steps": metrics["simulated_steps"],
@@ -50,6 +64,10 @@ def run_train(task: str, seed: int, extra: list[str], workdir: Path) -> dict:
         "eval_mean": metrics["gym_eval"]["mean_return"],
         "eval_std": metrics["gym_eval"]["std_return"],
         "eval_episodes": metrics["gym_eval"]["episodes"],
+        "returned_update": metrics["returned_update"],
+        "threshold": THRESHOLDS.get(task),
+        "threshold_first_episodes": reached["episodes"],
+        "threshold_first_seconds": reached["seconds"],
     }
 
 
@@ -78,59 +96,78 @@ def main() -> None:
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("--seeds", type=int, default=5, help="training seeds per task (default 5)")
-    parser.add_argument("--tasks", nargs="+", default=["pendulum", "cartpole"])
+    parser.add_argument(
+        "--tasks", nargs="*", default=["pendulum", "cartpole"], help="tasks run with defaults"
+    )
     parser.add_argument("--original", action="store_true", help="also run the 2019 recipes")
+    parser.add_argument(
+        "--original-episodes",
+        default="1,2,5,10,20",
+        help="training-episode counts for the original Pendulum recipes (default 1,2,5,10,20)",
+    )
     parser.add_argument("--out", type=Path, default=HERE / "results" / "core.json")
     args = parser.parse_args()
 
-    configs = [(task, []) for task in args.tasks]
+    configs = [(task, "defaults", []) for task in args.tasks]
     if args.original:
-        configs += [
-            ("pendulum", ["--recipe", "original"]),
-            ("pendulum-unclipped", ["--recipe", "original"]),
-            ("cartpole", ["--recipe", "original"]),
-        ]
+        for task, per_episode in ORIGINAL_UPDATES_PER_EPISODE.items():
+            for n in (int(x) for x in args.original_episodes.split(",")):
+                extra = ["--recipe", "original", "--updates", str(n * per_episode)]
+                configs.append((task, f"original, {n} ep", extra))
+        configs.append(("cartpole", "original", ["--recipe", "original"]))
     rows = []
-    header = f"{'task':<19} {'recipe':<18} {'seed':>4} {'episodes':>9} {'steps':>9} {'wall s':>7} {'compile s':>9}  {'Gymnasium return (100 seeds)':<28}"
+    header = (
+        f"{'task':<19} {'recipe':<16} {'seed':>4} {'episodes':>9} {'steps':>9} {'wall s':>7} "
+        f"{'compile s':>9}  {'Gymnasium return (100 seeds)':<28}"
+    )
     print(header)
     print("-" * len(header))
     with tempfile.TemporaryDirectory() as tmp:
-        for task, extra in configs:
+        for task, label, extra in configs:
             for seed in range(args.seeds):
-                r = run_train(task, seed, extra, Path(tmp))
+                r = run_train(task, seed, label, extra, Path(tmp))
                 rows.append(r)
                 print(
-                    f"{r['task']:<19} {r['recipe']:<18} {seed:>4} {r['simulated_episodes']:>9.4g} "
-                    f"{r['simulated_steps']:>9} {r['train_seconds']:>7.1f} {r['compile_seconds']:>9.1f}  "
-                    f"{r['eval_mean']:>9.1f} ± {r['eval_std']:<6.1f} ({r['gym_env']})",
+                    f"{r['task']:<19} {label:<16} {seed:>4} {r['simulated_episodes']:>9.4g} "
+                    f"{r['simulated_steps']:>9} {r['train_seconds']:>7.1f} "
+                    f"{r['compile_seconds']:>9.1f}  {r['eval_mean']:>9.1f} ± {r['eval_std']:<6.1f} "
+                    f"({r['gym_env']})",
                     flush=True,
                 )
     summary = []
-    for task, extra in configs:
-        group = [
-            r for r in rows if r["task"] == task and r["recipe"] == (" ".join(extra) or "defaults")
-        ]
+    for task, label, _ in configs:
+        group = [r for r in rows if r["task"] == task and r["recipe"] == label]
         means = [r["eval_mean"] for r in group]
+        firsts = [r["threshold_first_episodes"] for r in group]
         summary.append(
             {
                 "task": task,
-                "recipe": group[0]["recipe"],
+                "recipe": label,
                 "seeds": len(group),
                 "median_eval_mean": statistics.median(means),
                 "worst_eval_mean": min(means),
+                "best_eval_mean": max(means),
                 "median_train_seconds": statistics.median(r["train_seconds"] for r in group),
                 "max_train_seconds": max(r["train_seconds"] for r in group),
                 "simulated_episodes": group[0]["simulated_episodes"],
+                "simulated_steps": group[0]["simulated_steps"],
+                "threshold": group[0]["threshold"],
+                "seeds_reaching_threshold_in_gymnasium": sum(
+                    group[0]["threshold"] is not None and m >= group[0]["threshold"] for m in means
+                ),
+                "threshold_first_episodes_in_training": firsts,
             }
         )
     print()
     print(
-        f"{'task':<19} {'recipe':<18} {'seeds':>5} {'median return':>13} {'worst':>8} {'median s':>8} {'max s':>6}"
+        f"{'task':<19} {'recipe':<16} {'seeds':>5} {'episodes':>9} {'median return':>13} "
+        f"{'worst':>8} {'best':>8} {'median s':>8} {'max s':>6}"
     )
     for s in summary:
         print(
-            f"{s['task']:<19} {s['recipe']:<18} {s['seeds']:>5} {s['median_eval_mean']:>13.1f} "
-            f"{s['worst_eval_mean']:>8.1f} {s['median_train_seconds']:>8.1f} {s['max_train_seconds']:>6.1f}"
+            f"{s['task']:<19} {s['recipe']:<16} {s['seeds']:>5} {s['simulated_episodes']:>9.4g} "
+            f"{s['median_eval_mean']:>13.1f} {s['worst_eval_mean']:>8.1f} {s['best_eval_mean']:>8.1f} "
+            f"{s['median_train_seconds']:>8.1f} {s['max_train_seconds']:>6.1f}"
         )
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(

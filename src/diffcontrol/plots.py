@@ -39,6 +39,16 @@ def learning_curve(
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
     ax1.plot(episodes, ret, "o-", color="C0", label="evaluation return (simulator)")
     ax1.fill_between(episodes, ret - std, ret + std, color="C0", alpha=0.2)
+    returned = [p for p in curve if p["update"] == metrics.get("returned_update")]
+    if returned:
+        ax1.plot(
+            [returned[0]["simulated_episodes"]],
+            [returned[0]["eval_return"]],
+            "*",
+            ms=14,
+            color="C3",
+            label="returned controller",
+        )
     if threshold is not None:
         ax1.axhline(threshold, color="k", ls="--", lw=1, label=f"threshold {threshold:g}")
     ax1.set_ylabel("return")
