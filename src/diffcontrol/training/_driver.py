@@ -104,8 +104,8 @@ def train(
 
     Returns:
         A ``TrainResult`` whose controller is the one of the best evaluation point when
-        ``config.keep_best`` (the default), else the last; ``metrics`` holds ``train_seconds`` (wall clock, compilation and
-        evaluation included), ``compile_seconds``, ``simulated_steps``,
+        ``config.keep_best`` (the default), else the last; ``metrics`` holds
+        ``train_seconds`` (wall clock, compilation and evaluation included), ``compile_seconds``, ``simulated_steps``,
         ``simulated_episodes`` (in the task's standard episode length), the ``curve``, and
         ``returned_update`` with ``final_eval_return`` (the returned controller's).
 
