@@ -300,7 +300,13 @@ def test_task_contract(task):
 
     obs = observe(state)
     assert obs.shape == (task.observation_size,) and np.all(np.isfinite(np.asarray(obs)))
-    action = jnp.full((task.action_size,), 0.3)
+    # A valid action: 0.3 for unbounded tasks, the same fraction of the range for bounded ones
+    # (0.3 N m for Pendulum-v1; 51 degrees and 271.5 lb for the trebuchet).
+    if task.action_low is None:
+        action = jnp.full((task.action_size,), 0.3)
+    else:
+        low, high = jnp.asarray(task.action_low), jnp.asarray(task.action_high)
+        action = low + 0.575 * (high - low)
     next_state, reward, terminated = step(params, state, action)
     assert next_state.shape == state.shape and next_state.dtype == state.dtype
     assert reward.shape == () and terminated.shape == () and terminated.dtype == jnp.bool_

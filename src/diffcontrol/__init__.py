@@ -25,8 +25,8 @@ from .errors import (  # noqa: E402
     RunDirectoryError,
     UnknownTaskError,
 )
-from .evaluation import EvalResult, evaluate  # noqa: E402
-from .io import NumpyPolicy  # noqa: E402
+from .evaluation import AimResult, EvalResult, evaluate, evaluate_aiming  # noqa: E402
+from .io import AimingPolicy, NumpyPolicy  # noqa: E402
 from .rollout import Trajectory  # noqa: E402
 from .tasks import Task, make, register  # noqa: E402
 from .training import TrainingDiverged, TrainResult, resolve_config, train  # noqa: E402
@@ -37,13 +37,19 @@ def load(run_dir: str | _os.PathLike) -> NumpyPolicy:
 
     Returns a ``NumpyPolicy``: ``policy(obs)`` takes one Gymnasium observation (NumPy) and
     returns a valid Gymnasium action, so it drops into a plain ``gymnasium.make(...)`` loop.
+    For an aiming task (the trebuchet) it returns an ``AimingPolicy``:
+    ``policy(target_m, wind_mps) -> (angle_deg, weight_lb)``.
 
     Raises:
         ModelFileError: the file is missing, corrupt, or of an unsupported version.
     """
-    from .io import read_model
+    from .io import AimingPolicy, read_model
 
-    return NumpyPolicy(read_model(_Path(run_dir)))
+    doc = read_model(_Path(run_dir))
+    known = doc["task"] in tasks.names()
+    if known and tasks.make(doc["task"]).kind == "aiming":
+        return AimingPolicy(doc)
+    return NumpyPolicy(doc)
 
 
 def list_tasks() -> list[str]:
@@ -52,6 +58,8 @@ def list_tasks() -> list[str]:
 
 
 __all__ = [
+    "AimResult",
+    "AimingPolicy",
     "ConfigError",
     "DiffcontrolError",
     "EvalResult",
@@ -67,6 +75,7 @@ __all__ = [
     "UnknownTaskError",
     "controllers",
     "evaluate",
+    "evaluate_aiming",
     "list_tasks",
     "load",
     "make",

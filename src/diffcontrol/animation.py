@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import imageio.v3 as iio
 import matplotlib
@@ -73,5 +74,39 @@ def animate(recording: Recording, task: Task, path: str | Path, max_frames: int 
         frames.append(np.asarray(fig.canvas.buffer_rgba())[..., :3].copy())
     duration_ms = 1000.0 * recording.dt * every
     data = iio.imwrite("<bytes>", np.stack(frames), extension=".gif", duration=duration_ms, loop=0)
+    write_bytes(path, data)
+    return Path(path)
+
+
+def animate_throw(throw: Any, target: float, wind: float, path: str | Path, fps: int = 30) -> Path:
+    """Write an animated GIF of a recorded trebuchet throw (``systems.trebuchet.simulate``),
+    played at real time until a little after landing, with the target marked."""
+    from .plots import _throw_frame
+
+    times = np.asarray(throw.time)
+    ended = np.asarray(throw.phases) >= 3
+    last = int(np.argmax(ended)) if ended.any() else len(times) - 1
+    dt = float(times[1] - times[0]) if len(times) > 1 else 1 / 60
+    every = max(1, int(round(1.0 / (fps * dt))))
+    proj = np.asarray(throw.projectile)
+    x_max = max(float(np.max(proj[: last + 1, 0])), target) + 5
+    y_max = max(float(np.max(proj[: last + 1, 1])) + 3, 8)
+    frames = []
+    hold = int(round(1.0 / (every * dt)))  # hold the landing for about 1 s
+    indices = list(range(0, last + 1, every)) + [last] * hold
+    fig, ax = plt.subplots(figsize=(6.4, 2.8), dpi=75)
+    for i in indices:
+        ax.clear()
+        _throw_frame(ax, throw, i, target, wind)
+        ax.set_xlim(-5, x_max)
+        ax.set_ylim(-2.5, y_max)
+        ax.set_aspect("equal", adjustable="box")
+        ax.set_title(f"t = {times[i]:4.2f} s   x = {proj[i, 0]:6.2f} m", fontsize=9)
+        fig.canvas.draw()
+        frames.append(np.asarray(fig.canvas.buffer_rgba())[..., :3].copy())
+    plt.close(fig)
+    data = iio.imwrite(
+        "<bytes>", np.stack(frames), extension=".gif", duration=1000.0 * every * dt, loop=0
+    )
     write_bytes(path, data)
     return Path(path)

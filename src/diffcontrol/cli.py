@@ -145,9 +145,10 @@ def _build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--final-eval",
         type=_nonneg_int,
-        default=100,
+        default=None,
         metavar="N",
-        help="Gymnasium episodes (seeds 0..N-1) to evaluate after training; 0 skips (default 100)",
+        help="evaluate after training: Gymnasium episodes on seeds 0..N-1 (default 100), or "
+        "random targets for aiming tasks (default 1000); 0 skips",
     )
     p.add_argument("--no-animation", action="store_true", help="skip the GIF (saves a few seconds)")
     _add_common(p)
@@ -177,14 +178,26 @@ def _build_parser() -> argparse.ArgumentParser:
         help="run a trained controller in Gymnasium's own environment",
         description=(
             "Run the controller saved in DIR in Gymnasium's own environment (Pendulum-v1, "
-            "CartPole-v1) on seeds S ... S+N-1 and print the mean and std of the return."
+            "CartPole-v1) on seeds S ... S+N-1 and print the mean and std of the return. For "
+            "an aiming task (trebuchet), aim at N random targets (20-100 m, wind ~ N(0, 5^2) "
+            "m/s, drawn with seed S) and print the miss statistics over the reachable ones."
         ),
     )
     p.add_argument("run_dir", metavar="DIR", help="a directory written by `diffcontrol train`")
     p.add_argument(
-        "--episodes", type=_positive_int, default=100, metavar="N", help="episodes (default 100)"
+        "--episodes",
+        type=_positive_int,
+        default=None,
+        metavar="N",
+        help="episodes (default 100), or random targets for aiming tasks (default 1000)",
     )
-    p.add_argument("--seed", type=int, default=0, metavar="S", help="first reset seed (default 0)")
+    p.add_argument(
+        "--seed",
+        type=int,
+        default=0,
+        metavar="S",
+        help="first reset seed, or the seed of the random targets (default 0)",
+    )
     p.add_argument("--json", action="store_true", help="print the result as JSON")
 
     p = sub.add_parser(
@@ -197,6 +210,32 @@ def _build_parser() -> argparse.ArgumentParser:
         "--seed", type=int, default=0, metavar="S", help="reset seed of the episode (default 0)"
     )
     p.add_argument("--out", metavar="FILE", default=None, help="GIF path (default DIR/rollout.gif)")
+    p.add_argument(
+        "--target", type=_finite_float, default=80.0, metavar="M", help="aiming tasks: target (m)"
+    )
+    p.add_argument(
+        "--wind", type=_finite_float, default=-3.0, metavar="MPS", help="aiming tasks: wind (m/s)"
+    )
+
+    p = sub.add_parser(
+        "aim",
+        help="aim a trained trebuchet controller at one target",
+        description=(
+            "Ask the aiming controller in DIR for the release angle and counterweight that hit "
+            "a target at M metres in a wind of W m/s (+ blows toward the target), simulate "
+            "the throw, and print the distance and the miss. --direct also aims by gradient "
+            "steps on the simulator alone, for comparison."
+        ),
+    )
+    p.add_argument(
+        "run_dir", metavar="DIR", help="a directory written by `diffcontrol train trebuchet`"
+    )
+    p.add_argument("--target", type=_finite_float, required=True, metavar="M", help="target (m)")
+    p.add_argument("--wind", type=_finite_float, default=0.0, metavar="W", help="wind (m/s)")
+    p.add_argument(
+        "--direct", action="store_true", help="also aim by gradient descent on the simulator"
+    )
+    p.add_argument("--json", action="store_true", help="print the result as JSON")
     return parser
 
 
@@ -275,14 +314,15 @@ def _cmd_train(args: argparse.Namespace) -> int:
         },
     )
     io.write_json(out / "model.json", doc)
+    if task.kind == "aiming":
+        return _finish_aiming(args, task, out, doc, metrics, say)
     policy = io.NumpyPolicy(doc)
-    if args.final_eval and task.gym_id:
+    final_eval = 100 if args.final_eval is None else args.final_eval
+    if final_eval and task.gym_id:
         t0 = time.perf_counter()
-        ev = evaluate(policy, task, episodes=args.final_eval, seed=0)
+        ev = evaluate(policy, task, episodes=final_eval, seed=0)
         metrics["gym_eval"] = {**ev.to_json(), "seconds": time.perf_counter() - t0}
-        say(
-            f"Gymnasium {ev.env_id}, seeds 0-{args.final_eval - 1}: return {ev.mean:.1f} ± {ev.std:.1f}"
-        )
+        say(f"Gymnasium {ev.env_id}, seeds 0-{final_eval - 1}: return {ev.mean:.1f} ± {ev.std:.1f}")
     io.write_json(out / "metrics.json", metrics)
 
     from . import plots
@@ -312,19 +352,125 @@ def _cmd_train(args: argparse.Namespace) -> int:
     return 0
 
 
+def _example_throw(policy: Any, target: float, wind: float) -> Any:
+    import jax
+
+    from .systems import trebuchet as tb
+
+    angle, weight = policy(target, wind)
+    return jax.jit(tb.simulate)(wind, angle, weight)
+
+
+def _finish_aiming(args, task, out: Path, doc: dict, metrics: dict, say) -> int:
+    """The end of `train` for aiming tasks: miss statistics, the throw plot and animation."""
+    from . import io, plots
+    from .evaluation import evaluate_aiming
+
+    policy = io.AimingPolicy(doc)
+    n = 1000 if args.final_eval is None else args.final_eval
+    if n:
+        t0 = time.perf_counter()
+        ev = evaluate_aiming(policy, task, targets=n, seed=0)
+        metrics["aim_eval"] = {**ev.to_json(), "seconds": time.perf_counter() - t0}
+        say(f"{n} random targets (seed 0): {ev.summary()}")
+    io.write_json(out / "metrics.json", metrics)
+    plots.learning_curve(metrics, out / "learning_curve.png", None)
+    files = ["model.json", "metrics.json", "learning_curve.png", "rollout.png"]
+    target, wind = 80.0, -3.0
+    throw = _example_throw(policy, target, wind)
+    plots.throw(throw, target, wind, out / "rollout.png")
+    if not args.no_animation:
+        from .animation import animate_throw
+
+        animate_throw(throw, target, wind, out / "rollout.gif")
+        files.append("rollout.gif")
+    summary = f"; mean |miss| {metrics['aim_eval']['mean_miss_m']:.3f} m" if n else ""
+    print(
+        f"done in {metrics['train_seconds']:.1f} s (compile {metrics['compile_seconds']:.1f} s): "
+        f"{metrics['simulated_episodes']:.4g} simulated throws{summary}"
+    )
+    print(f"wrote {', '.join(str(out / f) for f in files)}")
+    return 0
+
+
 def _load_run(run_dir: str):
     from . import io, tasks
 
     doc = io.read_model(run_dir)
-    return tasks.make(doc["task"]), io.NumpyPolicy(doc)
+    task = tasks.make(doc["task"])
+    return task, (io.AimingPolicy(doc) if task.kind == "aiming" else io.NumpyPolicy(doc))
+
+
+def _cmd_aim(args: argparse.Namespace) -> int:
+    import jax
+
+    from .systems import trebuchet as tb
+    from .tasks.trebuchet import aim_directly, check_target
+
+    task, policy = _load_run(args.run_dir)
+    if task.kind != "aiming":
+        raise DiffcontrolError(
+            f"{args.run_dir} holds a {task.name!r} controller; `aim` needs a trebuchet run"
+        )
+    check_target(args.target, args.wind)
+    t0 = time.perf_counter()
+    angle, weight = policy(args.target, args.wind)
+    net_seconds = time.perf_counter() - t0
+    distance = float(jax.jit(tb.shoot)(args.wind, angle, weight))
+    result = {
+        "target_m": args.target,
+        "wind_mps": args.wind,
+        "angle_deg": angle,
+        "weight_lb": weight,
+        "distance_m": distance,
+        "miss_m": distance - args.target,
+        "network_seconds": net_seconds,
+    }
+    lines = [
+        f"network: angle {angle:.2f} deg, weight {weight:.1f} lb -> {distance:.2f} m "
+        f"(miss {distance - args.target:+.3f} m; {net_seconds * 1e6:.0f} us)"
+    ]
+    if args.direct:
+        direct = jax.jit(aim_directly)
+        jax.block_until_ready(direct(args.target, args.wind))  # compile first
+        t0 = time.perf_counter()
+        a, w, miss = jax.block_until_ready(direct(args.target, args.wind))
+        seconds = time.perf_counter() - t0
+        result["direct"] = {
+            "angle_deg": float(a),
+            "weight_lb": float(w),
+            "miss_m": float(miss),
+            "seconds": seconds,
+        }
+        lines.append(
+            f"direct:  angle {float(a):.2f} deg, weight {float(w):.1f} lb -> "
+            f"{args.target + float(miss):.2f} m (miss {float(miss):+.3f} m; {seconds * 1e3:.1f} ms)"
+        )
+    if args.json:
+        print(json.dumps(result))
+    else:
+        print(f"target {args.target:g} m, wind {args.wind:+g} m/s")
+        print("\n".join(lines))
+    return 0
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
     from .evaluation import evaluate
 
     task, policy = _load_run(args.run_dir)
+    if task.kind == "aiming":
+        from .evaluation import evaluate_aiming
+
+        n = args.episodes or 1000
+        result = evaluate_aiming(policy, task, targets=n, seed=args.seed)
+        if args.json:
+            print(json.dumps({"run_dir": str(args.run_dir), **result.to_json()}))
+        else:
+            print(f"{task.name}, {n} random targets (seed {args.seed}): {result.summary()}")
+        return 0
     if not task.gym_id:
         raise DiffcontrolError(f"task {task.name!r} has no Gymnasium environment to evaluate in")
+    args.episodes = args.episodes or 100
     ev = evaluate(policy, task, episodes=args.episodes, seed=args.seed)
     if args.json:
         print(json.dumps({"run_dir": str(args.run_dir), "task": task.name, **ev.to_json()}))
@@ -343,6 +489,15 @@ def _cmd_animate(args: argparse.Namespace) -> int:
 
     task, policy = _load_run(args.run_dir)
     path = Path(args.out) if args.out else Path(args.run_dir) / "rollout.gif"
+    if task.kind == "aiming":
+        from .animation import animate_throw
+        from .tasks.trebuchet import check_target
+
+        check_target(args.target, args.wind)
+        throw = _example_throw(policy, args.target, args.wind)
+        animate_throw(throw, args.target, args.wind, path)
+        print(f"wrote {path} (distance {float(throw.distance):.2f} m, target {args.target:g} m)")
+        return 0
     rec = record_episode(policy, task, seed=args.seed)
     animate(rec, task, path)
     print(f"wrote {path} (return {rec.total_return:.1f}, {len(rec.rewards)} steps)")
@@ -354,6 +509,7 @@ COMMANDS = {
     "train": _cmd_train,
     "evaluate": _cmd_evaluate,
     "animate": _cmd_animate,
+    "aim": _cmd_aim,
 }
 
 

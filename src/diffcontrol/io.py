@@ -251,7 +251,26 @@ class NumpyPolicy:
 
     def __repr__(self) -> str:
         sizes = [self._layers[0][0].shape[1]] + [w.shape[0] for w, _ in self._layers]
-        return f"NumpyPolicy(task={self.task!r}, sizes={sizes}, head={self._head!r})"
+        return f"{type(self).__name__}(task={self.task!r}, sizes={sizes}, head={self._head!r})"
+
+
+class AimingPolicy(NumpyPolicy):
+    """A ``model.json`` aiming controller (the trebuchet) run with NumPy alone.
+
+    ``policy(target_m, wind_mps)`` returns ``(angle_deg, weight_lb)``; scalars give floats,
+    equal-length arrays give arrays. ``policy.action(obs)`` is the raw ``NumpyPolicy`` form
+    on observations ``(target_m, wind_mps)``.
+    """
+
+    def __call__(self, target_m: Any, wind_mps: Any = 0.0) -> tuple[Any, Any]:  # type: ignore[override]
+        target, wind = np.broadcast_arrays(
+            np.asarray(target_m, np.float64), np.asarray(wind_mps, np.float64)
+        )
+        a = self.action(np.stack([target, wind], axis=-1))
+        angle, weight = a[..., 0], a[..., 1]
+        if angle.ndim == 0:
+            return float(angle), float(weight)
+        return angle, weight
 
 
 def controller_from_dict(doc: dict) -> MLPController:

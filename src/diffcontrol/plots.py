@@ -91,3 +91,51 @@ def rollout(recording: Recording, task: Task, path: str | Path) -> Path:
     )
     fig.tight_layout()
     return _save(fig, path)
+
+
+def _throw_frame(ax: Any, throw: Any, i: int, target: float, wind: float) -> None:
+    """Draw the trebuchet and the projectile's path up to step ``i`` of a recorded throw."""
+    arm, cw, proj = (np.asarray(a) for a in (throw.arm_tip, throw.counterweight, throw.projectile))
+    from .systems.trebuchet import TrebuchetParams
+
+    ground = -float(TrebuchetParams().pivot_height)
+    ax.axhline(ground, color="0.4", lw=1)
+    ax.plot([0.0], [0.0], "ko", ms=4)
+    ax.plot([0.0, 0.0], [ground, 0.0], color="0.3", lw=2)
+    ax.plot([arm[i, 0], 0.0, cw[i, 0]], [arm[i, 1], 0.0, cw[i, 1]], color="#8b5a2b", lw=3)
+    ax.plot([cw[i, 0]], [cw[i, 1]], "s", color="0.2", ms=8)
+    if int(np.asarray(throw.phases)[i]) < 2:  # still on the sling
+        ax.plot([arm[i, 0], proj[i, 0]], [arm[i, 1], proj[i, 1]], color="0.5", lw=1)
+    ax.plot(proj[: i + 1, 0], proj[: i + 1, 1], color="C0", lw=1)
+    ax.plot([proj[i, 0]], [proj[i, 1]], "o", color="C3", ms=5)
+    ax.plot([target], [ground], marker="v", color="C2", ms=12, label=f"target {target:.1f} m")
+    ax.annotate(
+        f"wind {wind:+.1f} m/s",
+        xy=(0.02, 0.92),
+        xycoords="axes fraction",
+        fontsize=9,
+    )
+
+
+def throw(throw: Any, target: float, wind: float, path: str | Path, title: str = "") -> Path:
+    """A recorded trebuchet throw: the path, the machine at release, and the target."""
+    times = np.asarray(throw.time)
+    rel = np.asarray(throw.phases) >= 2
+    i_rel = int(np.argmax(rel)) if rel.any() else len(times) - 1
+    fig, ax = plt.subplots(figsize=(8, 3.6))
+    _throw_frame(ax, throw, len(times) - 1, target, wind)
+    arm = np.asarray(throw.arm_tip)
+    ax.plot([arm[i_rel, 0], 0.0], [arm[i_rel, 1], 0.0], color="#8b5a2b", lw=1, ls=":")
+    proj = np.asarray(throw.projectile)
+    x_max = max(float(np.max(proj[:, 0])), target) + 5
+    ax.set_xlim(-5, x_max)
+    ax.set_ylim(-2.5, max(float(np.max(proj[:, 1])) + 3, 8))
+    ax.set_aspect("equal", adjustable="box")
+    ax.set_xlabel("x from the pivot (m)")
+    ax.set_ylabel("height (m)")
+    miss = float(throw.distance) - target
+    ax.set_title(title or f"distance {float(throw.distance):.2f} m, miss {miss:+.2f} m")
+    ax.legend(loc="upper right", fontsize=8)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    return _save(fig, path)

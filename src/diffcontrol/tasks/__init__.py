@@ -10,6 +10,7 @@ from ..errors import UnknownTaskError
 from ._base import StepLoss, Task
 from .cartpole import CartPole
 from .pendulum import Pendulum, PendulumUnclipped
+from .trebuchet import TrebuchetAiming
 
 _REGISTRY: dict[str, Task] = {}
 
@@ -42,7 +43,7 @@ def names() -> list[str]:
     return list(_REGISTRY)
 
 
-for _task in (Pendulum(), PendulumUnclipped(), CartPole()):
+for _task in (Pendulum(), PendulumUnclipped(), CartPole(), TrebuchetAiming()):
     register(_task)
 
 __all__ = [
@@ -54,4 +55,5 @@ __all__ = [
     "Pendulum",
     "PendulumUnclipped",
     "CartPole",
+    "TrebuchetAiming",
 ]

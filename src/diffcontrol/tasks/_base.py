@@ -23,6 +23,8 @@ class Task(abc.ABC):
     Class attributes:
         name: the registry name (``diffcontrol list``).
         summary: one line for ``diffcontrol list``.
+        kind: ``"control"`` (a sequential task evaluated in Gymnasium) or ``"aiming"`` (one
+            action per situation, evaluated by its miss statistics, like the trebuchet).
         gym_id: the Gymnasium environment the task is evaluated in, or ``None``.
         episode_length: the standard episode length (Gymnasium's ``max_episode_steps``);
             ``simulated_episodes`` in ``metrics.json`` is counted in these.
@@ -37,6 +39,7 @@ class Task(abc.ABC):
 
     name: ClassVar[str]
     summary: ClassVar[str]
+    kind: ClassVar[str] = "control"
     gym_id: ClassVar[str | None] = None
     episode_length: ClassVar[int]
     observation_size: ClassVar[int]

@@ -1,0 +1,138 @@
+"""The trebuchet aiming task: reachability, direct aiming, learning, and the CLI end to end."""
+
+from __future__ import annotations
+
+import json
+
+import jax
+import numpy as np
+import pytest
+
+import diffcontrol
+from diffcontrol import io
+from diffcontrol.cli import main
+from diffcontrol.evaluation import evaluate_aiming
+from diffcontrol.systems import trebuchet as tb
+from diffcontrol.tasks import trebuchet as aim
+from diffcontrol.training import resolve_config
+
+shoot = jax.jit(tb.shoot)
+aim_directly = jax.jit(aim.aim_directly)
+TINY = ["--updates", "20", "--eval-every", "10", "--eval-episodes", "16", "--final-eval", "50"]
+
+
+@pytest.fixture(scope="module")
+def trebuchet_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("runs") / "trebuchet"
+    assert main(["train", "trebuchet", "--out", str(out), "--quiet", *TINY]) == 0
+    return out
+
+
+def test_reset_draws_the_original_situations():
+    task = diffcontrol.make("trebuchet")
+    keys = jax.random.split(jax.random.key(0), 4000)
+    states = np.asarray(jax.jit(jax.vmap(task.reset, in_axes=(0, None)))(keys, None))
+    target, wind, distance = states.T
+    assert target.min() >= 20 and target.max() <= 100
+    assert abs(np.mean(target) - 60) < 1.5 and abs(np.std(target) - 80 / np.sqrt(12)) < 1.0
+    assert abs(np.mean(wind)) < 0.3 and abs(np.std(wind) - 5.0) < 0.2
+    assert np.all(np.abs(wind) <= 20) and np.all(distance == 0)
+
+
+def test_reachable_range_brackets_what_the_heads_can_throw():
+    winds = np.array([-12.0, -3.0, 0.0, 4.0, 10.0])
+    shortest, longest = (np.asarray(x) for x in aim.reachable_range(winds))
+    assert np.all(shortest < 20) and np.all(np.diff(longest) > 0)  # a tail wind carries further
+    # No angle/weight inside the bounds beats the longest throw (a coarse grid, all winds).
+    a, w = np.meshgrid(np.linspace(5, 85, 33), np.linspace(30, 450, 15), indexing="ij")
+    grid = np.asarray(shoot(winds[:, None, None], a[None], w[None]))
+    assert np.all(grid.max(axis=(1, 2)) <= longest + 1e-3)
+    assert np.all(grid.max(axis=(1, 2)) >= longest - 0.5)  # and the search is not far off
+    assert np.all(grid.min(axis=(1, 2)) >= shortest - 0.5)
+
+
+def test_direct_aiming_hits_reachable_targets():
+    target = np.array([25.0, 50.0, 80.0, 95.0])
+    wind = np.array([3.0, -5.0, -2.0, 4.0])
+    angle, weight, miss = (np.asarray(x) for x in aim_directly(target, wind))
+    assert np.all(np.abs(miss) < 0.01), miss
+    assert np.all((angle >= 5) & (angle <= 85) & (weight >= 30) & (weight <= 450))
+    np.testing.assert_allclose(np.asarray(shoot(wind, angle, weight)), target, atol=0.01)
+
+
+def test_check_target_names_the_reachable_range():
+    aim.check_target(60.0, 0.0)
+    with pytest.raises(diffcontrol.ConfigError, match=r"out of reach.*reaches"):
+        aim.check_target(150.0, -10.0)
+    with pytest.raises(diffcontrol.ConfigError, match="positive"):
+        aim.check_target(-5.0, 0.0)
+    with pytest.raises(diffcontrol.ConfigError, match="finite"):
+        aim.check_target(60.0, float("nan"))
+
+
+def test_cli_train_writes_everything_and_load_aims(trebuchet_run):
+    for name in ("model.json", "metrics.json", "learning_curve.png", "rollout.png", "rollout.gif"):
+        assert (trebuchet_run / name).stat().st_size > 0, name
+    metrics = json.loads((trebuchet_run / "metrics.json").read_text())
+    ev = metrics["aim_eval"]
+    assert ev["targets"] == 50 and ev["reachable"] + ev["unreachable"] == 50
+    assert ev["median_miss_m"] <= ev["p95_miss_m"] <= ev["worst_miss_m"]
+    assert metrics["simulated_episodes"] == 20 * resolve_config(diffcontrol.make("trebuchet")).batch
+
+    policy = diffcontrol.load(trebuchet_run)
+    assert isinstance(policy, diffcontrol.AimingPolicy)
+    angle, weight = policy(80.0, -3.0)
+    assert isinstance(angle, float) and 5 <= angle <= 85 and 30 <= weight <= 450
+    angles, weights = policy(np.array([30.0, 60.0, 90.0]), np.array([0.0, 2.0, -2.0]))
+    assert angles.shape == weights.shape == (3,)
+    assert (angles[1], weights[1]) == pytest.approx(policy(60.0, 2.0))
+    # The NumPy policy is the JAX controller.
+    controller = io.controller_from_dict(io.read_model(trebuchet_run))
+    np.testing.assert_allclose(
+        np.asarray(controller(np.array([80.0, -3.0]))), [angle, weight], rtol=1e-5
+    )
+
+
+def test_cli_aim_evaluate_animate(trebuchet_run, capsys, tmp_path):
+    assert main(["aim", str(trebuchet_run), "--target", "70", "--wind", "2", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    angle, weight = diffcontrol.load(trebuchet_run)(70.0, 2.0)
+    assert out["angle_deg"] == pytest.approx(angle) and out["weight_lb"] == pytest.approx(weight)
+    distance = float(shoot(2.0, angle, weight))
+    assert out["miss_m"] == pytest.approx(distance - 70.0, abs=1e-3)
+
+    assert main(["aim", str(trebuchet_run), "--target", "70", "--direct"]) == 0
+    text = capsys.readouterr().out
+    assert "network:" in text and "direct:" in text
+
+    assert main(["evaluate", str(trebuchet_run), "--episodes", "40", "--json"]) == 0
+    ev = json.loads(capsys.readouterr().out)
+    ref = evaluate_aiming(diffcontrol.load(trebuchet_run), diffcontrol.make("trebuchet"), 40)
+    assert ev["targets"] == 40 and ev["mean_miss_m"] == pytest.approx(ref.stats["mean_miss_m"])
+
+    gif = tmp_path / "throw.gif"
+    assert main(["animate", str(trebuchet_run), "--out", str(gif), "--target", "50"]) == 0
+    assert gif.stat().st_size > 0
+
+
+@pytest.mark.parametrize(
+    "argv, needle",
+    [
+        (["--target", "150", "--wind", "-10"], "out of reach"),
+        (["--target", "-3"], "positive"),
+        (["--target", "nan"], "--target"),
+    ],
+)
+def test_cli_aim_bad_targets(trebuchet_run, capsys, argv, needle):
+    try:
+        status = main(["aim", str(trebuchet_run), *argv])
+    except SystemExit as e:  # argparse rejects non-numbers before the command runs
+        status = e.code
+    assert status == 2
+    err = capsys.readouterr().err
+    assert needle in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+
+
+def test_cli_aim_needs_an_aiming_run(cartpole_run, capsys):
+    assert main(["aim", str(cartpole_run), "--target", "50"]) == 2
+    assert "trebuchet" in capsys.readouterr().err
