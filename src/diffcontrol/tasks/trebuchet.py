@@ -49,6 +49,8 @@ class TrebuchetAiming(Task):
 
     - ``squared_miss``: ``(distance - target)^2``, the original's loss.
     - ``abs_miss``: ``|distance - target|``, less dominated by unreachable targets.
+    - ``huber_miss``: squared below 1 m, linear above: precise near the target, and the
+      unreachable targets' pull is bounded.
     """
 
     name = "trebuchet"
@@ -64,7 +66,7 @@ class TrebuchetAiming(Task):
     obs_offset = (60.0, 0.0)
     obs_scale = (1.0 / 40.0, 1.0 / WIND_STD_MPS)
     reward_threshold = None
-    losses = ("squared_miss", "abs_miss")
+    losses = ("squared_miss", "abs_miss", "huber_miss")
     state_labels = ("target (m)", "wind (m/s)", "distance (m)")
     action_labels = ("release angle (deg)", "counterweight (lb)")
 
@@ -95,20 +97,31 @@ class TrebuchetAiming(Task):
             return lambda params, state, action, next_state, reward: reward**2
         if name == "abs_miss":
             return lambda params, state, action, next_state, reward: -reward
+        if name == "huber_miss":
+
+            def huber(params, state, action, next_state, reward):
+                miss = -reward
+                return jnp.where(miss < 1.0, 0.5 * miss**2, miss - 0.5)
+
+            return huber
         raise KeyError(name)
 
     def default_config(self) -> TrainConfig:
+        # Measured (1,000 updates, seed 0): mean |miss| 0.78 m with the squared miss, 0.30 m
+        # with huber_miss and 0.27 m with abs_miss (the unreachable targets' pull on the
+        # shared weights is bounded); 2,000 updates of abs_miss at lr 1e-2: 0.14 m.
         return TrainConfig(
-            updates=1500,
+            updates=2000,
             batch=64,
             window=1,
             horizon=1,
-            learning_rate=3e-3,
+            learning_rate=1e-2,
             lr_schedule="warmup_cosine",
             lr_final_fraction=0.01,
             grad_clip=0.0,
             hidden=(32, 32),
             activation="tanh",
+            loss="abs_miss",
             eval_every=100,
             eval_episodes=512,
         )

@@ -1,0 +1,170 @@
+"""Benchmark of the trebuchet demo: aiming accuracy, training time, network vs direct aiming.
+
+Each training run is the real command line, `diffcontrol train trebuchet --out DIR --seed S`,
+in a fresh process pinned to one core (`taskset -c 0`) with the persistent compilation cache
+off, so `train_seconds` includes compiling everything. Each trained network then aims at the
+same 1,000 random targets (20-100 m, wind ~ N(0, 5^2) m/s, seed 0); misses are counted over
+the reachable targets and the unreachable ones are reported. Then, in this process (pin it
+too: `taskset -c 0 python benchmarks/trebuchet.py`), the time per target of the network
+(NumPy, one call per target, and one batched call) and of direct aiming by Gauss-Newton
+steps on the simulator alone (jitted, one target per call).
+
+    taskset -c 0 python benchmarks/trebuchet.py             # 3 training seeds
+    taskset -c 0 python benchmarks/trebuchet.py --seeds 1
+
+Prints a table and writes benchmarks/results/trebuchet.json (machine, date, every figure).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+from core import machine  # noqa: E402
+
+
+def run_train(seed: int, workdir: Path, extra: list[str]) -> dict:
+    out = workdir / f"trebuchet-{seed}"
+    cmd = [sys.executable, "-m", "diffcontrol.cli", "train", "trebuchet", "--out", str(out)]
+    cmd += ["--seed", str(seed), "--quiet", "--no-animation", "--final-eval", "1000", *extra]
+    if shutil.which("taskset"):
+        cmd = ["taskset", "-c", "0", *cmd]
+    env = dict(os.environ, DIFFCONTROL_NO_COMPILE_CACHE="1")
+    subprocess.run(cmd, check=True, env=env, stdout=subprocess.DEVNULL)
+    m = json.loads((out / "metrics.json").read_text())
+    return {
+        "seed": seed,
+        "run_dir": str(out),
+        "simulated_throws": m["simulated_episodes"],
+        "updates": m["updates"],
+        "train_seconds": m["train_seconds"],
+        "compile_seconds": m["compile_seconds"],
+        **{k: m["aim_eval"][k] for k in m["aim_eval"] if k not in ("task", "seed")},
+    }
+
+
+def time_per_call(fn, args_list, repeat: int = 1) -> float:
+    """Mean seconds per call of ``fn`` over ``args_list`` (after one warm-up call)."""
+    fn(*args_list[0])
+    t0 = time.perf_counter()
+    for _ in range(repeat):
+        for args in args_list:
+            fn(*args)
+    return (time.perf_counter() - t0) / (repeat * len(args_list))
+
+
+def aiming_speed(run_dir: str, n_direct: int) -> dict:
+    import jax
+
+    import diffcontrol
+    from diffcontrol.tasks import trebuchet as aim
+
+    policy = diffcontrol.load(run_dir)
+    rng = np.random.default_rng(1)
+    targets = rng.uniform(30, 90, size=1000)
+    winds = rng.normal(0, 3, size=1000)
+    pairs = list(zip(targets.tolist(), winds.tolist()))
+
+    net_single = time_per_call(policy, pairs)
+    t0 = time.perf_counter()
+    for _ in range(20):
+        policy(targets, winds)
+    net_batched = (time.perf_counter() - t0) / (20 * len(targets))
+
+    direct = jax.jit(aim.aim_directly)
+    results = []
+
+    def one(target, wind):
+        results.append(jax.block_until_ready(direct(target, wind)))
+
+    direct_single = time_per_call(one, pairs[:n_direct])
+    misses = np.array([float(r[2]) for r in results[1 : n_direct + 1]])
+    return {
+        "network_seconds_per_target_single_call": net_single,
+        "network_seconds_per_target_batched_1000": net_batched,
+        "direct_seconds_per_target": direct_single,
+        "direct_targets": n_direct,
+        "direct_max_abs_miss_m": float(np.max(np.abs(misses))),
+        "speedup_single": direct_single / net_single,
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--seeds", type=int, default=3, help="training seeds (default 3)")
+    parser.add_argument("--direct-targets", type=int, default=50, help="targets aimed directly")
+    parser.add_argument("--out", type=Path, default=HERE / "results" / "trebuchet.json")
+    parser.add_argument("extra", nargs="*", help="extra `diffcontrol train` options (after --)")
+    args = parser.parse_args()
+
+    header = (
+        f"{'seed':>4} {'throws':>8} {'wall s':>7} {'compile s':>9} {'reachable':>9} "
+        f"{'mean m':>7} {'median m':>8} {'p95 m':>7} {'worst m':>8}"
+    )
+    print(header)
+    print("-" * len(header))
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for seed in range(args.seeds):
+            r = run_train(seed, Path(tmp), args.extra)
+            rows.append(r)
+            print(
+                f"{seed:>4} {r['simulated_throws']:>8.0f} {r['train_seconds']:>7.1f} "
+                f"{r['compile_seconds']:>9.1f} {r['reachable']:>5}/{r['targets']:<4}"
+                f"{r['mean_miss_m']:>7.3f} {r['median_miss_m']:>8.3f} {r['p95_miss_m']:>7.3f} "
+                f"{r['worst_miss_m']:>8.3f}",
+                flush=True,
+            )
+        speed = aiming_speed(rows[0]["run_dir"], args.direct_targets)
+    print()
+    print(
+        f"network, one NumPy call per target: {speed['network_seconds_per_target_single_call'] * 1e6:.1f} us"
+        f"; batched (1000 per call): {speed['network_seconds_per_target_batched_1000'] * 1e6:.2f} us"
+    )
+    print(
+        f"direct Gauss-Newton aiming (jitted, 1 target per call): "
+        f"{speed['direct_seconds_per_target'] * 1e3:.1f} ms per target, worst |miss| "
+        f"{speed['direct_max_abs_miss_m']:.4f} m over {speed['direct_targets']} targets"
+    )
+    print(f"network is {speed['speedup_single']:.0f}x faster per target (single calls)")
+    summary = {
+        "seeds": len(rows),
+        "median_mean_miss_m": statistics.median(r["mean_miss_m"] for r in rows),
+        "worst_mean_miss_m": max(r["mean_miss_m"] for r in rows),
+        "median_train_seconds": statistics.median(r["train_seconds"] for r in rows),
+        "max_train_seconds": max(r["train_seconds"] for r in rows),
+    }
+    print(
+        f"\nmean |miss| over seeds: median {summary['median_mean_miss_m']:.3f} m, worst "
+        f"{summary['worst_mean_miss_m']:.3f} m; training {summary['median_train_seconds']:.1f} s "
+        f"(max {summary['max_train_seconds']:.1f} s)"
+    )
+    for r in rows:
+        r.pop("run_dir")
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(
+        json.dumps(
+            {"machine": machine(), "runs": rows, "aiming_speed": speed, "summary": summary},
+            indent=1,
+        )
+        + "\n"
+    )
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
