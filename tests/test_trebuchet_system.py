@@ -346,3 +346,72 @@ def test_check_inputs_accepts_and_broadcasts():
 def test_check_inputs_rejects(args, match):
     with pytest.raises(ConfigError, match=match):
         tb.check_inputs(*args)
+
+
+# --- the phase scans: budgets, trajectory layout, root finding ----------------------------------
+
+# (wind m/s, angle deg, weight lb): the corners of the step budgets' sweep (TrebuchetParams):
+# the slowest throws in all (452 steps) and the longest flight, and the lightest weight that
+# lifts off within the ground budget (44 of 45 steps), with its slowest release (47 of 50).
+BUDGET_CORNERS = [
+    (20.0, 67.0, 530.0),
+    (20.0, 63.0, 590.0),
+    (-20.0, 0.05, 25.0),
+    (20.0, 90.0, 25.0),
+]
+
+
+@pytest.mark.parametrize("point", BUDGET_CORNERS)
+def test_step_budgets_cover_the_supported_range(point):
+    p = DEFAULT
+    th = _simulate(*point)
+    assert bool(th.landed) and not bool(th.diverged), point
+    ground, hang, flying, _ = _phase_lengths(th)
+    assert ground <= p.ground_steps and hang <= p.hang_steps, (point, ground, hang)
+    assert ground + hang + flying <= 460 < p.max_steps, (point, ground, hang, flying)
+
+
+def test_spent_budgets_report_not_landed():
+    """A phase that runs out of its budget stops the throw there, reported as not landed."""
+    on_ground = _simulate(*BLOG_POINT, tb.TrebuchetParams(ground_steps=10))
+    assert not bool(on_ground.landed) and int(on_ground.phase) == tb.GROUND
+    assert np.isnan(float(on_ground.liftoff_time)) and not bool(on_ground.weight_too_light)
+    assert np.all(np.asarray(on_ground.phases) == tb.GROUND)
+    np.testing.assert_allclose(float(on_ground.time[-1]), 10 * DEFAULT.dt, rtol=1e-6)
+    assert float(on_ground.distance) == pytest.approx(float(on_ground.projectile[-1, 0]))
+    on_sling = _simulate(*BLOG_POINT, tb.TrebuchetParams(hang_steps=5))
+    assert not bool(on_sling.landed) and int(on_sling.phase) == tb.HANG
+    assert np.isfinite(float(on_sling.liftoff_time)) and np.isnan(float(on_sling.release_time))
+    assert np.isfinite(float(on_sling.distance))
+
+
+@pytest.mark.parametrize("field", ["max_steps", "ground_steps", "hang_steps"])
+def test_step_budgets_must_be_positive_ints(field):
+    with pytest.raises(ConfigError, match=f"TrebuchetParams.{field} must be a positive int"):
+        tb.TrebuchetParams(**{field: 0})
+
+
+def test_trajectory_rows_are_steps(x64):
+    """Row ``i`` is the state after ``i`` steps: full steps of ``dt``, except the three steps
+    that end at lift-off, release and landing, where the phase changes (here lift-off is the
+    jump at its step's start, so that step takes no time)."""
+    th = _simulate(*BLOG_POINT)
+    phases, time = np.asarray(th.phases), np.asarray(th.time)
+    end = int(np.argmax(phases == tb.END))
+    steps = np.diff(time[: end + 1])
+    partial = np.flatnonzero(~np.isclose(steps, DEFAULT.dt, rtol=1e-9, atol=0)) + 1
+    changes = np.flatnonzero(np.diff(phases[: end + 1])) + 1
+    np.testing.assert_array_equal(partial, changes)
+    assert np.all(steps >= 0) and len(changes) == 3
+    assert float(th.liftoff_time) == time[changes[0]]
+    assert float(th.release_time) == time[changes[1]]
+    assert float(th.landing_time) == time[changes[2]]
+    assert float(th.distance) == pytest.approx(_shoot(*BLOG_POINT), abs=1e-12)
+
+
+def test_vmap_matches_python_loop_at_converged_roots(x64):
+    """Throws whose release root finding converges with the test's sign at rounding level.
+    Bisecting there, as the original's safeguard does, put the vmapped distance 1e-5 m off."""
+    points = np.array([(-10.0, 35.0, 249.9975), (-15.0, 15.0, 60.0006)])
+    looped = np.array([_shoot(*point) for point in points])
+    np.testing.assert_allclose(_distances(*points.T), looped, rtol=1e-12)

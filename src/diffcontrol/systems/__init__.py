@@ -4,8 +4,16 @@ No losses, policies or I/O live here. Each system documents where its derivative
 non-smooth.
 """
 
-from . import cartpole, pendulum
+from . import cartpole, pendulum, trebuchet
 from .cartpole import CartPoleParams
 from .pendulum import PendulumParams
+from .trebuchet import TrebuchetParams
 
-__all__ = ["cartpole", "pendulum", "CartPoleParams", "PendulumParams"]
+__all__ = [
+    "cartpole",
+    "pendulum",
+    "trebuchet",
+    "CartPoleParams",
+    "PendulumParams",
+    "TrebuchetParams",
+]
