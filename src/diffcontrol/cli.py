@@ -394,11 +394,10 @@ def _finish_aiming(args, task, out: Path, doc: dict, metrics: dict, say) -> int:
 
 
 def _load_run(run_dir: str):
-    from . import io, tasks
+    from . import load, tasks
 
-    doc = io.read_model(run_dir)
-    task = tasks.make(doc["task"])
-    return task, (io.AimingPolicy(doc) if task.kind == "aiming" else io.NumpyPolicy(doc))
+    policy = load(run_dir)  # chooses the policy class by the task's kind
+    return tasks.make(policy.task), policy
 
 
 def _cmd_aim(args: argparse.Namespace) -> int:
