@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import os
@@ -11,7 +12,7 @@ import time
 from pathlib import Path
 from typing import Any, NoReturn
 
-from .config import TrainConfig, help_of
+from .config import ODETrainConfig, help_of
 from .errors import DiffcontrolError
 
 EXIT_USAGE = 2
@@ -76,6 +77,13 @@ def _yes_no(text: str) -> bool:
     raise argparse.ArgumentTypeError(f"expected yes or no, got {text!r}")
 
 
+def _positive_float(text: str) -> float:
+    value = _finite_float(text)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text!r}")
+    return value
+
+
 def _param(text: str) -> tuple[str, float]:
     name, sep, value = text.partition("=")
     if not sep or not name:
@@ -102,6 +110,19 @@ _CONFIG_OPTIONS: dict[str, tuple[Any, str]] = {
     "eval_episodes": (_positive_int, "N"),
     "target_return": (float, "R"),
     "keep_best": (_yes_no, "yes|no"),
+}
+# ODETrainConfig fields that discrete-time tasks do not have.
+_ODE_OPTIONS: dict[str, tuple[Any, str]] = {
+    "horizon_s": (_positive_float, "S"),
+    "saves": (_positive_int, "N"),
+    "solver": (str, "NAME"),
+    "rtol": (_positive_float, "TOL"),
+    "atol": (_positive_float, "TOL"),
+    "max_steps": (_positive_int, "N"),
+    "gradient": (str, "METHOD"),
+    "population": (_positive_int, "N"),
+    "curriculum_start": (_finite_float, "F"),
+    "curriculum_fraction": (_finite_float, "F"),
 }
 
 
@@ -163,6 +184,18 @@ def _build_parser() -> argparse.ArgumentParser:
             metavar=metavar,
             default=None,
             help=help_of(name).replace("%", "%%"),
+        )
+    ode = p.add_argument_group(
+        "continuous-time tasks only (cartpole-swingup*): the ODE solve and its gradient"
+    )
+    for name, (typ, metavar) in _ODE_OPTIONS.items():
+        ode.add_argument(
+            "--" + name.replace("_", "-"),
+            dest=name,
+            type=typ,
+            metavar=metavar,
+            default=None,
+            help=help_of(name, ODETrainConfig).replace("%", "%%"),
         )
     group.add_argument(
         "--param",
@@ -265,13 +298,24 @@ def _cmd_train(args: argparse.Namespace) -> int:
     from .training import resolve_config, train
 
     task = tasks.make(args.task)
-    overrides = {name: getattr(args, name) for name in _CONFIG_OPTIONS}
+    config_cls = type(task.default_config())
+    fields = {f.name for f in dataclasses.fields(config_cls)}
+    overrides = {name: getattr(args, name) for name in {**_CONFIG_OPTIONS, **_ODE_OPTIONS}}
+    foreign = sorted(n for n, v in overrides.items() if v is not None and n not in fields)
+    if foreign:
+        kind = "a continuous-time" if task.kind == "ode" else "a discrete-time"
+        flags = ", ".join("--" + n.replace("_", "-") for n in foreign)
+        raise DiffcontrolError(
+            f"{flags} do{'es' if len(foreign) == 1 else ''} not apply to {task.name!r} ({kind} "
+            "task); see `diffcontrol train --help` for the settings of each kind"
+        )
+    overrides = {n: v for n, v in overrides.items() if n in fields}
     if args.params:
         overrides["params"] = tuple(args.params)
     out = Path(args.out)
     explicit = args.recipe is not None or any(v is not None for v in overrides.values())
     if args.resume and not explicit and (out / io.RUN_FILE).exists():
-        config = TrainConfig.from_json(io.read_json(out / io.RUN_FILE, "run file")["config"])
+        config = config_cls.from_json(io.read_json(out / io.RUN_FILE, "run file")["config"])
     else:
         config = resolve_config(task, args.recipe, **overrides)
 
@@ -279,10 +323,17 @@ def _cmd_train(args: argparse.Namespace) -> int:
     if not (args.no_compile_cache or os.environ.get("DIFFCONTROL_NO_COMPILE_CACHE")):
         cache_dir = _jax_setup.enable_compile_cache()
     say = (lambda line: None) if args.quiet else (lambda line: print(line, flush=True))
-    say(
-        f"training {task.name}: {config.updates} updates x window {config.window} x batch "
-        f"{config.batch} (seed {config.seed}) -> {out}"
-    )
+    if task.kind == "ode":
+        say(
+            f"training {task.name}: {config.updates} updates of {config.population} closed-loop "
+            f"solve(s) over {config.horizon_s:g} s ({config.solver}, rtol {config.rtol:g}, atol "
+            f"{config.atol:g}, gradient {config.gradient}; seed {config.seed}) -> {out}"
+        )
+    else:
+        say(
+            f"training {task.name}: {config.updates} updates x window {config.window} x batch "
+            f"{config.batch} (seed {config.seed}) -> {out}"
+        )
     try:
         result = train(task, config, out_dir=out, resume=args.resume, progress=say)
     except KeyboardInterrupt:
@@ -316,6 +367,8 @@ def _cmd_train(args: argparse.Namespace) -> int:
     io.write_json(out / "model.json", doc)
     if task.kind == "aiming":
         return _finish_aiming(args, task, out, doc, metrics, say)
+    if task.kind == "ode":
+        return _finish_ode(args, task, out, result, metrics, say)
     policy = io.NumpyPolicy(doc)
     final_eval = 100 if args.final_eval is None else args.final_eval
     if final_eval and task.gym_id:
@@ -393,6 +446,52 @@ def _finish_aiming(args, task, out: Path, doc: dict, metrics: dict, say) -> int:
     return 0
 
 
+def _finish_ode(args, task, out: Path, result, metrics: dict, say) -> int:
+    """The end of `train` for continuous-time tasks: a reference solve, data.json, plots, GIF."""
+    from . import io, plots
+    from .evaluation import simulate_continuous, swingup_result
+
+    rec = simulate_continuous(task, result.controller, result.params)
+    report = swingup_result(rec)
+    metrics["swingup"] = report.to_json()
+    say(f"reference solve: {report.summary()}")
+    io.write_json(out / "metrics.json", metrics)
+    io.write_json(out / "data.json", rec.to_json())
+    plots.learning_curve(metrics, out / "learning_curve.png", None)
+    plots.swingup(rec, out / "swingup.png")
+    files = ["model.json", "data.json", "metrics.json", "learning_curve.png", "swingup.png"]
+    if not args.no_animation:
+        from .animation import animate_swingup
+
+        animate_swingup(rec, out / "rollout.gif")
+        files.append("rollout.gif")
+    print(
+        f"done in {metrics['train_seconds']:.1f} s (compile {metrics['compile_seconds']:.1f} s): "
+        f"{metrics['simulated_episodes']} closed-loop solves ({metrics['simulated_steps']} solver "
+        f"steps); final |θ| {abs(report.final_theta):.3f} rad, ẋ {report.final_x_dot:+.3f} m/s, "
+        f"peak |F| {report.peak_force:.1f} N"
+    )
+    print(f"wrote {', '.join(str(out / f) for f in files)}")
+    return 0
+
+
+def _ode_recording(run_dir: str, task):
+    """Re-solve a saved continuous-time controller (the reference solve)."""
+    from .evaluation import simulate_continuous
+    from .io import controller_from_dict, read_model
+
+    doc = read_model(Path(run_dir))
+    params = task.default_params()
+    run_file = Path(run_dir) / "run.json"
+    if run_file.exists():  # the run's own --param overrides
+        from . import io
+        from .training import task_params
+
+        overrides = io.read_json(run_file, "run file").get("config", {}).get("params", [])
+        params = task_params(task, tuple((str(k), float(v)) for k, v in overrides))
+    return simulate_continuous(task, controller_from_dict(doc), params)
+
+
 def _load_run(run_dir: str):
     from . import load, tasks
 
@@ -467,6 +566,15 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         else:
             print(f"{task.name}, {n} random targets (seed {args.seed}): {result.summary()}")
         return 0
+    if task.kind == "ode":
+        from .evaluation import swingup_result
+
+        report = swingup_result(_ode_recording(args.run_dir, task))
+        if args.json:
+            print(json.dumps({"run_dir": str(args.run_dir), **report.to_json()}))
+        else:
+            print(f"{task.name} (reference solve, dopri8 at 1e-9): {report.summary()}")
+        return 0
     if not task.gym_id:
         raise DiffcontrolError(f"task {task.name!r} has no Gymnasium environment to evaluate in")
     args.episodes = args.episodes or 100
@@ -496,6 +604,13 @@ def _cmd_animate(args: argparse.Namespace) -> int:
         throw = _example_throw(policy, args.target, args.wind)
         animate_throw(throw, args.target, args.wind, path)
         print(f"wrote {path} (distance {float(throw.distance):.2f} m, target {args.target:g} m)")
+        return 0
+    if task.kind == "ode":
+        from .animation import animate_swingup
+
+        rec = _ode_recording(args.run_dir, task)
+        animate_swingup(rec, path)
+        print(f"wrote {path} ({rec.t[-1]:g} s, peak |F| {abs(rec.force).max():.1f} N)")
         return 0
     rec = record_episode(policy, task, seed=args.seed)
     animate(rec, task, path)
