@@ -331,7 +331,7 @@ def swingup_result(rec: ContinuousRecording) -> SwingUpResult:
     up = np.abs(theta) < 0.1
     first_up = int(np.argmax(up)) if up.any() else len(theta)
     rate = rec.y[:first_up, 3]
-    signs = np.sign(rate[np.abs(rate) > 1e-9])
+    signs = np.sign(rate[np.abs(rate) > 1e-3])  # ignore numerical jitter at rest
     swings = int(np.sum(signs[1:] != signs[:-1])) if signs.size > 1 else 0
     upright_time = None
     if up[-1]:
