@@ -34,7 +34,7 @@ from diffcontrol.config import ODETrainConfig
 from diffcontrol.errors import ConfigError, SolverFailed
 from diffcontrol.evaluation import simulate_continuous, swingup_result
 from diffcontrol.systems import cartpole_swingup as cp
-from diffcontrol.training import make_ode_trainer, task_params, train
+from diffcontrol.training import make_ode_trainer, train
 
 from .conftest import TINY_SWINGUP
 
@@ -64,7 +64,9 @@ def _post_rhs(t, u):
     F = _force(t)
     D = M + m * np.sin(th) ** 2
     ddx = (F + m * np.sin(th) * (L * dth**2 - g * np.cos(th))) / D
-    ddth = (-F * np.cos(th) - m * L * dth**2 * np.sin(th) * np.cos(th) + (M + m) * g * np.sin(th)) / (L * D)
+    ddth = (
+        -F * np.cos(th) - m * L * dth**2 * np.sin(th) * np.cos(th) + (M + m) * g * np.sin(th)
+    ) / (L * D)
     return [dx, ddx, dth, ddth]
 
 
@@ -112,10 +114,14 @@ def test_vector_field_matches_the_posts_equations_against_scipy():
 
 
 def test_friction_matches_the_mass_matrix_form_against_scipy():
-    params = cp.SwingUpParams(cart_viscous=1.3, cart_coulomb=0.7, pole_viscous=0.2, pole_coulomb=0.1)
+    params = cp.SwingUpParams(
+        cart_viscous=1.3, cart_coulomb=0.7, pole_viscous=0.2, pole_coulomb=0.1
+    )
     ts = np.linspace(0.0, 2.0, 41)
     y0 = [0.0, 0.5, 2.0, -1.0, 0.0, 0.0]
-    ref = solve_ivp(_lagrange_rhs(params), (0, 2), y0, method="DOP853", t_eval=ts, rtol=1e-11, atol=1e-11)
+    ref = solve_ivp(
+        _lagrange_rhs(params), (0, 2), y0, method="DOP853", t_eval=ts, rtol=1e-11, atol=1e-11
+    )
     ys = _diffrax_solve(params, y0, ts)
     np.testing.assert_allclose(ys, ref.y.T, atol=1e-7)
     assert ys[-1, 5] > 0.1  # friction dissipated energy
@@ -124,7 +130,9 @@ def test_friction_matches_the_mass_matrix_form_against_scipy():
 @pytest.mark.parametrize("friction", [False, True])
 def test_energy_balance(friction):
     """Without force: energy is conserved, or lost exactly as the dissipated-energy integral."""
-    params = cp.SwingUpParams(cart_viscous=1.0, pole_viscous=0.3) if friction else cp.SwingUpParams()
+    params = (
+        cp.SwingUpParams(cart_viscous=1.0, pole_viscous=0.3) if friction else cp.SwingUpParams()
+    )
     ts = np.linspace(0.0, 3.0, 31)
     ys = _diffrax_solve(params, [0.0, 1.0, 1.0, 0.0, 0.0, 0.0], ts, OpenLoop(a=0.0, b=0.0))
     with jax.enable_x64(True):
@@ -141,7 +149,9 @@ def _loss_and_weights(gradient: str):
     cfg = ODETrainConfig(horizon_s=0.6, saves=13, rtol=1e-10, atol=1e-10, gradient=gradient)
     trainer = make_ode_trainer(SWINGUP, cfg)
     params = jax.tree.map(lambda x: jnp.asarray(x, jnp.float64), SWINGUP.default_params())
-    ctrl = jax.tree.map(lambda x: jnp.asarray(x, jnp.float64), trainer.new_controller(jax.random.PRNGKey(3)))
+    ctrl = jax.tree.map(
+        lambda x: jnp.asarray(x, jnp.float64), trainer.new_controller(jax.random.PRNGKey(3))
+    )
     spec = jax.tree.map(lambda _: False, ctrl)
     spec = eqx.tree_at(lambda c: c.layers, spec, replace=jax.tree.map(lambda _: True, ctrl.layers))
     diff, static = eqx.partition(ctrl, spec)
@@ -174,7 +184,9 @@ def reference_gradient():
         return np.asarray(flat), dirs, np.asarray(fd), float(value)
 
 
-@pytest.mark.parametrize(("gradient", "rtol_fd"), [("checkpoint", 1e-4), ("forward", 1e-4), ("backsolve", 1e-3)])
+@pytest.mark.parametrize(
+    ("gradient", "rtol_fd"), [("checkpoint", 1e-4), ("forward", 1e-4), ("backsolve", 1e-3)]
+)
 def test_gradient_methods_against_finite_differences(gradient, rtol_fd, reference_gradient):
     ref_flat, dirs, fd, ref_value = reference_gradient
     with jax.enable_x64(True):
@@ -200,12 +212,14 @@ def test_force_read_back_matches_the_controller(swingup_run):
     the controller's own output, to O(dt^2)), and the saved force is the NumPy policy's."""
     policy = diffcontrol.load(swingup_run)
     data = json.loads((swingup_run / "data.json").read_text())
-    t, force = np.asarray(data["t"]), np.asarray(data["force"])
+    force = np.asarray(data["force"])
     state = np.stack([data["x"], data["x_dot"], data["theta"], data["theta_dot"]], axis=-1)
     np.testing.assert_allclose(policy(state), force, rtol=1e-5, atol=1e-4)
     names = ("t", "x", "x_dot", "theta", "theta_dot", "force", "impulse", "dissipated_energy")
     with jax.enable_x64(True):
-        tr = diffcontrol.tasks.SwingUpTrajectory(*(jnp.asarray(data[k], jnp.float64) for k in names))
+        tr = diffcontrol.tasks.SwingUpTrajectory(
+            *(jnp.asarray(data[k], jnp.float64) for k in names)
+        )
         read_back = np.asarray(tr.impulse_force)[1:]
     trapezoid = (force[1:] + force[:-1]) / 2
     peak = np.max(np.abs(force))
@@ -230,10 +244,14 @@ def test_state_policy_resimulated_by_scipy_matches(swingup_run):
         F = policy(np.asarray(u))
         D = M + m * np.sin(th) ** 2
         ddx = (F + m * np.sin(th) * (L * dth**2 - g * np.cos(th))) / D
-        ddth = (-F * np.cos(th) - m * L * dth**2 * np.sin(th) * np.cos(th) + (M + m) * g * np.sin(th)) / (L * D)
+        ddth = (
+            -F * np.cos(th) - m * L * dth**2 * np.sin(th) * np.cos(th) + (M + m) * g * np.sin(th)
+        ) / (L * D)
         return [dx, ddx, dth, ddth]
 
-    ref = solve_ivp(rhs, (0, t[-1]), [0, 0, np.pi, 0], method="DOP853", t_eval=t, rtol=1e-10, atol=1e-10)
+    ref = solve_ivp(
+        rhs, (0, t[-1]), [0, 0, np.pi, 0], method="DOP853", t_eval=t, rtol=1e-10, atol=1e-10
+    )
     theta = (ref.y[2] + np.pi) % (2 * np.pi) - np.pi
     np.testing.assert_allclose(ref.y[0], data["x"], atol=1e-4)
     np.testing.assert_allclose(np.cos(theta), np.cos(data["theta"]), atol=1e-4)
@@ -242,7 +260,11 @@ def test_state_policy_resimulated_by_scipy_matches(swingup_run):
 def test_custom_loss_from_python_changes_what_is_learned():
     """A user's trajectory loss replaces the task's: here, drive the cart to x = 1 m."""
     cfg = SWINGUP.default_config().replace(updates=100)
-    result = train(SWINGUP, cfg, trajectory_loss=lambda tr: (tr.x[-1] - 1.0) ** 2 + 1e-3 * jnp.mean(tr.force**2))
+    result = train(
+        SWINGUP,
+        cfg,
+        trajectory_loss=lambda tr: (tr.x[-1] - 1.0) ** 2 + 1e-3 * jnp.mean(tr.force**2),
+    )
     rec = simulate_continuous(SWINGUP, result.controller, result.params)
     assert abs(rec.y[-1, 0] - 1.0) < 0.2
 
@@ -321,7 +343,9 @@ def test_population_and_curriculum():
     assert horizons[0] == pytest.approx(0.5) and horizons[-1] == pytest.approx(1.0)
     assert all(b >= a for a, b in zip(horizons, horizons[1:]))
     assert result.metrics["simulated_episodes"] == 600
-    chosen = result.curve[[p["update"] for p in result.curve].index(result.metrics["returned_update"])]
+    chosen = result.curve[
+        [p["update"] for p in result.curve].index(result.metrics["returned_update"])
+    ]
     rec = simulate_continuous(SWINGUP, result.controller, result.params)
     # The reference solve is more accurate than training's (rtol 1e-3): close, not equal.
     assert rec.loss == pytest.approx(chosen["eval_loss"], rel=0.05)
@@ -341,7 +365,9 @@ def test_resume_continues_exactly(tmp_path):
     with pytest.raises(KeyboardInterrupt):
         train(SWINGUP, cfg, out_dir=tmp_path / "run", progress=interrupt)
     resumed = train(SWINGUP, cfg, out_dir=tmp_path / "run", resume=True)
-    for a, b in zip(jax.tree.leaves(whole.controller), jax.tree.leaves(resumed.controller), strict=True):
+    for a, b in zip(
+        jax.tree.leaves(whole.controller), jax.tree.leaves(resumed.controller), strict=True
+    ):
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
     assert [p["update"] for p in resumed.curve] == [0, 50, 100, 150]
 
@@ -350,7 +376,14 @@ def test_resume_continues_exactly(tmp_path):
 
 
 def test_cli_writes_the_posts_outputs(swingup_run):
-    for name in ("model.json", "data.json", "metrics.json", "swingup.png", "learning_curve.png", "rollout.gif"):
+    for name in (
+        "model.json",
+        "data.json",
+        "metrics.json",
+        "swingup.png",
+        "learning_curve.png",
+        "rollout.gif",
+    ):
         assert (swingup_run / name).stat().st_size > 0, name
     model = json.loads((swingup_run / "model.json").read_text())
     assert model["observation"]["state"] == ["x", "x_dot", "theta", "theta_dot"]
@@ -388,7 +421,9 @@ def test_cli_evaluate_and_animate(swingup_run, tmp_path, capsys):
 def test_cli_bad_input_is_one_line_and_exit_2(args, match, tmp_path, capsys):
     out = tmp_path / "run"
     try:
-        code = main(["train", "cartpole-swingup", "--out", str(out), "--quiet", *TINY_SWINGUP, *args])
+        code = main(
+            ["train", "cartpole-swingup", "--out", str(out), "--quiet", *TINY_SWINGUP, *args]
+        )
     except SystemExit as e:  # argparse's own type checks exit from inside
         code = e.code
     err = capsys.readouterr().err.strip()

@@ -143,12 +143,14 @@ def _build_parser() -> argparse.ArgumentParser:
         "train",
         help="train a controller and write model, metrics, plots and an animation",
         description=(
-            "Train a controller for TASK by backpropagation through time through its "
-            "differentiable simulator, with the task's tuned defaults unless options change "
-            "them. Writes to DIR: model.json (the controller, runnable with NumPy alone), "
-            "metrics.json (timings, simulated steps and episodes, learning curve, Gymnasium "
-            "evaluation), learning_curve.png, rollout.png, rollout.gif, and checkpoint.npz "
-            "(for --resume)."
+            "Train a controller for TASK by differentiating through its simulator, with the "
+            "task's tuned defaults unless options change them: backpropagation through time "
+            "for discrete-time tasks, through an adaptive ODE solve for continuous-time ones "
+            "(cartpole-swingup*). Writes to DIR: model.json (the controller, runnable with "
+            "NumPy alone), metrics.json (timings, simulated steps and episodes, learning "
+            "curve, evaluation), learning_curve.png, rollout.png and rollout.gif (swing-ups: "
+            "data.json with the time series, swingup.png with angle, position and force), "
+            "and checkpoint.npz (for --resume)."
         ),
     )
     p.add_argument("task", metavar="TASK", help="task name (see `diffcontrol list`)")
@@ -213,7 +215,10 @@ def _build_parser() -> argparse.ArgumentParser:
             "Run the controller saved in DIR in Gymnasium's own environment (Pendulum-v1, "
             "CartPole-v1) on seeds S ... S+N-1 and print the mean and std of the return. For "
             "an aiming task (trebuchet), aim at N random targets (20-100 m, wind ~ N(0, 5^2) "
-            "m/s, drawn with seed S) and print the miss statistics over the reachable ones."
+            "m/s, drawn with seed S) and print the miss statistics over the reachable ones. "
+            "For a continuous-time task (cartpole-swingup*), re-solve the closed loop with a "
+            "float64 reference solver (dopri8 at 1e-9) and print the end state, the peak "
+            "force and the swings."
         ),
     )
     p.add_argument("run_dir", metavar="DIR", help="a directory written by `diffcontrol train`")
@@ -236,7 +241,10 @@ def _build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser(
         "animate",
         help="re-render the animation of a saved controller",
-        description="Record one Gymnasium episode of the controller in DIR and write it as a GIF.",
+        description=(
+            "Record one Gymnasium episode of the controller in DIR (or re-solve a swing-up, "
+            "or simulate a trebuchet throw) and write it as a GIF."
+        ),
     )
     p.add_argument("run_dir", metavar="DIR", help="a directory written by `diffcontrol train`")
     p.add_argument(
@@ -288,7 +296,7 @@ def _cmd_list(args: argparse.Namespace) -> int:
         task = tasks.make(name)
         losses = "/".join(task.losses)
         recipes = ", ".join(task.recipes()) or "-"
-        print(f"{name:<20} {task.summary}  [losses: {losses}; recipes: {recipes}]")
+        print(f"{name:<26} {task.summary}  [losses: {losses}; recipes: {recipes}]")
     return 0
 
 
@@ -451,7 +459,7 @@ def _finish_ode(args, task, out: Path, result, metrics: dict, say) -> int:
     from . import io, plots
     from .evaluation import simulate_continuous, swingup_result
 
-    rec = simulate_continuous(task, result.controller, result.params)
+    rec = simulate_continuous(task, result.controller, result.params, config=result.config)
     report = swingup_result(rec)
     metrics["swingup"] = report.to_json()
     say(f"reference solve: {report.summary()}")
@@ -476,20 +484,19 @@ def _finish_ode(args, task, out: Path, result, metrics: dict, say) -> int:
 
 
 def _ode_recording(run_dir: str, task):
-    """Re-solve a saved continuous-time controller (the reference solve)."""
+    """Re-solve a saved continuous-time controller (the reference solve) with the run's own
+    settings (horizon, saves, loss, --param overrides) where its run.json is there."""
+    from . import io
     from .evaluation import simulate_continuous
-    from .io import controller_from_dict, read_model
+    from .training import task_params
 
-    doc = read_model(Path(run_dir))
-    params = task.default_params()
-    run_file = Path(run_dir) / "run.json"
-    if run_file.exists():  # the run's own --param overrides
-        from . import io
-        from .training import task_params
-
-        overrides = io.read_json(run_file, "run file").get("config", {}).get("params", [])
-        params = task_params(task, tuple((str(k), float(v)) for k, v in overrides))
-    return simulate_continuous(task, controller_from_dict(doc), params)
+    doc = io.read_model(Path(run_dir))
+    config = task.default_config()
+    run_file = Path(run_dir) / io.RUN_FILE
+    if Path(run_dir).is_dir() and run_file.exists():
+        config = type(config).from_json(io.read_json(run_file, "run file")["config"])
+    params = task_params(task, config.params)
+    return simulate_continuous(task, io.controller_from_dict(doc), params, config=config)
 
 
 def _load_run(run_dir: str):

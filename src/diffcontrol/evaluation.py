@@ -272,22 +272,23 @@ def simulate_continuous(
     controller: Any,
     params: Any = None,
     *,
+    config: Any = None,
     rate_hz: float = 100.0,
-    horizon_s: float | None = None,
 ) -> ContinuousRecording:
     """Solve ``task``'s closed loop with ``controller`` (an ``MLPController``) for reporting.
 
     A float64 reference solve (``dopri8`` at ``REFERENCE_RTOL``/``REFERENCE_ATOL``) saved at
-    ``rate_hz`` over ``horizon_s`` (default: the task's), plus the task's default loss on its
-    own save grid (``saves`` points, as in training).
+    ``rate_hz`` over the horizon of ``config`` (an ``ODETrainConfig``; default: the task's),
+    plus that config's loss (by name; the task's default if empty) on its own save grid
+    (``saves`` points, as in training).
     """
     import jax
     import jax.numpy as jnp
 
     from .rollout import solve_closed_loop
 
-    config = task.default_config()
-    horizon = float(horizon_s or config.horizon_s)
+    config = config or task.default_config()
+    horizon = float(config.horizon_s)
     params = task.default_params() if params is None else params
     n = int(round(horizon * rate_hz)) + 1
     with jax.enable_x64(True):
@@ -313,7 +314,7 @@ def simulate_continuous(
         ys, force, ok = run(ctrl, p64, ts)
         ts_loss = jnp.linspace(0.0, horizon, config.saves)
         ys_loss, _, ok_loss = run(ctrl, p64, ts_loss)
-        loss_fn = task.trajectory_loss(task.losses[0])
+        loss_fn = task.trajectory_loss(config.loss or task.losses[0])
         loss = float(loss_fn(task.trajectory(p64, ctrl, ts_loss, ys_loss)))
         if not (bool(ok) and bool(ok_loss)):
             raise ValueError("the reference solve failed: the closed loop explodes")
