@@ -130,6 +130,12 @@ def train(
     """
     t_start = time.perf_counter()
     config = config or task.default_config()
+    expected = type(task.default_config())
+    if not isinstance(config, expected):
+        raise ConfigError(
+            f"task {task.name!r} is trained with a {expected.__name__}, got a "
+            f"{type(config).__name__}; start from task.default_config()"
+        )
     say = progress or (lambda line: None)
     params = task_params(task, config.params)
     if isinstance(task, ContinuousTask):
@@ -161,7 +167,7 @@ def train(
         out = io.prepare_run_dir(out_dir, run, resume)
         ckpt = out / CHECKPOINT_FILE
         if resume and ckpt.exists():
-            like_best = trainer.pick(ts.controller, np.zeros(config_population(config)))
+            like_best = trainer.pick(ts.controller, np.zeros(_population(config)))
             (ts, best), meta = io.load_checkpoint(ckpt, (ts, like_best))
             say(f"resuming {task.name} from update {int(ts.update)} ({ckpt})")
 
@@ -208,7 +214,7 @@ def train(
         if isinstance(task, ContinuousTask) and not math.isfinite(first["eval_return"]):
             _check_first_solve(trainer, ts, params)
     elif best is None:
-        best = trainer.pick(ts.controller, np.zeros(config_population(config)))
+        best = trainer.pick(ts.controller, np.zeros(_population(config)))
 
     t0 = time.perf_counter()
     total = jnp.asarray(config.updates, jnp.int32)
@@ -284,7 +290,7 @@ def train(
     )
 
 
-def config_population(config: Any) -> int:
+def _population(config: Any) -> int:
     """How many controllers a run trains side by side (1 for discrete-time runs)."""
     return getattr(config, "population", 1)
 
@@ -293,7 +299,7 @@ def _check_first_solve(trainer: Any, ts: Any, params: PyTree) -> None:
     """Before any update, no member's loss is finite: the loss or the solve is at fault."""
     from ._ode import FAIL_MAX_STEPS, FAIL_NAN, FAIL_SOLVER, failure_message
 
-    ctrl = trainer.pick(ts.controller, np.zeros(config_population(trainer.config)))
+    ctrl = trainer.pick(ts.controller, np.zeros(_population(trainer.config)))
     loss, (ok, hit_max, _) = jax.jit(trainer.member_loss)(
         ctrl, params, jnp.asarray(trainer.config.horizon_s)
     )
