@@ -134,7 +134,7 @@ class ODETrainer(eqx.Module):
             simulated_seconds=jnp.zeros((), float),
         )
 
-    def _member_update(self, controller, opt_state, fail_code, params, horizon, update):
+    def _member_update(self, controller, opt_state, fail_code, params, horizon):
         spec = _trainable(controller)
         diff, static = eqx.partition(controller, spec)
 
@@ -171,8 +171,8 @@ class ODETrainer(eqx.Module):
         """One update of every member still training."""
         horizon = self.horizon_at(ts.update)
         ctrl, opt, code, loss, gnorm, steps, live = eqx.filter_vmap(
-            self._member_update, in_axes=(0, 0, 0, None, None, None)
-        )(ts.controller, ts.opt_state, ts.fail_code, params, horizon, ts.update)
+            self._member_update, in_axes=(0, 0, 0, None, None)
+        )(ts.controller, ts.opt_state, ts.fail_code, params, horizon)
         newly = (code != FAIL_NONE) & (ts.fail_code == FAIL_NONE)
         n_live = jnp.sum(live)
         new = ODETrainState(
