@@ -63,6 +63,34 @@ def supports(task: Any) -> bool:
     return isinstance(task, Task) and task.kind in SUPPORTED_KINDS
 
 
+_COMPILED: dict[str, tuple[Any, Any]] = {}
+
+
+def _compiled(task: Task, params: Any, nominal: bool) -> tuple[Any, Any]:
+    """Jitted ``reset(key)`` and ``step(state, action)`` of ``task`` with ``params`` built in.
+
+    The parameters are closed over (constants of the compiled programs): fewer arguments to
+    flatten per call makes a step several times cheaper to dispatch. The programs of the
+    nominal parameters are shared by every environment of the task, so making many
+    environments (an evaluation pool) compiles once.
+    """
+    if nominal and task.name in _COMPILED and _COMPILED[task.name][0] is type(task):
+        return _COMPILED[task.name][1]
+
+    def reset(key):
+        state = task.reset(key, params)
+        return state, task.observe(state)
+
+    def step(state, action):
+        next_state, reward, terminated = task.step(params, state, action.astype(state.dtype))
+        return next_state, task.observe(next_state), reward, terminated
+
+    fns = (jax.jit(reset), jax.jit(step))
+    if nominal:
+        _COMPILED[task.name] = (type(task), fns)
+    return fns
+
+
 class TaskEnv(gymnasium.Env):
     """A discrete-time diffcontrol task stepped from NumPy through its jitted ``task.step``.
 
@@ -111,20 +139,7 @@ class TaskEnv(gymnasium.Env):
             self._low = self._high = None
             self.action_space = spaces.Box(-np.inf, np.inf, (task.action_size,), dtype=np.float32)
 
-        # The parameters are closed over (constants of the compiled programs): fewer
-        # arguments to flatten per call makes a step several times cheaper to dispatch.
-        params_ = self.params
-
-        def reset(key):
-            state = task.reset(key, params_)
-            return state, task.observe(state)
-
-        def step(state, action):
-            next_state, reward, terminated = task.step(params_, state, action.astype(state.dtype))
-            return next_state, task.observe(next_state), reward, terminated
-
-        self._reset = jax.jit(reset)
-        self._step = jax.jit(step)
+        self._reset, self._step = _compiled(task, self.params, params is None)
         self.state: jax.Array | None = None
 
     def task_action(self, action: Any) -> np.ndarray:

@@ -89,6 +89,7 @@ def train(
     resume: bool = False,
     step_loss: StepLoss | None = None,
     progress: Callable[[str], None] | None = None,
+    on_point: Callable[[dict[str, Any], MLPController], None] | None = None,
 ) -> TrainResult:
     """Train a controller for ``task`` by truncated BPTT through its simulator.
 
@@ -101,6 +102,11 @@ def train(
         step_loss: a user-supplied training loss ``f(params, state, action, next_state,
             reward) -> scalar`` that replaces the task's built-in one.
         progress: called with one human-readable line per evaluation point.
+        on_point: called with each evaluation point (the dict that joins the curve) and the
+            controller at that point, e.g. to evaluate it elsewhere. The time spent in it is
+            left out of every ``seconds`` and of ``train_seconds`` (and reported as
+            ``callback_seconds``); it is not saved in checkpoints, so a resumed run calls it
+            only for the points after the resume.
 
     Returns:
         A ``TrainResult`` whose controller is the one of the best evaluation point when
@@ -152,11 +158,12 @@ def train(
     curve: list[dict[str, Any]] = list(meta["curve"])
     seconds_before = float(meta["seconds_before"])
     eval_seconds = 0.0
+    callback_seconds = 0.0  # time spent in on_point, left out of the training time
 
     best_index = int(meta["best_index"])
 
     def record(ts: TrainState, loss: float, grad_norm: float) -> dict[str, Any]:
-        nonlocal eval_seconds, best, best_index
+        nonlocal eval_seconds, best, best_index, callback_seconds
         t_eval = time.perf_counter()
         returns = np.asarray(evaluate(ts.controller, params, k_eval))
         eval_seconds += time.perf_counter() - t_eval
@@ -167,7 +174,7 @@ def train(
             "update": update,
             "simulated_steps": steps,
             "simulated_episodes": steps / task.episode_length,
-            "seconds": seconds_before + time.perf_counter() - t_start,
+            "seconds": seconds_before + time.perf_counter() - t_start - callback_seconds,
             "loss": loss,
             "grad_norm": grad_norm,
             "eval_return": float(returns.mean()),
@@ -181,6 +188,10 @@ def train(
         if len(curve) == 1 or math.isnan(so_far) or point["eval_return"] >= so_far:
             best, best_index = ts.controller, len(curve) - 1
         say(_progress_line(point, config.updates))
+        if on_point is not None:
+            t_cb = time.perf_counter()
+            on_point(point, ts.controller)
+            callback_seconds += time.perf_counter() - t_cb
         return point
 
     if not curve:
@@ -214,7 +225,10 @@ def train(
                 {
                     "curve": curve,
                     "best_index": best_index,
-                    "seconds_before": seconds_before + time.perf_counter() - t_start,
+                    "seconds_before": seconds_before
+                    + time.perf_counter()
+                    - t_start
+                    - callback_seconds,
                     "compile_seconds_before": float(meta["compile_seconds_before"])
                     + compile_seconds,
                 },
@@ -222,7 +236,7 @@ def train(
 
     updates_done = int(ts.update)
     steps = updates_done * steps_per_update
-    wall = seconds_before + time.perf_counter() - t_start
+    wall = seconds_before + time.perf_counter() - t_start - callback_seconds
     chosen = curve[best_index] if config.keep_best else curve[-1]
     metrics = {
         "task": task.name,
@@ -231,6 +245,7 @@ def train(
         "train_seconds": wall,
         "compile_seconds": float(meta["compile_seconds_before"]) + compile_seconds,
         "eval_seconds_in_training": eval_seconds,
+        "callback_seconds": callback_seconds,
         "updates": updates_done,
         "simulated_steps": steps,
         "simulated_episodes": steps / task.episode_length,
