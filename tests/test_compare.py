@@ -164,3 +164,13 @@ def test_compare_refuses_a_directory_with_other_files(capsys, tmp_path):
     code = main(["compare", "cartpole", "--out", str(tmp_path), "--methods", "diffcontrol"])
     assert code == 2 and "not empty" in capsys.readouterr().err
     assert [p.name for p in tmp_path.iterdir()] == ["notes.txt"]
+
+
+def test_compare_help(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["compare", "--help"])
+    assert exc.value.code == 0
+    out = capsys.readouterr().out
+    for option in ("--seeds", "--rl-steps", "--updates", "--eval-every", "--resume", "--out"):
+        assert option in out
+    assert "leave out these evaluations" in " ".join(out.split())
