@@ -18,7 +18,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from .. import io
+from .. import envs, io
 from ..errors import ConfigError, RunDirectoryError
 from ..tasks import Task
 from .baselines import BASELINES, INSTALL_HINT, Baseline, require_rl
@@ -105,7 +105,7 @@ def run_comparison(
         "eval_episodes": eval_episodes,
         "final_episodes": final_episodes,
         "eval_seed": eval_seed,
-        "eval_env": task.gym_label if task.gym_id else f"diffcontrol/{task.name}",
+        "eval_env": task.gym_label if task.gym_id else envs.env_id(task),
     }
     out = _prepare(Path(out_dir), settings, resume)
     runs_dir = out / "runs"
