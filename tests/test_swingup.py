@@ -21,6 +21,7 @@ import json
 import re
 
 import equinox as eqx
+import gymnasium
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -429,3 +430,48 @@ def test_cli_bad_input_is_one_line_and_exit_2(args, match, tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert code == 2
     assert match in err and len(err.splitlines()) == 1, err
+
+
+# --- the Gymnasium environments ------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "name", ["CartPoleSwingUp", "CartPoleSwingUpLimited", "CartPoleSwingUpFriction"]
+)
+def test_swingup_environments_pass_check_env(name):
+    from gymnasium.utils.env_checker import check_env
+
+    env = gymnasium.make(f"diffcontrol/{name}-v0")
+    check_env(env.unwrapped, skip_render_check=True)
+    task = env.unwrapped.task
+    assert env.spec.max_episode_steps == task.default_config().saves - 1
+
+
+def test_swingup_environment_equals_the_differentiable_closed_loop():
+    """With a constant force the held action and the controller inside the ODE are the same
+    input, so the environment's episode must reproduce the differentiable solve: the same
+    final state (to the solvers' tolerances) and a return of exactly minus the same loss."""
+    force = 7.5
+    cfg = SWINGUP.default_config().replace(rtol=1e-7, atol=1e-9)
+    trainer = make_ode_trainer(SWINGUP, cfg)
+    ctrl = trainer.new_controller(jax.random.PRNGKey(0))
+    zeroed = [
+        eqx.tree_at(lambda l: (l.weight, l.bias), l, (l.weight * 0, l.bias * 0))
+        for l in ctrl.layers
+    ]
+    zeroed[-1] = eqx.tree_at(lambda l: l.bias, zeroed[-1], jnp.full((1,), force))
+    ctrl = eqx.tree_at(lambda c: c.layers, ctrl, tuple(zeroed))
+    params = SWINGUP.default_params()
+    loss, _ = jax.jit(trainer.member_loss)(ctrl, params, jnp.asarray(cfg.horizon_s))
+    sol = trainer.solve(ctrl, params, jnp.asarray(cfg.horizon_s), "checkpoint")
+
+    env = gymnasium.make("diffcontrol/CartPoleSwingUp-v0")
+    env.reset(seed=0)
+    total, steps, done = 0.0, 0, False
+    while not done:
+        _, reward, terminated, truncated, info = env.step(np.array([force], np.float32))
+        total, steps, done = total + reward, steps + 1, terminated or truncated
+    assert steps == cfg.saves - 1
+    np.testing.assert_allclose(info["state"], np.asarray(sol.ys[-1, :4]), rtol=1e-4, atol=1e-4)
+    assert total == pytest.approx(-float(loss), rel=1e-4)
+    assert abs(info["state"][0]) > 1.0  # the push really moved the cart

@@ -15,7 +15,7 @@ from pathlib import Path as _Path
 
 __version__ = "0.1.0"
 
-from . import controllers, rollout, systems, tasks  # noqa: E402
+from . import controllers, envs, rollout, systems, tasks  # noqa: E402
 from .config import ODETrainConfig, TrainConfig  # noqa: E402
 from .controllers import MLPController, straight_through_sign  # noqa: E402, F401
 from .errors import (  # noqa: E402
@@ -32,6 +32,8 @@ from .io import AimingPolicy, NumpyPolicy, StatePolicy  # noqa: E402
 from .rollout import Trajectory  # noqa: E402
 from .tasks import ContinuousTask, Task, make, register  # noqa: E402
 from .training import TrainResult, resolve_config, train  # noqa: E402
+
+envs.register_all()  # gymnasium.make("diffcontrol/<Name>-v0") for every registered task
 
 
 def load(run_dir: str | _os.PathLike) -> NumpyPolicy:
@@ -84,6 +86,7 @@ __all__ = [
     "TrainingDiverged",
     "UnknownTaskError",
     "controllers",
+    "envs",
     "evaluate",
     "evaluate_aiming",
     "list_tasks",

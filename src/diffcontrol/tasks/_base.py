@@ -30,6 +30,7 @@ class _TaskBase(abc.ABC):
     losses: ClassVar[tuple[str, ...]]
     state_labels: ClassVar[tuple[str, ...]] = ()
     action_labels: ClassVar[tuple[str, ...]] = ()
+    env_name: ClassVar[str | None] = None
 
     @abc.abstractmethod
     def default_params(self) -> PyTree:
@@ -86,6 +87,9 @@ class Task(_TaskBase):
         reward_threshold: the return at which the task counts as solved.
         losses: the names of the built-in training losses; the first is the default.
         state_labels, action_labels: names with units, for plots.
+        env_name: the ``Name`` of the Gymnasium environment ``diffcontrol/<Name>-v0`` that
+            steps this task (``diffcontrol.envs``); ``None`` derives it from ``name``
+            (``pendulum-unclipped`` -> ``PendulumUnclipped``).
     """
 
     episode_length: ClassVar[int]

@@ -42,6 +42,7 @@ class CartPole(Task):
         "pole speed θ̇ (rad/s)",
     )
     action_labels = ("push (±1 × 10 N)",)
+    env_name = "CartPole"
 
     def default_params(self) -> cp.CartPoleParams:
         return cp.CartPoleParams()

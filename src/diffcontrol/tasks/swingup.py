@@ -113,6 +113,7 @@ class CartPoleSwingUp(ContinuousTask):
     """Swing the post's cart-pole up from hanging down in 1 s, and stop (the post's loss)."""
 
     name = "cartpole-swingup"
+    env_name = "CartPoleSwingUp"
     summary = "neural-ODE cart-pole swing-up of the 2020 post: 1 s, unbounded force"
     observation_size = 3
     action_size = 1
@@ -182,6 +183,7 @@ class CartPoleSwingUpLimited(CartPoleSwingUp):
     """
 
     name = "cartpole-swingup-limited"
+    env_name = "CartPoleSwingUpLimited"
     summary = "the post's 'motor can't give 60 N' swing-up: 10 s, x and peak-force penalties"
     losses = ("limited_hold", "limited", "swingup", "energy")
 
@@ -213,6 +215,7 @@ class CartPoleSwingUpFriction(CartPoleSwingUp):
     """
 
     name = "cartpole-swingup-friction"
+    env_name = "CartPoleSwingUpFriction"
     summary = "3 s swing-up with cart and joint friction; the loss adds the dissipated energy"
     losses = ("energy", "swingup", "limited", "limited_hold")
 

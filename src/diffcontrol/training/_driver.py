@@ -93,6 +93,7 @@ def train(
     step_loss: StepLoss | None = None,
     trajectory_loss: TrajectoryLoss | None = None,
     progress: Callable[[str], None] | None = None,
+    on_point: Callable[[dict[str, Any], MLPController], None] | None = None,
 ) -> TrainResult:
     """Train a controller for ``task`` by differentiating through its simulator.
 
@@ -112,6 +113,11 @@ def train(
         trajectory_loss: continuous-time tasks: a loss ``f(trajectory) -> scalar`` of the saved
             trajectory (a ``SwingUpTrajectory`` for the swing-ups) that replaces the task's.
         progress: called with one human-readable line per evaluation point.
+        on_point: called with each evaluation point (the dict that joins the curve) and the
+            controller at that point (a continuous-time run's best member), e.g. to evaluate it elsewhere. The time spent in it is
+            left out of every ``seconds`` and of ``train_seconds`` (and reported as
+            ``callback_seconds``); it is not saved in checkpoints, so a resumed run calls it
+            only for the points after the resume.
 
     Returns:
         A ``TrainResult`` whose controller is the one of the best evaluation point when
@@ -181,11 +187,12 @@ def train(
     curve: list[dict[str, Any]] = list(meta["curve"])
     seconds_before = float(meta["seconds_before"])
     eval_seconds = 0.0
+    callback_seconds = 0.0  # time spent in on_point, left out of the training time
     best_index = int(meta["best_index"])
     last_returns = None
 
     def record(ts: Any, loss: float, grad_norm: float) -> dict[str, Any]:
-        nonlocal eval_seconds, best, best_index, last_returns
+        nonlocal eval_seconds, best, best_index, last_returns, callback_seconds
         t_eval = time.perf_counter()
         returns = np.asarray(evaluate(ts.controller, params, k_eval))
         eval_seconds += time.perf_counter() - t_eval
@@ -194,7 +201,7 @@ def train(
         point = {
             "update": int(ts.update),
             **trainer.counts(ts),
-            "seconds": seconds_before + time.perf_counter() - t_start,
+            "seconds": seconds_before + time.perf_counter() - t_start - callback_seconds,
             "loss": loss,
             "grad_norm": grad_norm,
             "eval_return": eval_return,
@@ -207,6 +214,10 @@ def train(
         if best is None or len(curve) == 1 or math.isnan(so_far) or eval_return >= so_far:
             best, best_index = trainer.pick(ts.controller, returns), len(curve) - 1
         say(_progress_line(point, config.updates))
+        if on_point is not None:
+            t_cb = time.perf_counter()
+            on_point(point, trainer.pick(ts.controller, returns))
+            callback_seconds += time.perf_counter() - t_cb
         return point
 
     if not curve:
@@ -249,13 +260,16 @@ def train(
                 {
                     "curve": curve,
                     "best_index": best_index,
-                    "seconds_before": seconds_before + time.perf_counter() - t_start,
+                    "seconds_before": seconds_before
+                    + time.perf_counter()
+                    - t_start
+                    - callback_seconds,
                     "compile_seconds_before": float(meta["compile_seconds_before"])
                     + compile_seconds,
                 },
             )
 
-    wall = seconds_before + time.perf_counter() - t_start
+    wall = seconds_before + time.perf_counter() - t_start - callback_seconds
     chosen = curve[best_index] if config.keep_best else curve[-1]
     if config.keep_best:
         controller = best
@@ -271,6 +285,7 @@ def train(
         "train_seconds": wall,
         "compile_seconds": float(meta["compile_seconds_before"]) + compile_seconds,
         "eval_seconds_in_training": eval_seconds,
+        "callback_seconds": callback_seconds,
         "updates": int(ts.update),
         **counts,
         "episode_length": trainer.episode_length,

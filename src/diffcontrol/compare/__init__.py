@@ -1,0 +1,244 @@
+"""``diffcontrol compare``: diffcontrol against reinforcement learning on the same task.
+
+``run_comparison`` trains diffcontrol (its default configuration, through ``train``) and the
+RL baselines of ``diffcontrol.compare.baselines`` (Stable-Baselines3 with rl-baselines3-zoo's
+settings; the ``rl`` extra) with the same training seeds, evaluates them all with the same
+protocol (``diffcontrol.compare.run``), and writes to its output directory:
+
+- ``runs/<method>-seed<S>.json``: one finished (method, seed) run, written atomically as
+  soon as it ends, so an interrupted comparison resumes (``resume=True``) where it stopped;
+- ``comparison.json``: the settings, every run, and the summary over seeds;
+- ``comparison.md``: the table; ``comparison.png``: the learning curves.
+"""
+
+from __future__ import annotations
+
+import platform
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from .. import envs, io
+from ..errors import ConfigError, RunDirectoryError
+from ..tasks import Task
+from .baselines import BASELINES, INSTALL_HINT, Baseline, require_rl
+from .report import plot, summarize, table
+from .run import (
+    DEFAULT_EVAL_EVERY,
+    THRESHOLDS,
+    evaluate_batch,
+    methods_for,
+    run_diffcontrol,
+    run_rl,
+)
+
+SETTINGS_FILE = "compare.json"
+
+
+def run_comparison(
+    task: Task,
+    out_dir: str | Path,
+    *,
+    seeds: int = 3,
+    methods: list[str] | None = None,
+    rl_steps: int | None = None,
+    updates: int | None = None,
+    eval_every: int | None = None,
+    eval_episodes: int = 20,
+    final_episodes: int = 100,
+    eval_seed: int = 1000,
+    torch_threads: int | None = 1,
+    resume: bool = False,
+    progress: Callable[[str], None] | None = None,
+) -> dict[str, Any]:
+    """Run the comparison on ``task``; returns what ``comparison.json`` holds.
+
+    Args:
+        task: ``pendulum``, ``cartpole`` or ``trebuchet`` (the tasks with baselines).
+        out_dir: output directory (new or empty, or a previous comparison with ``resume``).
+        seeds: training seeds ``0 ... seeds-1`` for every method.
+        methods: a subset of ``methods_for(task)``; all of them when omitted.
+        rl_steps: RL budget in environment steps; each baseline's zoo budget when omitted.
+        updates: diffcontrol's gradient updates; the task's default when omitted.
+        eval_every: RL evaluation interval in environment steps (task default when omitted).
+        eval_episodes: episodes per evaluation point (reset seeds ``eval_seed ...``).
+        final_episodes: episodes for each returned controller (reset seeds ``eval_seed ...``).
+        eval_seed: the first reset seed of the evaluation episodes.
+        torch_threads: PyTorch threads for the RL baselines (``None``: PyTorch's default).
+        resume: keep the finished runs already in ``out_dir`` and run only the others.
+        progress: called with one line per evaluation point and per finished run.
+
+    Raises:
+        ConfigError: a bad setting, an unknown method, or a task without baselines.
+        RunDirectoryError: ``out_dir`` holds other files or a comparison with other settings.
+        DiffcontrolError: an RL method is asked for and the ``rl`` extra is not installed.
+    """
+    say = progress or (lambda line: None)
+    known = methods_for(task)
+    methods = list(methods or known)
+    for m in methods:
+        if m not in known:
+            raise ConfigError(
+                f"unknown method {m!r} for task {task.name!r}; choose from {', '.join(known)}"
+            )
+    for name, value in (
+        ("seeds", seeds),
+        ("eval_episodes", eval_episodes),
+        ("final_episodes", final_episodes),
+    ):
+        if not isinstance(value, int) or value <= 0:
+            raise ConfigError(f"{name} must be a positive integer, got {value!r}")
+    for name, value in (("rl_steps", rl_steps), ("updates", updates), ("eval_every", eval_every)):
+        if value is not None and (not isinstance(value, int) or value <= 0):
+            raise ConfigError(f"{name} must be a positive integer, got {value!r}")
+    if any(m != "diffcontrol" for m in methods):
+        require_rl()
+    every = eval_every or DEFAULT_EVAL_EVERY[task.name]
+    settings = {
+        "format": "diffcontrol-compare",
+        "task": task.name,
+        "methods": methods,
+        "seeds": list(range(seeds)),
+        "rl_steps": rl_steps,
+        "updates": updates,
+        "eval_every": every,
+        "eval_episodes": eval_episodes,
+        "final_episodes": final_episodes,
+        "eval_seed": eval_seed,
+        "eval_env": task.gym_label if task.gym_id else envs.env_id(task),
+    }
+    out = _prepare(Path(out_dir), settings, resume)
+    runs_dir = out / "runs"
+    results = []
+    for method in methods:
+        for seed in range(seeds):
+            path = runs_dir / f"{method}-seed{seed}.json"
+            if resume and path.exists():
+                result = io.read_json(path, "comparison run")
+                say(f"{method} seed {seed}: kept the finished run in {path}")
+            else:
+                say(f"{method} seed {seed}: training")
+                common = dict(
+                    eval_episodes=eval_episodes,
+                    final_episodes=final_episodes,
+                    eval_seed=eval_seed,
+                    say=say,
+                )
+                if method == "diffcontrol":
+                    result = run_diffcontrol(task, seed, updates=updates, **common)
+                else:
+                    result = run_rl(
+                        task,
+                        method,
+                        seed,
+                        steps=rl_steps,
+                        eval_every=every,
+                        torch_threads=torch_threads,
+                        **common,
+                    )
+                io.write_json(path, result)
+            results.append(result)
+            f = result["final"]
+            say(
+                f"{method} seed {seed}: {result['env_steps']:,} steps, "
+                f"{result['train_seconds']:.1f} s of training; final return "
+                f"{f['mean_return']:.1f} ± {f['std_return']:.1f} ({f['episodes']} episodes)"
+            )
+    thresholds = THRESHOLDS.get(task.name, ())
+    summary = summarize(results, thresholds)
+    doc = {
+        **settings,
+        "thresholds": list(thresholds),
+        "created": io.now_iso(),
+        "machine": machine(),
+        "summary": summary,
+        "runs": results,
+    }
+    io.write_json(out / "comparison.json", doc)
+    text = table(task.name, summary)
+    io.write_bytes(out / "comparison.md", (text + "\n").encode())
+    plot(task.name, results, thresholds, out / "comparison.png")
+    doc["table"] = text
+    return doc
+
+
+def _prepare(out: Path, settings: dict, resume: bool) -> Path:
+    """Create ``out`` (and ``out/runs``), or check that it holds this comparison."""
+    path = out / SETTINGS_FILE
+    if path.exists():
+        old = io.read_json(path, "comparison settings")
+        if not resume:
+            raise RunDirectoryError(
+                f"{out} already holds a comparison; pass --resume to continue it, or choose "
+                "another --out"
+            )
+        diff = [k for k in settings if old.get(k) != settings[k]]
+        if diff:
+            raise RunDirectoryError(
+                f"{out} holds a comparison with other settings ({', '.join(diff)} differ); "
+                "resume it with the same options, or choose another --out"
+            )
+    else:
+        try:
+            out.mkdir(parents=True, exist_ok=True)
+            if any(out.iterdir()):
+                raise RunDirectoryError(
+                    f"{out} is not empty and holds no comparison; choose a new or empty --out"
+                )
+            (out / "runs").mkdir(exist_ok=True)
+            io.write_json(path, settings)
+        except OSError as e:
+            raise RunDirectoryError(
+                f"cannot write to {out} ({e.strerror}); choose a writable --out"
+            ) from None
+    (out / "runs").mkdir(exist_ok=True)
+    return out
+
+
+def machine() -> dict[str, Any]:
+    """The CPU, cores this process may use, and the versions that shape the timings."""
+    import os
+
+    import jax
+
+    cpu = platform.processor() or "unknown"
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    info: dict[str, Any] = {
+        "cpu": cpu,
+        "cores_allowed": sorted(os.sched_getaffinity(0))
+        if hasattr(os, "sched_getaffinity")
+        else None,
+        "python": platform.python_version(),
+        "jax": jax.__version__,
+    }
+    try:
+        import stable_baselines3
+        import torch
+
+        info.update(
+            stable_baselines3=stable_baselines3.__version__,
+            torch=torch.__version__,
+            torch_threads=torch.get_num_threads(),
+        )
+    except ImportError:
+        pass
+    return info
+
+
+__all__ = [
+    "BASELINES",
+    "Baseline",
+    "DEFAULT_EVAL_EVERY",
+    "INSTALL_HINT",
+    "THRESHOLDS",
+    "evaluate_batch",
+    "machine",
+    "methods_for",
+    "run_comparison",
+]

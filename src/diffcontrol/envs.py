@@ -1,0 +1,319 @@
+"""Every diffcontrol task as a Gymnasium environment: ``gymnasium.make("diffcontrol/<Name>-v0")``.
+
+``import diffcontrol`` registers one environment per registered task
+(``diffcontrol/Pendulum-v0``, ``diffcontrol/PendulumUnclipped-v0``, ``diffcontrol/CartPole-v0``,
+``diffcontrol/Trebuchet-v0``, and the swing-ups below), so any reinforcement-learning library that takes a Gymnasium
+environment can train on exactly the simulator that diffcontrol differentiates through: the
+same ``task.reset`` distribution, the same ``task.step`` (dynamics, reward, termination) under
+one ``jax.jit``, the same observation, and the task's standard episode length as Gymnasium's
+``max_episode_steps``.
+
+Spaces follow the task's action head:
+
+- ``sign`` (CartPole): ``Discrete(2)``; action 1 is the push ``+1`` (right), 0 is ``-1``, as
+  ``task.gym_action`` maps a controller's output.
+- bounded heads (``tanh``, ``sigmoid``): ``Box(action_low, action_high)``; actions outside the
+  box are clipped to it (the heads never leave it; Pendulum's plant clips the torque itself).
+- ``linear`` with no bounds (the unclipped pendulum): an unbounded ``Box``.
+
+Observations are ``float32`` in an unbounded ``Box`` of ``task.observation_size``. The state is
+kept as a JAX array between steps, in JAX's default precision (``float32`` unless x64 is on).
+
+Continuous-time tasks (the swing-ups: ``diffcontrol/CartPoleSwingUp-v0``, ``...Limited-v0``,
+``...Friction-v0``) are ``ContinuousTaskEnv``: the same ODE, the action held constant over each
+interval of the loss's save grid, and the episode's return minus the task's loss.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import equinox as eqx
+import gymnasium
+import jax
+import jax.numpy as jnp
+import numpy as np
+from gymnasium import spaces
+
+from . import tasks as _tasks
+from .errors import ConfigError
+from .tasks import ContinuousTask, Task
+
+NAMESPACE = "diffcontrol"
+VERSION = 0
+SUPPORTED_KINDS = ("control", "aiming")
+"""Task kinds that step one action at a time through ``Task.step`` (see ``Task.kind``)."""
+
+
+def env_name(task: Task) -> str:
+    """The ``Name`` of ``diffcontrol/<Name>-v0`` for ``task`` (``task.env_name`` or derived)."""
+    if getattr(task, "env_name", None):
+        return str(task.env_name)
+    return "".join(part.capitalize() for part in task.name.replace("_", "-").split("-"))
+
+
+def env_id(task: Task | str) -> str:
+    """The Gymnasium id of ``task`` (an instance or a registered name): ``diffcontrol/<Name>-v0``."""
+    if isinstance(task, str):
+        task = _tasks.make(task)
+    return f"{NAMESPACE}/{env_name(task)}-v{VERSION}"
+
+
+def supports(task: Any) -> bool:
+    """Whether ``task`` can be stepped as a Gymnasium environment by ``TaskEnv``."""
+    return isinstance(task, Task) and task.kind in SUPPORTED_KINDS
+
+
+def _entry(task: Any) -> tuple[str, int] | None:
+    """The environment class and the episode length (steps) for ``task``, if it has one."""
+    if supports(task):
+        return f"{__name__}:TaskEnv", task.episode_length
+    if isinstance(task, ContinuousTask):
+        return f"{__name__}:ContinuousTaskEnv", task.default_config().saves - 1
+    return None
+
+
+_COMPILED: dict[str, tuple[Any, Any]] = {}
+
+
+def _compiled(task: Task, params: Any, nominal: bool) -> tuple[Any, Any]:
+    """Jitted ``reset(key)`` and ``step(state, action)`` of ``task`` with ``params`` built in.
+
+    The parameters are closed over (constants of the compiled programs): fewer arguments to
+    flatten per call makes a step several times cheaper to dispatch. The programs of the
+    nominal parameters are shared by every environment of the task, so making many
+    environments (an evaluation pool) compiles once.
+    """
+    if nominal and task.name in _COMPILED and _COMPILED[task.name][0] is type(task):
+        return _COMPILED[task.name][1]
+
+    def reset(key):
+        state = task.reset(key, params)
+        return state, task.observe(state)
+
+    def step(state, action):
+        next_state, reward, terminated = task.step(params, state, action.astype(state.dtype))
+        return next_state, task.observe(next_state), reward, terminated
+
+    fns = (jax.jit(reset), jax.jit(step))
+    if nominal:
+        _COMPILED[task.name] = (type(task), fns)
+    return fns
+
+
+class TaskEnv(gymnasium.Env):
+    """A discrete-time diffcontrol task stepped from NumPy through its jitted ``task.step``.
+
+    Args:
+        task: a registered task name (``"pendulum"``) or a ``Task`` instance.
+        params: the task's physical parameters (a PyTree like ``task.default_params()``);
+            the nominal ones when omitted.
+
+    The environment itself never truncates: ``gymnasium.make("diffcontrol/<Name>-v0")`` wraps
+    it in a ``TimeLimit`` of ``task.episode_length`` steps, as Gymnasium does for its own
+    environments. ``reset(seed=s)`` draws the JAX key of ``task.reset`` from the environment's
+    seeded NumPy generator, so a seed gives the same start every time (not the same start as
+    Gymnasium's own environment with that seed: the two draw differently).
+
+    Raises:
+        UnknownTaskError: ``task`` is not a registered name.
+        ConfigError: the task is of a kind that cannot be stepped one action at a time.
+    """
+
+    metadata = {"render_modes": []}
+
+    def __init__(self, task: Task | str, params: Any = None):
+        if isinstance(task, str):
+            task = _tasks.make(task)
+        if not supports(task):
+            raise ConfigError(
+                f"task {getattr(task, 'name', task)!r} of kind {getattr(task, 'kind', '?')!r} "
+                f"cannot be a step-by-step Gymnasium environment; supported kinds: "
+                f"{', '.join(SUPPORTED_KINDS)}"
+            )
+        self.task = task
+        p = task.default_params() if params is None else params
+        self.params = jax.tree.map(lambda x: jnp.asarray(x, dtype=float), p)
+        self.observation_space = spaces.Box(
+            -np.inf, np.inf, (task.observation_size,), dtype=np.float32
+        )
+        self._discrete = task.action_head == "sign"
+        if self._discrete:
+            self.action_space = spaces.Discrete(2)
+            self._low = self._high = None
+        elif task.action_low is not None and task.action_high is not None:
+            self._low = np.asarray(task.action_low, np.float32)
+            self._high = np.asarray(task.action_high, np.float32)
+            self.action_space = spaces.Box(self._low, self._high, dtype=np.float32)
+        else:
+            self._low = self._high = None
+            self.action_space = spaces.Box(-np.inf, np.inf, (task.action_size,), dtype=np.float32)
+
+        self._reset, self._step = _compiled(task, self.params, params is None)
+        self.state: jax.Array | None = None
+
+    def task_action(self, action: Any) -> np.ndarray:
+        """The task's action vector for a Gymnasium action (``Discrete`` 0/1 -> ``[-1]``/``[+1]``)."""
+        if self._discrete:
+            return np.array([1.0 if int(action) == 1 else -1.0])
+        a = np.asarray(action, np.float64).reshape(self.task.action_size)
+        if self._low is not None:
+            a = np.clip(a, self._low, self._high)
+        return a
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        key = jax.random.PRNGKey(int(self.np_random.integers(0, 2**31 - 1)))
+        self.state, obs = self._reset(key)
+        return np.asarray(obs, np.float32), {}
+
+    def step(self, action: Any):
+        if self.state is None:
+            raise RuntimeError("call reset() before step()")
+        self.state, obs, reward, terminated = self._step(self.state, self.task_action(action))
+        obs, reward, terminated = jax.device_get((obs, reward, terminated))
+        return np.asarray(obs, np.float32), float(reward), bool(terminated), False, {}
+
+
+def register_env(task: Any) -> str:
+    """Register ``task`` as ``diffcontrol/<Name>-v0`` (again, if already there); returns the id.
+
+    Raises:
+        ConfigError: the task's kind cannot be a Gymnasium environment.
+    """
+    entry = _entry(task)
+    if entry is None:
+        raise ConfigError(
+            f"task {task.name!r} of kind {task.kind!r} has no Gymnasium environment; "
+            f"supported kinds: {', '.join(SUPPORTED_KINDS)} and continuous-time tasks"
+        )
+    entry_point, steps = entry
+    eid = env_id(task)
+    if eid in gymnasium.registry:
+        del gymnasium.registry[eid]
+    gymnasium.register(
+        id=eid,
+        entry_point=entry_point,
+        kwargs={"task": task.name},
+        max_episode_steps=steps,
+        reward_threshold=getattr(task, "reward_threshold", None),
+    )
+    return eid
+
+
+def register_all() -> list[str]:
+    """Register every registered task of a supported kind; skip the others. Returns the ids."""
+    ids = []
+    for name in _tasks.names():
+        task = _tasks.make(name)
+        if _entry(task) is not None:
+            ids.append(register_env(task))
+    return ids
+
+
+# ---------------------------------------------------------------------------------------------
+# Continuous-time tasks (the swing-ups): the same ODE, the action held over each save interval.
+
+
+class ContinuousTaskEnv(gymnasium.Env):
+    """A continuous-time diffcontrol task as a Gymnasium environment, with a zero-order hold.
+
+    An episode is the task's closed loop over ``horizon_s`` from its (deterministic) initial
+    state, cut into the ``saves - 1`` intervals of the save grid that the loss sees; each step
+    holds the action (the force, N) constant over one interval and integrates the task's own
+    vector field over it (Tsit5 at rtol 1e-6, atol 1e-8). The observation is the task's
+    (``(cos theta, sin theta, theta_dot)`` for the swing-ups; ``info["state"]`` has the full
+    state). The reward is 0 until the last step, which returns minus the task's default loss
+    of the recorded trajectory: the episode's return is exactly ``-loss``, the number
+    diffcontrol minimises. The loss's force at save ``k`` is the action held after it (the
+    last save repeats the last action).
+
+    What differs from the differentiable version: there the controller acts continuously
+    inside the ODE; here an agent can only act once per interval (0.02 s for the 1 s swing-up,
+    0.2 s for the 10 s one). With a constant force both give the same trajectory (a test
+    checks that).
+
+    Args:
+        task: a registered continuous-time task name or instance.
+        params: its physical parameters; the nominal ones when omitted.
+        max_force: the action space's bound (N); the swing-up's force is unbounded, but RL
+            needs a box (the unconstrained swing-up peaks at about 63 N).
+    """
+
+    metadata = {"render_modes": []}
+
+    def __init__(self, task: Any, params: Any = None, max_force: float = 100.0):
+        import diffrax
+
+        if isinstance(task, str):
+            task = _tasks.make(task)
+        self.task = task
+        self.config = task.default_config()
+        p = task.default_params() if params is None else params
+        self.params = jax.tree.map(lambda x: jnp.asarray(x, dtype=float), p)
+        self.dt = self.config.horizon_s / (self.config.saves - 1)
+        self.observation_space = spaces.Box(
+            -np.inf, np.inf, (task.observation_size,), dtype=np.float32
+        )
+        self.action_space = spaces.Box(-max_force, max_force, (task.action_size,), np.float32)
+        self._loss = jax.jit(self._episode_loss)
+
+        def advance(y, force):
+            sol = diffrax.diffeqsolve(
+                diffrax.ODETerm(task.vector_field),
+                diffrax.Tsit5(),
+                0.0,
+                self.dt,
+                None,
+                y,
+                args=(self.params, _Hold(force)),
+                stepsize_controller=diffrax.PIDController(rtol=1e-6, atol=1e-8),
+                max_steps=4096,
+            )
+            return sol.ys[-1]
+
+        self._advance = jax.jit(advance)
+        self._observe = jax.jit(task.observe)
+        self._ys: list[np.ndarray] = []
+        self._forces: list[float] = []
+
+    def _episode_loss(self, ys, forces):
+        ts = jnp.linspace(0.0, self.config.horizon_s, self.config.saves)
+        traj = self.task.trajectory(self.params, lambda obs: jnp.zeros((1,)), ts, ys)
+        traj = eqx.tree_at(lambda tr: tr.force, traj, forces.astype(ys.dtype))
+        return self.task.trajectory_loss(self.task.losses[0])(traj)
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)  # the start is deterministic; the seed only seeds np_random
+        y = self.task.initial_state(self.params)
+        self._ys, self._forces = [np.asarray(y)], []
+        return self._obs(y), {"state": np.asarray(y[:4])}
+
+    def _obs(self, y) -> np.ndarray:
+        return np.asarray(self._observe(jnp.asarray(y)[:4]), np.float32)
+
+    def step(self, action: Any):
+        if not self._ys:
+            raise RuntimeError("call reset() before step()")
+        force = float(np.clip(np.asarray(action, np.float64).reshape(-1)[0], *self._bounds()))
+        y = self._advance(jnp.asarray(self._ys[-1]), jnp.asarray(force, float))
+        self._ys.append(np.asarray(y))
+        self._forces.append(force)
+        done = len(self._ys) == self.config.saves
+        reward = 0.0
+        if done:
+            forces = np.asarray(self._forces + self._forces[-1:])
+            reward = -float(self._loss(jnp.asarray(np.stack(self._ys)), jnp.asarray(forces)))
+        return self._obs(y), reward, False, done, {"state": np.asarray(y[:4])}
+
+    def _bounds(self) -> tuple[float, float]:
+        return float(self.action_space.low[0]), float(self.action_space.high[0])
+
+
+class _Hold(eqx.Module):
+    """A force held constant: ``force_fn(t, state) = force``."""
+
+    force: Any
+
+    def __call__(self, t, state):
+        return self.force
