@@ -5,7 +5,6 @@ from __future__ import annotations
 import datetime as dt
 import json
 import os
-import platform
 import shutil
 import subprocess
 import sys
@@ -14,22 +13,12 @@ from pathlib import Path
 
 
 def machine() -> dict:
-    """CPU model, cores used, Python and JAX versions, and today's date."""
-    cpu = platform.processor() or "unknown"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    import jax
+    """The library's description of the machine (CPU, versions), the cores used and the date."""
+    from diffcontrol.compare import machine as describe
 
     return {
-        "cpu": cpu,
+        **describe(),
         "cores_used": 1 if shutil.which("taskset") else os.cpu_count(),
-        "python": platform.python_version(),
-        "jax": jax.__version__,
         "date": dt.date.today().isoformat(),
     }
 

@@ -58,11 +58,12 @@ def _force(t):
     return f.a * np.sin(f.w * t) + f.b
 
 
-def _post_rhs(t, u):
-    """The post's closed-form equations (no friction), NumPy."""
+def _post_rhs(t, u, force=None):
+    """The post's closed-form equations (no friction), NumPy; the force ``force(t, u)``
+    (default: the open-loop ``_force(t)``)."""
     m, M, L, g = 1.0, 2.0, 1.0, 9.8
     x, dx, th, dth = u
-    F = _force(t)
+    F = _force(t) if force is None else force(t, u)
     D = M + m * np.sin(th) ** 2
     ddx = (F + m * np.sin(th) * (L * dth**2 - g * np.cos(th))) / D
     ddth = (
@@ -240,15 +241,7 @@ def test_state_policy_resimulated_by_scipy_matches(swingup_run):
     t = np.asarray(data["t"])
 
     def rhs(t_, u):
-        x, dx, th, dth = u
-        m, M, L, g = 1.0, 2.0, 1.0, 9.8
-        F = policy(np.asarray(u))
-        D = M + m * np.sin(th) ** 2
-        ddx = (F + m * np.sin(th) * (L * dth**2 - g * np.cos(th))) / D
-        ddth = (
-            -F * np.cos(th) - m * L * dth**2 * np.sin(th) * np.cos(th) + (M + m) * g * np.sin(th)
-        ) / (L * D)
-        return [dx, ddx, dth, ddth]
+        return _post_rhs(t_, u, lambda _, state: policy(np.asarray(state)))
 
     ref = solve_ivp(
         rhs, (0, t[-1]), [0, 0, np.pi, 0], method="DOP853", t_eval=t, rtol=1e-10, atol=1e-10

@@ -10,7 +10,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from ..config import ODETrainConfig, help_of
+from ..config import ODETrainConfig, TrainConfig, help_of
 from ..errors import DiffcontrolError
 from ._args import (
     add_common,
@@ -58,6 +58,19 @@ _ODE_OPTIONS: dict[str, tuple[Any, str]] = {
 }
 
 
+def _add_options(group: Any, options: dict[str, tuple[Any, str]], config_cls: type) -> None:
+    """One ``--name`` option per config field, its help the field's documentation."""
+    for name, (typ, metavar) in options.items():
+        group.add_argument(
+            "--" + name.replace("_", "-"),
+            dest=name,
+            type=typ,
+            metavar=metavar,
+            default=None,
+            help=help_of(name, config_cls).replace("%", "%%"),
+        )
+
+
 def add_parser(sub: Any) -> None:
     p = sub.add_parser(
         "train",
@@ -98,27 +111,11 @@ def add_parser(sub: Any) -> None:
     group = p.add_argument_group(
         "training settings (defaults depend on the task; see `diffcontrol list`)"
     )
-    for name, (typ, metavar) in _CONFIG_OPTIONS.items():
-        group.add_argument(
-            "--" + name.replace("_", "-"),
-            dest=name,
-            type=typ,
-            metavar=metavar,
-            default=None,
-            help=help_of(name).replace("%", "%%"),
-        )
+    _add_options(group, _CONFIG_OPTIONS, TrainConfig)
     ode = p.add_argument_group(
         "continuous-time tasks only (cartpole-swingup*): the ODE solve and its gradient"
     )
-    for name, (typ, metavar) in _ODE_OPTIONS.items():
-        ode.add_argument(
-            "--" + name.replace("_", "-"),
-            dest=name,
-            type=typ,
-            metavar=metavar,
-            default=None,
-            help=help_of(name, ODETrainConfig).replace("%", "%%"),
-        )
+    _add_options(ode, _ODE_OPTIONS, ODETrainConfig)
     group.add_argument(
         "--param",
         dest="params",

@@ -6,6 +6,7 @@ import abc
 from collections.abc import Callable
 from typing import Any, ClassVar
 
+import equinox as eqx
 import numpy as np
 from jaxtyping import Array, PRNGKeyArray, PyTree
 
@@ -141,6 +142,16 @@ TrajectoryLoss = Callable[[Any], Array]
 the saved trajectory (for the swing-up, a ``SwingUpTrajectory``)."""
 
 
+class StateFeedback(eqx.Module):
+    """``force_fn(t, state) = controller(observe(state))[0]``, the weights as PyTree leaves."""
+
+    controller: Any
+    observe: Any = eqx.field(static=True)
+
+    def __call__(self, t: Array, state: Array) -> Array:
+        return self.controller(self.observe(state))[0]
+
+
 class ContinuousTask(_TaskBase):
     """A continuous-time control task: a closed-loop ODE and a loss on its saved trajectory.
 
@@ -181,6 +192,11 @@ class ContinuousTask(_TaskBase):
     @abc.abstractmethod
     def trajectory_loss(self, name: str) -> TrajectoryLoss:
         """The built-in loss ``name`` (one of ``losses``) of a saved trajectory."""
+
+    def force_fn(self, controller: Any) -> StateFeedback:
+        """The controller as the ODE's input ``(t, state) -> action``: state feedback through
+        ``observe``, as a PyTree whose leaves are the controller's weights."""
+        return StateFeedback(controller, self.observe)
 
     def controller_kwargs(self) -> dict[str, Any]:
         """As for every task, with the Glorot-uniform weights and zero biases of the post."""

@@ -99,16 +99,6 @@ LOSSES: dict[str, TrajectoryLoss] = {
 }
 
 
-class StateFeedback(eqx.Module):
-    """``force_fn(t, state) = controller(observe(state))[0]`` as a PyTree (weights as leaves)."""
-
-    controller: Any
-    observe: Any = eqx.field(static=True)
-
-    def __call__(self, t: Array, state: Array) -> Array:
-        return self.controller(self.observe(state))[0]
-
-
 class CartPoleSwingUp(ContinuousTask):
     """Swing the post's cart-pole up from hanging down in 1 s, and stop (the post's loss)."""
 
@@ -140,10 +130,6 @@ class CartPoleSwingUp(ContinuousTask):
 
     def observe(self, state):
         return jnp.stack([jnp.cos(state[2]), jnp.sin(state[2]), state[3]])
-
-    def force_fn(self, controller: Any) -> StateFeedback:
-        """The controller as the ODE's force input ``(t, state) -> F``."""
-        return StateFeedback(controller, self.observe)
 
     def trajectory(self, params, controller, ts, ys) -> SwingUpTrajectory:
         force = jax.vmap(lambda y: controller(self.observe(y[:4]))[0])(ys)
