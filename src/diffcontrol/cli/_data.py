@@ -60,12 +60,12 @@ def add_parser(sub: Any) -> None:
 
 def _check_out(out: Path, force: bool) -> None:
     """Refuse, before recording anything, an output the recording could not be written to."""
+    if out.is_dir():
+        raise DataFileError(f"--out {out} is a directory; give a file name ending in .csv/.npz")
     if out.suffix.lower() not in (".csv", ".npz"):
         raise DataFileError(
             f"--out {out}: unknown file type {out.suffix or '(none)'!r}; use a .csv or .npz file"
         )
-    if out.is_dir():
-        raise DataFileError(f"--out {out} is a directory; give a file name ending in .csv/.npz")
     if out.exists() and not force:
         raise DataFileError(
             f"--out {out} already exists; pass --force to overwrite it or choose another --out"

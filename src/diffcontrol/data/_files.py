@@ -14,13 +14,13 @@ from typing import Any
 import numpy as np
 
 from ..errors import DataFileError
-from ..io import write_bytes
+from ..io import _finite, write_bytes
 from ._format import FORMAT, VERSION, parse_column, validate
 from ._table import TrajectoryData
 
 
 def _header(data: TrajectoryData) -> dict:
-    return {"format": FORMAT, "version": VERSION, "metadata": data.metadata}
+    return {"format": FORMAT, "version": VERSION, "metadata": _finite(data.metadata)}
 
 
 def _number(x: float) -> str:
@@ -102,7 +102,7 @@ def read_trajectories(path: str | os.PathLike) -> TrajectoryData:
 
 def _read_csv(path: Path) -> TrajectoryData:
     try:
-        lines = path.read_text(encoding="utf-8").splitlines()
+        lines = path.read_text(encoding="utf-8-sig").splitlines()  # -sig: a spreadsheet's BOM
     except UnicodeDecodeError:
         raise DataFileError(f"{path} is not a text file; is it an .npz named .csv?") from None
     first = lines[0]

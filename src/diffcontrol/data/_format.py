@@ -98,7 +98,7 @@ def validate(
         if off.size:
             i = int(np.flatnonzero(episode[1:] == episode[:-1])[off[0]]) + 1
             raise bad(
-                f"{row(i)}, column {time_col!r}: a time step of {steps[off[0]]!r} s, but the "
+                f"{row(i)}, column {time_col!r}: a time step of {float(steps[off[0]])!r} s, but the "
                 f"metadata's dt_s is {dt!r} s; write time in seconds, or correct dt_s (or "
                 "remove it if the steps vary)"
             )
@@ -171,8 +171,8 @@ def _check_rows(time, episode, obs, act, columns, bad, row) -> None:
             i = a + 1 + int(np.flatnonzero(steps <= 0)[0])
             what = "repeats" if time[i] == time[i - 1] else "goes back"
             raise bad(
-                f"{row(i)}, column {columns[0]!r}: time {what} ({time[i - 1]!r} then "
-                f"{time[i]!r}) within episode {e}; time must increase within an episode"
+                f"{row(i)}, column {columns[0]!r}: time {what} ({float(time[i - 1])!r} then "
+                f"{float(time[i])!r}) within episode {e}; time must increase within an episode"
             )
         last = act[b - 1]
         if not np.all(np.isnan(last)):
