@@ -139,6 +139,16 @@ def test_episodes_transitions_and_split():
         d.time[0] = 1.0  # read-only
 
 
+def test_constructor_validates_and_leaves_the_callers_arrays_alone():
+    d = _small()
+    obs, act = d.observations.copy(), d.actions.copy()
+    act[3] = 0.5  # the last row of episode 0
+    with pytest.raises(DataFileError, match="^trajectory data: row 3: the last row of episode 0"):
+        TrajectoryData(d.time, d.episode, obs, act, d.columns)
+    TrajectoryData(d.time, d.episode, obs, d.actions, d.columns)
+    assert obs.flags.writeable
+
+
 # --- recording -----------------------------------------------------------------------------------
 
 

@@ -191,12 +191,12 @@ def _check_rows(time, episode, obs, act, columns, bad, row) -> None:
                 f"finite); every row needs finite {what} (only an episode's last row has none)"
             )
     for j, c in enumerate(columns[2 + k :]):
-        v = act[:, j][np.isfinite(act[:, j])]
-        if parse_column(c)[2] == DISCRETE_UNIT and np.any((v < 0) | (v != np.round(v))):
-            i = int(np.flatnonzero(np.isfinite(act[:, j]) & ((act[:, j] < 0) |
-                                   (act[:, j] != np.round(act[:, j]))))[0])  # fmt: skip
+        col = act[:, j]
+        wrong = np.isfinite(col) & ((col < 0) | (col != np.round(col)))
+        if parse_column(c)[2] == DISCRETE_UNIT and wrong.any():
+            i = int(np.flatnonzero(wrong)[0])
             raise bad(
-                f"{row(i)}, column {c!r}: {act[i, j]} is not a discrete action index (0, 1, "
+                f"{row(i)}, column {c!r}: {col[i]} is not a discrete action index (0, 1, "
                 "...); write the index the environment takes, or change the unit"
             )
 
@@ -207,14 +207,14 @@ def _check_known(env_id: Any, columns: Sequence[str], bad: Callable) -> None:
     expected = [*KNOWN_COLUMNS[env_id][0], *KNOWN_COLUMNS[env_id][1]]
     got = list(columns[2:])
     by_name = {parse_column(c)[:2]: c for c in expected}
-    for c in got:
+    for c in got:  # compared parsed, so 'obs.x[m]' is 'obs.x [m]'
         want = by_name.get(parse_column(c)[:2])
-        if want is not None and want != c:
+        if want is not None and parse_column(want) != parse_column(c):
             raise bad(
                 f"column {c!r}: {env_id} gives {parse_column(want)[1]} in "
                 f"[{parse_column(want)[2]}]; convert the values and write {want!r}"
             )
-    if got != expected:
+    if [parse_column(c) for c in got] != [parse_column(c) for c in expected]:
         raise bad(
             f"columns {got} are not those of {env_id}: expected {expected}; rename them, or "
             "drop env_id from the metadata if the data is from another system"

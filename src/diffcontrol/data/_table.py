@@ -48,18 +48,18 @@ class TrajectoryData:
     metadata: dict = dataclasses.field(default_factory=dict)
 
     def __post_init__(self) -> None:
+        # copies, so that making them read-only never touches the caller's arrays
         fields = {
-            "time": np.asarray(self.time, np.float64),
-            "episode": np.asarray(self.episode),
-            "observations": np.asarray(self.observations, np.float64),
-            "actions": np.asarray(self.actions, np.float64),
+            "time": np.array(self.time, np.float64),
+            "episode": np.array(self.episode),
+            "observations": np.array(self.observations, np.float64),
+            "actions": np.array(self.actions, np.float64),
             "columns": tuple(self.columns),
             "metadata": dict(self.metadata),
         }
         for name, value in fields.items():
             object.__setattr__(self, name, value)
-        validate(self.time, self.episode, self.observations, self.actions, self.columns,
-                 self.metadata)  # fmt: skip
+        validate(*fields.values())
         object.__setattr__(self, "episode", self.episode.astype(np.int64))
         for name in ("time", "episode", "observations", "actions"):
             getattr(self, name).setflags(write=False)
