@@ -87,7 +87,12 @@ class TrajectoryData:
         m = len(action_columns)
         pad = [np.concatenate([a.reshape(-1, m), np.full((1, m), np.nan)]) for a in act]
         steps = [np.arange(len(o), dtype=np.float64) for o in obs]
-        time = np.concatenate(steps) * (1.0 if dt_s is None else dt_s) if obs else np.zeros(0)
+        # rounded to 1e-12 s so the CSV says 9.95, not 9.950000000000001
+        time = (
+            np.round(np.concatenate(steps) * (1.0 if dt_s is None else dt_s), 12)
+            if obs
+            else np.zeros(0)
+        )
         unit = "step" if dt_s is None else "s"
         meta = {"dt_s": dt_s, **(metadata or {})}
         return cls(
