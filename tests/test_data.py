@@ -269,7 +269,7 @@ CSV_CASES = {
         lambda ls: (
             [ls[0], ls[1]]
             + [f"{float(l.split(',')[0]) * 1000!r}," + l.split(",", 1)[1] for l in ls[2:]]
-        ),  # fmt: skip
+        ),
         r"line 4, .*a time step of 50.0 s, but the metadata's dt_s is 0.05 s",
     ),
     "NaN observation": (_cell(3, 3, "nan"), r"line 4, column 'obs.sin_theta \[1\]': nan"),
@@ -398,6 +398,14 @@ def test_cli_records_csv_and_npz(tmp_path, capsys):
     assert capsys.readouterr().out.startswith(f"wrote {npz}: 2 episode(s)")
     d = read_trajectories(npz)
     assert d.env_id == "CartPole-v1" and d.metadata["seed"] == 5
+    heavy = tmp_path / "g20.csv"
+    argv = ["record", "Pendulum-v1", "--episodes", "1", "--env-arg", "g=20", "--out", str(heavy)]
+    assert main([*argv, "--quiet"]) == 0
+    d = read_trajectories(heavy)
+    assert d.metadata["env_kwargs"] == {"g": 20.0}
+    nominal = diffcontrol.record("Pendulum-v1", 1)
+    np.testing.assert_array_equal(d.observations[0], nominal.observations[0])  # same start
+    assert not np.allclose(d.observations[1:], nominal.observations[1:])  # other gravity
 
 
 def test_cli_records_with_a_controller(tmp_path, pendulum_model, capsys):
@@ -427,8 +435,12 @@ def test_cli_bad_input(tmp_path, pendulum_model, capsys):
     assert out.read_text() == "mine"
     assert main([*rec, "--out", str(out), "--force", "--quiet"]) == 0
     assert read_trajectories(out).num_episodes == 1
-    _fails_cleanly(capsys, ["record", "Pendulm-v1", "--episodes", "1", "--out", str(tmp_path / "x.csv")],
-                   "'Pendulm-v1'", "Pendulum-v1")  # fmt: skip
+    _fails_cleanly(
+        capsys,
+        ["record", "Pendulm-v1", "--episodes", "1", "--out", str(tmp_path / "x.csv")],
+        "'Pendulm-v1'",
+        "Pendulum-v1",
+    )
     _fails_cleanly(
         capsys,
         [
@@ -440,14 +452,22 @@ def test_cli_bad_input(tmp_path, pendulum_model, capsys):
             str(pendulum_model),
             "--out",
             str(tmp_path / "y.csv"),
-        ],  # fmt: skip
+        ],
         "takes 3 observations but CartPole-v1 gives 4",
     )
-    _fails_cleanly(capsys, [*rec, "--controller", str(tmp_path / "none"), "--out",
-                            str(tmp_path / "z.csv")], "does not exist")  # fmt: skip
+    _fails_cleanly(
+        capsys,
+        [*rec, "--controller", str(tmp_path / "none"), "--out", str(tmp_path / "z.csv")],
+        "does not exist",
+    )
     _fails_cleanly(capsys, [*rec, "--out", str(out / "sub.csv")], "not a writable directory")
     _fails_cleanly(capsys, [*rec, "--out", str(tmp_path / "d.txt")], "use a .csv or .npz")
     _fails_cleanly(capsys, [*rec, "--out", str(tmp_path)], "is a directory")
+    _fails_cleanly(
+        capsys,
+        [*rec, "--env-arg", "gravity=3", "--out", str(tmp_path / "g.csv")],
+        "does not take the arguments {'gravity': 3.0}",
+    )
     assert sorted(p.name for p in tmp_path.iterdir()) == ["d.csv"]
     with pytest.raises(SystemExit) as exc:
         main(["record", "Pendulum-v1", "--episodes", "0"])

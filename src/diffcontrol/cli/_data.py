@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import DataFileError
-from ._args import positive_int
+from ._args import param, positive_int
 
 
 def add_parser(sub: Any) -> None:
@@ -40,6 +40,15 @@ def add_parser(sub: Any) -> None:
         default=0,
         metavar="S",
         help="first reset seed, and the seed of the random actions (default 0)",
+    )
+    p.add_argument(
+        "--env-arg",
+        type=param,
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="a numeric keyword argument of gymnasium.make, e.g. g=9.0 for Pendulum-v1 "
+        "(repeatable)",
     )
     p.add_argument(
         "--max-steps",
@@ -96,6 +105,7 @@ def cmd_record(args: argparse.Namespace) -> int:
         args.episodes,
         policy=policy,
         seed=args.seed,
+        env_kwargs=dict(args.env_arg),
         max_steps=args.max_steps,
         progress=say,
         source=f"controller {args.controller} (task {policy.task!r})" if policy else None,
