@@ -15,11 +15,13 @@ from pathlib import Path as _Path
 
 __version__ = "0.1.0"
 
-from . import controllers, envs, rollout, systems, tasks  # noqa: E402
+from . import controllers, data, envs, rollout, systems, tasks  # noqa: E402
 from .config import ODETrainConfig, TrainConfig  # noqa: E402
 from .controllers import MLPController, straight_through_sign  # noqa: E402, F401
+from .data import TrajectoryData, read_trajectories  # noqa: E402
 from .errors import (  # noqa: E402
     ConfigError,
+    DataFileError,
     DiffcontrolError,
     ModelFileError,
     RunDirectoryError,
@@ -29,6 +31,7 @@ from .errors import (  # noqa: E402
 )
 from .evaluation import AimResult, EvalResult, evaluate, evaluate_aiming  # noqa: E402
 from .io import AimingPolicy, NumpyPolicy, StatePolicy  # noqa: E402
+from .recording import record  # noqa: E402
 from .rollout import Trajectory  # noqa: E402
 from .tasks import ContinuousTask, Task, make, register  # noqa: E402
 from .training import TrainResult, resolve_config, train  # noqa: E402
@@ -70,6 +73,7 @@ __all__ = [
     "AimingPolicy",
     "ConfigError",
     "ContinuousTask",
+    "DataFileError",
     "DiffcontrolError",
     "EvalResult",
     "MLPController",
@@ -84,14 +88,18 @@ __all__ = [
     "TrainResult",
     "Trajectory",
     "TrainingDiverged",
+    "TrajectoryData",
     "UnknownTaskError",
     "controllers",
+    "data",
     "envs",
     "evaluate",
     "evaluate_aiming",
     "list_tasks",
     "load",
     "make",
+    "read_trajectories",
+    "record",
     "register",
     "resolve_config",
     "rollout",

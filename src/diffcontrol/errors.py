@@ -37,3 +37,7 @@ class TrainingDiverged(DiffcontrolError):
 
 class SolverFailed(TrainingDiverged):
     """Every population member's ODE solve failed (or its loss became non-finite)."""
+
+
+class DataFileError(DiffcontrolError):
+    """A trajectory data file (CSV or NPZ) that is missing, malformed or inconsistent."""
