@@ -15,7 +15,7 @@ from pathlib import Path as _Path
 
 __version__ = "0.1.0"
 
-from . import controllers, data, envs, rollout, systems, tasks  # noqa: E402
+from . import controllers, data, envs, rollout, systems, tasks, wrappers  # noqa: E402
 from .config import ODETrainConfig, TrainConfig  # noqa: E402
 from .controllers import MLPController, straight_through_sign  # noqa: E402, F401
 from .data import TrajectoryData, read_trajectories  # noqa: E402
@@ -37,6 +37,7 @@ from .tasks import ContinuousTask, Task, make, register  # noqa: E402
 from .training import TrainResult, resolve_config, train  # noqa: E402
 
 envs.register_all()  # gymnasium.make("diffcontrol/<Name>-v0") for every registered task
+wrappers.register()  # gymnasium.make("diffcontrol/PendulumFriction-v0", g=..., friction=...)
 
 
 def load(run_dir: str | _os.PathLike) -> NumpyPolicy:
@@ -106,4 +107,5 @@ __all__ = [
     "systems",
     "tasks",
     "train",
+    "wrappers",
 ]

@@ -21,6 +21,7 @@ KNOWN_COLUMNS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
     "Pendulum-v1": (_PENDULUM, ("action.torque [N m]",)),
     "CartPole-v1": (_CARTPOLE, ("action.push [index]",)),
     "diffcontrol/Pendulum-v0": (_PENDULUM, ("action.torque [N m]",)),
+    "diffcontrol/PendulumFriction-v0": (_PENDULUM, ("action.torque [N m]",)),
     "diffcontrol/PendulumUnclipped-v0": (_PENDULUM, ("action.torque [N m]",)),
     "diffcontrol/CartPole-v0": (_CARTPOLE, ("action.push [index]",)),
     "diffcontrol/Trebuchet-v0": (
