@@ -41,3 +41,7 @@ class SolverFailed(TrainingDiverged):
 
 class DataFileError(DiffcontrolError):
     """A trajectory data file (CSV or NPZ) that is missing, malformed or inconsistent."""
+
+
+class InsufficientDataError(DiffcontrolError):
+    """Too little recorded data for the model asked for (the message says how much is needed)."""
