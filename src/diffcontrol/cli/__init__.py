@@ -1,8 +1,8 @@
 """The ``diffcontrol`` command line. It sits on top of everything; nothing imports it.
 
 One module a group of commands: ``_train`` (train), ``_runs`` (list, evaluate, animate, aim),
-``_compare`` (compare), ``_data`` (record); ``_args`` holds the argument types and the
-one-line-error parser.
+``_compare`` (compare), ``_data`` (record), ``_fit`` (fit); ``_args`` holds the argument types
+and the one-line-error parser.
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import argparse
 import sys
 
 from ..errors import DiffcontrolError
-from . import _compare, _data, _runs, _train
+from . import _compare, _data, _fit, _runs, _train
 from ._args import EXIT_USAGE, Parser
 
 
@@ -30,6 +30,7 @@ def build_parser() -> argparse.ArgumentParser:
     _train.add_parser(sub)
     _compare.add_parser(sub)
     _data.add_parser(sub)
+    _fit.add_parser(sub)
     return parser
 
 
@@ -41,6 +42,7 @@ COMMANDS = {
     "aim": _runs.cmd_aim,
     "compare": _compare.cmd_compare,
     "record": _data.cmd_record,
+    "fit": _fit.cmd_fit,
 }
 
 
