@@ -49,6 +49,7 @@ import optimistix as optx
 
 from .data import KNOWN_COLUMNS, TrajectoryData, parse_column
 from .errors import ConfigError, DataFileError, InsufficientDataError
+from .tasks._base import Task
 
 MIN_TRANSITIONS_PER_PARAMETER = 50
 """The fewest recorded transitions ``(y_t, u_t, y_{t+1})`` per fitted parameter."""
@@ -106,7 +107,7 @@ def check_data(task: Any, data: TrajectoryData) -> None:
     """
     where = data.metadata.get("env_id") or "the data"
     expected = KNOWN_COLUMNS.get(task.gym_id or "")
-    if expected is None or type(task).state_from_observation is _base_state_from_observation():
+    if expected is None or type(task).state_from_observation is Task.state_from_observation:
         raise ConfigError(
             f"task {task.name!r} cannot be fitted to recorded data yet (it does not reconstruct "
             "its state from observations); fit the pendulum"
@@ -126,12 +127,6 @@ def check_data(task: Any, data: TrajectoryData) -> None:
             f"{where} was recorded every {dt} s but task {task.name!r} steps {model_dt} s; "
             "record at the task's time step"
         )
-
-
-def _base_state_from_observation():
-    from .tasks._base import Task
-
-    return Task.state_from_observation
 
 
 def _windows(task, data: TrajectoryData, window: int):
