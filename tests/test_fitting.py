@@ -152,3 +152,28 @@ def test_cli_fit_end_to_end(tmp_path, capsys):
     assert "--model hybrid is not implemented yet" in capsys.readouterr().err
     assert main([*args, "--force", "--params", "g,wind", *tiny]) == 2
     assert "unknown parameter(s) ['wind']" in capsys.readouterr().err
+
+
+def test_cli_fit_refuses_bad_data_in_one_line(tmp_path, capsys):
+    def fit(data, *extra):
+        argv = ["fit", "pendulum", "--data", str(data), "--model", "params"]
+        code = main([*argv, "--out", str(tmp_path / "out"), "--quiet", *extra])
+        return code, capsys.readouterr().err
+
+    code, err = fit(tmp_path / "missing.csv")
+    assert code == 2 and "missing.csv" in err and len(err.strip().splitlines()) == 1
+    broken = tmp_path / "broken.csv"
+    broken.write_text("time [s],episode\n0.0,0\n")
+    code, err = fit(broken)
+    assert code == 2 and "broken.csv" in err
+    cartpole = tmp_path / "cartpole.csv"
+    write_trajectories(cartpole, diffcontrol.record("CartPole-v1", 2))
+    code, err = fit(cartpole)
+    assert code == 2 and "CartPole-v1 has the columns" in err and "pendulum" in err
+    one = tmp_path / "one.csv"
+    write_trajectories(one, _record(1, max_steps=120))
+    code, err = fit(one)  # --holdout 0.2 of one episode
+    assert code == 2 and "leaves none to fit" in err and "--holdout 0" in err
+    code, err = fit(one, "--holdout", "0", "--params", "g,friction,m")
+    assert code == 2 and "at least 150 are needed" in err
+    assert not (tmp_path / "out").exists()  # nothing created for a refused fit

@@ -85,7 +85,8 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--quiet", action="store_true", help="print only the final summary")
 
 
-def _prepare_out(out: Path, force: bool) -> None:
+def _check_out(out: Path, force: bool) -> None:
+    """Refuse, before fitting, an --out that could not take fitted.json (nothing is created)."""
     if out.exists() and not out.is_dir():
         raise RunDirectoryError(f"--out {out} is a file; give a directory")
     if (out / "fitted.json").exists() and not force:
@@ -93,12 +94,16 @@ def _prepare_out(out: Path, force: bool) -> None:
             f"{out / 'fitted.json'} already exists; pass --force to replace it or choose "
             "another --out"
         )
+    parent = next((p for p in (out, *out.parents) if p.exists()), Path("."))
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise RunDirectoryError(f"cannot write --out {out}: {parent} is not writable")
+
+
+def _make_out(out: Path) -> None:
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as e:
         raise RunDirectoryError(f"cannot create --out {out} ({e.strerror})") from None
-    if not os.access(out, os.W_OK | os.X_OK):
-        raise RunDirectoryError(f"--out {out} is not writable; choose a writable directory")
 
 
 def _split(data: Any, fraction: float) -> tuple[Any, Any]:
@@ -142,7 +147,7 @@ def cmd_fit(args: argparse.Namespace) -> int:
         )
     data = read_trajectories(args.data)
     out = Path(args.out)
-    _prepare_out(out, args.force)
+    _check_out(out, args.force)
     train, held_out = _split(data, args.holdout)
     say = (lambda line: None) if args.quiet else print
     say(
@@ -212,6 +217,7 @@ def cmd_fit(args: argparse.Namespace) -> int:
         "created": now_iso(),
         "diffcontrol_version": __version__,
     }
+    _make_out(out)
     write_json(out / "fitted.json", doc)
     shown = held_out if held_out is not None else train
     prediction_plot(
