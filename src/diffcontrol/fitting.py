@@ -69,8 +69,8 @@ class FitResult:
             error is ``inf`` where the data cannot determine the parameter).
         loss: the mean squared window prediction error at the fit; ``nominal_loss`` at the
             nominal parameters (in the observations' units squared).
-        loss_history: [steps + lm_steps + 1] the loss after each Adam step, then after the
-            Levenberg-Marquardt refinement (NaN entries where a step diverged).
+        loss_history: the loss before each Adam step taken, then (with ``lm_steps``) one
+            entry after the Levenberg-Marquardt refinement (NaN if that diverged).
         diverged: a step gave a non-finite loss; ``params`` are then the best seen before it.
         message: one line on how the fit ended.
         window, windows, transitions: the window length (steps), how many windows and how
@@ -307,7 +307,9 @@ def _fit(task, data, names, window, steps, learning_rate, lm_steps, init) -> Fit
     errors = _standard_errors(lambda v: residuals(v, batch), values) * math.sqrt(window)
     fitted = _set(nominal_params, names, values)
     if not message:
-        message = f"converged to a mean squared window error of {best_loss:.3g}"
+        message = (
+            f"mean squared window error {best_loss:.3g} (nominal parameters: {nominal_loss:.3g})"
+        )
     return FitResult(
         params=fitted,
         names=names,
