@@ -129,7 +129,7 @@ def plot(task_name: str, results: list[dict], thresholds: tuple[float, ...], pat
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from ..plots import _save
+    from ..io import write_bytes
 
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.5), sharey=True)
     methods: list[str] = []
@@ -166,4 +166,10 @@ def plot(task_name: str, results: list[dict], thresholds: tuple[float, ...], pat
     axes[0].legend(loc="lower right")
     fig.suptitle(f"{task_name}: diffcontrol against RL baselines")
     fig.tight_layout()
-    return _save(fig, path)
+    import io as _io
+
+    buf = _io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110)
+    plt.close(fig)
+    write_bytes(path, buf.getvalue())
+    return Path(path)
