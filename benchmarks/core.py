@@ -15,18 +15,16 @@ Prints a table and writes benchmarks/results/core.json (machine, date, every fig
 from __future__ import annotations
 
 import argparse
-import datetime as dt
 import json
-import os
-import platform
-import shutil
 import statistics
-import subprocess
 import sys
 import tempfile
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+from _common import machine, train_cli  # noqa: E402, F401 (machine: also imported from here)
+
 # The quality bars, for "first reached" columns (in-simulator evaluation curve).
 THRESHOLDS = {"pendulum": -150.0, "cartpole": 475.0}
 # Updates per training episode of the original recipes (window 4, batch 1).
@@ -43,13 +41,7 @@ def first_reached(curve: list[dict], threshold: float | None) -> dict:
 
 def run_train(task: str, seed: int, label: str, extra: list[str], workdir: Path) -> dict:
     out = workdir / f"{task}-{seed}-{abs(hash(tuple(extra))) % 10**6}"
-    cmd = [sys.executable, "-m", "diffcontrol.cli", "train", task, "--out", str(out)]
-    cmd += ["--seed", str(seed), "--quiet", "--no-animation", "--final-eval", "100", *extra]
-    if shutil.which("taskset"):
-        cmd = ["taskset", "-c", "0", *cmd]
-    env = dict(os.environ, DIFFCONTROL_NO_COMPILE_CACHE="1")
-    subprocess.run(cmd, check=True, env=env, stdout=subprocess.DEVNULL)
-    metrics = json.loads((out / "metrics.json").read_text())
+    metrics, _ = train_cli(task, seed, out, ["--no-animation", "--final-eval", "100", *extra])
     reached = first_reached(metrics["curve"], THRESHOLDS.get(task))
     return {
         "task": task,
@@ -68,26 +60,6 @@ def run_train(task: str, seed: int, label: str, extra: list[str], workdir: Path)
         "threshold": THRESHOLDS.get(task),
         "threshold_first_episodes": reached["episodes"],
         "threshold_first_seconds": reached["seconds"],
-    }
-
-
-def machine() -> dict:
-    cpu = platform.processor() or "unknown"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    import jax
-
-    return {
-        "cpu": cpu,
-        "cores_used": 1 if shutil.which("taskset") else os.cpu_count(),
-        "python": platform.python_version(),
-        "jax": jax.__version__,
-        "date": dt.date.today().isoformat(),
     }
 
 

@@ -19,10 +19,7 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import shutil
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
@@ -32,18 +29,12 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from core import machine  # noqa: E402
+from _common import machine, train_cli  # noqa: E402
 
 
 def run_train(seed: int, workdir: Path, extra: list[str]) -> dict:
     out = workdir / f"trebuchet-{seed}"
-    cmd = [sys.executable, "-m", "diffcontrol.cli", "train", "trebuchet", "--out", str(out)]
-    cmd += ["--seed", str(seed), "--quiet", "--no-animation", "--final-eval", "1000", *extra]
-    if shutil.which("taskset"):
-        cmd = ["taskset", "-c", "0", *cmd]
-    env = dict(os.environ, DIFFCONTROL_NO_COMPILE_CACHE="1")
-    subprocess.run(cmd, check=True, env=env, stdout=subprocess.DEVNULL)
-    m = json.loads((out / "metrics.json").read_text())
+    m, _ = train_cli("trebuchet", seed, out, ["--no-animation", "--final-eval", "1000", *extra])
     return {
         "seed": seed,
         "run_dir": str(out),

@@ -45,3 +45,14 @@ def pendulum_run(tmp_path_factory):
     args += ["--eval-episodes", "2", "--final-eval", "2"]
     assert main(["train", "pendulum", "--out", str(out), "--quiet", *args]) == 0
     return out
+
+
+TINY_SWINGUP = ["--updates", "50", "--final-eval", "0"]
+
+
+@pytest.fixture(scope="session")
+def swingup_run(tmp_path_factory):
+    """A cartpole-swingup run trained by the CLI on a small budget (shared, read-only)."""
+    out = tmp_path_factory.mktemp("runs") / "swingup"
+    assert main(["train", "cartpole-swingup", "--out", str(out), "--quiet", *TINY_SWINGUP]) == 0
+    return out

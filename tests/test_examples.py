@@ -21,3 +21,9 @@ def test_custom_task_example_learns():
     result = _load("custom_task").main(updates=60)
     first, last = result.curve[0]["eval_return"], result.curve[-1]["eval_return"]
     assert last > 0.3 * first  # returns are negative: the cost fell by more than 70 %
+
+
+def test_continuous_task_example_learns():
+    result = _load("continuous_task").main(updates=300)
+    first, last = result.curve[0]["eval_loss"], result.curve[-1]["eval_loss"]
+    assert last < 0.3 * first  # the mass reaches x = 1 m and stays (the loss fell by > 70 %)

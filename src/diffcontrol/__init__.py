@@ -16,20 +16,22 @@ from pathlib import Path as _Path
 __version__ = "0.1.0"
 
 from . import controllers, envs, rollout, systems, tasks  # noqa: E402
-from .config import TrainConfig  # noqa: E402
+from .config import ODETrainConfig, TrainConfig  # noqa: E402
 from .controllers import MLPController, straight_through_sign  # noqa: E402, F401
 from .errors import (  # noqa: E402
     ConfigError,
     DiffcontrolError,
     ModelFileError,
     RunDirectoryError,
+    SolverFailed,
+    TrainingDiverged,
     UnknownTaskError,
 )
 from .evaluation import AimResult, EvalResult, evaluate, evaluate_aiming  # noqa: E402
-from .io import AimingPolicy, NumpyPolicy  # noqa: E402
+from .io import AimingPolicy, NumpyPolicy, StatePolicy  # noqa: E402
 from .rollout import Trajectory  # noqa: E402
-from .tasks import Task, make, register  # noqa: E402
-from .training import TrainingDiverged, TrainResult, resolve_config, train  # noqa: E402
+from .tasks import ContinuousTask, Task, make, register  # noqa: E402
+from .training import TrainResult, resolve_config, train  # noqa: E402
 
 envs.register_all()  # gymnasium.make("diffcontrol/<Name>-v0") for every registered task
 
@@ -40,14 +42,18 @@ def load(run_dir: str | _os.PathLike) -> NumpyPolicy:
     Returns a ``NumpyPolicy``: ``policy(obs)`` takes one Gymnasium observation (NumPy) and
     returns a valid Gymnasium action, so it drops into a plain ``gymnasium.make(...)`` loop.
     For an aiming task (the trebuchet) it returns an ``AimingPolicy``:
-    ``policy(target_m, wind_mps) -> (angle_deg, weight_lb)``.
+    ``policy(target_m, wind_mps) -> (angle_deg, weight_lb)``. For a continuous-time task (the
+    swing-ups) a ``StatePolicy``: ``policy(state) -> force`` on the physical state
+    ``(x, x_dot, theta, theta_dot)``, so any integrator can re-simulate the closed loop.
 
     Raises:
         ModelFileError: the file is missing, corrupt, or of an unsupported version.
     """
-    from .io import AimingPolicy, read_model
+    from .io import AimingPolicy, StatePolicy, read_model
 
     doc = read_model(_Path(run_dir))
+    if "features" in doc["observation"]:
+        return StatePolicy(doc)
     known = doc["task"] in tasks.names()
     if known and tasks.make(doc["task"]).kind == "aiming":
         return AimingPolicy(doc)
@@ -63,12 +69,16 @@ __all__ = [
     "AimResult",
     "AimingPolicy",
     "ConfigError",
+    "ContinuousTask",
     "DiffcontrolError",
     "EvalResult",
     "MLPController",
     "ModelFileError",
     "NumpyPolicy",
+    "ODETrainConfig",
     "RunDirectoryError",
+    "SolverFailed",
+    "StatePolicy",
     "Task",
     "TrainConfig",
     "TrainResult",

@@ -110,3 +110,47 @@ def animate_throw(throw: Any, target: float, wind: float, path: str | Path, fps:
     )
     write_bytes(path, data)
     return Path(path)
+
+
+def animate_swingup(recording: Any, path: str | Path, fps: int = 25) -> Path:
+    """Write an animated GIF of a swing-up (``evaluation.ContinuousRecording``) in real time.
+
+    The cart is drawn to scale (0.4 m wide) with the pole's 1 m arm to its mass; the view
+    follows the cart's range, and the force is printed and drawn as an arrow.
+    """
+    t, y, force = recording.t, recording.y, recording.force
+    dt = float(t[1] - t[0]) if len(t) > 1 else 1.0 / fps
+    every = max(1, int(round(1.0 / (fps * dt))))
+    x_lo, x_hi = float(np.min(y[:, 0])) - 1.3, float(np.max(y[:, 0])) + 1.3
+    fig, ax = plt.subplots(figsize=(max(4.0, min(9.0, 0.9 * (x_hi - x_lo))), 2.8), dpi=75)
+    ax.set_xlim(x_lo, x_hi)
+    ax.set_ylim(-1.3, 1.3)
+    ax.set_aspect("equal")
+    ax.axis("off")
+    ax.plot([x_lo, x_hi], [0, 0], color="0.6", lw=1)
+    cart = plt.Rectangle((0, -0.1), 0.4, 0.2, color="k")
+    ax.add_patch(cart)
+    (pole,) = ax.plot([], [], lw=4, color="#ca9865", solid_capstyle="round")
+    (bob,) = ax.plot([], [], "o", color="#cc4d4d", ms=9)
+    (arrow,) = ax.plot([], [], color="C0", lw=2)
+    text = ax.text(x_lo + 0.05, 1.1, "", fontsize=8, family="monospace")
+    peak = max(float(np.max(np.abs(force))), 1e-9)
+    frames = []
+    indices = list(range(0, len(t), every))
+    indices += [len(t) - 1] * int(round(1.0 / (every * dt)))  # hold the end for about 1 s
+    for i in indices:
+        x, theta = y[i, 0], y[i, 2]
+        cart.set_x(x - 0.2)
+        tip = (x + np.sin(theta), np.cos(theta))
+        pole.set_data([x, tip[0]], [0.0, tip[1]])
+        bob.set_data([tip[0]], [tip[1]])
+        arrow.set_data([x, x + 0.8 * force[i] / peak], [-0.22, -0.22])
+        text.set_text(f"t={t[i]:5.2f} s  F={force[i]:+7.2f} N")
+        fig.canvas.draw()
+        frames.append(np.asarray(fig.canvas.buffer_rgba())[..., :3].copy())
+    plt.close(fig)
+    data = iio.imwrite(
+        "<bytes>", np.stack(frames), extension=".gif", duration=1000.0 * every * dt, loop=0
+    )
+    write_bytes(path, data)
+    return Path(path)

@@ -1,4 +1,9 @@
-"""Training configuration: one frozen, typed dataclass whose field docs are the CLI help."""
+"""Training configuration: frozen, typed dataclasses whose field docs are the CLI help.
+
+``TrainConfig`` is for discrete-time tasks (windowed BPTT), ``ODETrainConfig`` for
+continuous-time ones (differentiation through an ODE solve). Both validate on construction,
+so a bad value is caught where it is set, with a message that names it.
+"""
 
 from __future__ import annotations
 
@@ -16,8 +21,70 @@ def _opt(doc: str, **kwargs: Any) -> Any:
     return field(metadata={"help": doc}, **kwargs)
 
 
+class _Config:
+    """What every configuration shares: validation helpers, ``replace`` and JSON round trips."""
+
+    def _check_common(self) -> None:
+        for name in ("updates", "eval_every"):
+            value = getattr(self, name)
+            if not isinstance(value, int) or isinstance(value, bool) or value <= 0:
+                raise ConfigError(f"{name} must be a positive integer, got {value!r}")
+        if not (math.isfinite(self.learning_rate) and self.learning_rate > 0):
+            raise ConfigError(
+                f"learning_rate must be a positive finite number, got {self.learning_rate!r}"
+            )
+        if not isinstance(self.keep_best, bool):
+            raise ConfigError(f"keep_best must be true or false, got {self.keep_best!r}")
+        if not (math.isfinite(self.grad_clip) and self.grad_clip >= 0):
+            raise ConfigError(f"grad_clip must be >= 0 (0 disables), got {self.grad_clip!r}")
+        if not (0 <= self.lr_final_fraction <= 1):
+            raise ConfigError(
+                f"lr_final_fraction must be in [0, 1], got {self.lr_final_fraction!r}"
+            )
+        if self.lr_schedule not in SCHEDULES:
+            raise ConfigError(
+                f"lr_schedule must be one of {', '.join(SCHEDULES)}, got {self.lr_schedule!r}"
+            )
+        if not self.hidden or any((not isinstance(h, int)) or h <= 0 for h in self.hidden):
+            raise ConfigError(f"hidden must be positive layer widths, got {self.hidden!r}")
+        for name, value in self.params:
+            if not math.isfinite(value):
+                raise ConfigError(f"parameter override {name}={value!r} is not a finite number")
+
+    def replace(self, **changes: Any) -> Any:
+        """A copy with some fields changed (validated again)."""
+        return dataclasses.replace(self, **changes)
+
+    def to_json(self) -> dict[str, Any]:
+        """A JSON-ready dict (tuples become lists, nan becomes None)."""
+        out = dataclasses.asdict(self)
+        out["hidden"] = list(self.hidden)
+        out["params"] = [list(p) for p in self.params]
+        for name, value in out.items():
+            if isinstance(value, float) and math.isnan(value):
+                out[name] = None
+        return out
+
+    @classmethod
+    def from_json(cls, data: dict[str, Any]) -> Any:
+        """Inverse of ``to_json``; unknown keys are an error."""
+        fields = {f.name: f for f in dataclasses.fields(cls)}
+        unknown = set(data) - set(fields)
+        if unknown:
+            raise ConfigError(f"unknown config keys {sorted(unknown)}")
+        data = dict(data)
+        if "hidden" in data:
+            data["hidden"] = tuple(data["hidden"])
+        if "params" in data:
+            data["params"] = tuple((str(k), float(v)) for k, v in data["params"])
+        for name, value in list(data.items()):
+            if value is None and isinstance(fields[name].default, float):
+                data[name] = math.nan
+        return cls(**data)
+
+
 @dataclass(frozen=True)
-class TrainConfig:
+class TrainConfig(_Config):
     """Settings of one training run by backpropagation through time (BPTT).
 
     The trainer keeps ``batch`` copies of the simulator running side by side. Every
@@ -74,8 +141,7 @@ class TrainConfig:
     )
 
     def __post_init__(self) -> None:
-        positive = ("updates", "batch", "window", "eval_every", "eval_episodes")
-        for name in positive:
+        for name in ("batch", "window", "eval_episodes"):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value <= 0:
                 raise ConfigError(f"{name} must be a positive integer, got {value!r}")
@@ -83,61 +149,138 @@ class TrainConfig:
             raise ConfigError(
                 f"horizon must be 0 (the task's) or a positive integer, got {self.horizon!r}"
             )
-        if not (math.isfinite(self.learning_rate) and self.learning_rate > 0):
+        self._check_common()
+
+
+GRADIENT_METHODS = ("checkpoint", "backsolve", "forward")
+SOLVER_NAMES = ("tsit5", "dopri5", "dopri8", "bosh3", "kvaerno5")
+
+
+@dataclass(frozen=True)
+class ODETrainConfig(_Config):
+    """Settings of one training run through a continuous-time closed loop (a neural ODE).
+
+    Every update solves the closed loop (the controller inside the ODE's right-hand side)
+    from the task's initial state over ``horizon_s`` seconds with an adaptive solver, saves
+    ``saves`` equally spaced points, differentiates the task's loss on that trajectory
+    through the solve by ``gradient``, and takes one Adam step. ``population`` controllers
+    from different initial weights train side by side under ``vmap``; the best is returned.
+    """
+
+    seed: int = _opt("PRNG seed: a run is a function of this seed.", default=0)
+    updates: int = _opt("Number of gradient updates (one closed-loop solve each).", default=1000)
+    horizon_s: float = _opt("Length of the closed-loop solve (s).", default=1.0)
+    saves: int = _opt(
+        "Equally spaced saved points on [0, horizon_s] that the loss sees (both ends included).",
+        default=50,
+    )
+    solver: str = _opt(
+        "Adaptive ODE solver: tsit5, dopri5, dopri8, bosh3 or kvaerno5 (implicit, for stiff "
+        "loops).",
+        default="tsit5",
+    )
+    rtol: float = _opt("Relative tolerance of the adaptive step-size controller.", default=1e-3)
+    atol: float = _opt("Absolute tolerance of the adaptive step-size controller.", default=1e-6)
+    max_steps: int = _opt(
+        "Step budget of one solve; a solve that needs more fails (and is reported).",
+        default=4096,
+    )
+    gradient: str = _opt(
+        "How the loss is differentiated through the solve: checkpoint (reverse mode through "
+        "the solver's steps, exact for the discretised solve; default), backsolve (the "
+        "continuous adjoint: O(1) memory but an APPROXIMATE gradient) or forward (forward "
+        "mode, one tangent per weight; cheapest for a few dozen weights).",
+        default="checkpoint",
+    )
+    population: int = _opt(
+        "Controllers from different initial weights trained side by side under vmap; the best "
+        "is returned. Helps against the local minima of swing-ups (the cart that never moves).",
+        default=1,
+    )
+    curriculum_start: float = _opt(
+        "Growing-horizon curriculum: the first update sees this fraction of horizon_s, growing "
+        "linearly to all of it over curriculum_fraction of the updates; 1 turns it off.",
+        default=1.0,
+    )
+    curriculum_fraction: float = _opt(
+        "Share of the updates over which the curriculum's horizon grows to horizon_s.",
+        default=0.5,
+    )
+    learning_rate: float = _opt("Adam learning rate (peak value for schedules).", default=0.05)
+    lr_schedule: str = _opt(
+        "Learning-rate schedule: constant, cosine (decay to lr_final_fraction), or "
+        "warmup_cosine (5% linear warm-up, then cosine).",
+        default="constant",
+    )
+    lr_final_fraction: float = _opt("Final learning rate as a fraction of the peak.", default=0.05)
+    grad_clip: float = _opt("Clip the gradient's global norm to this; 0 disables.", default=0.0)
+    hidden: tuple[int, ...] = _opt("Hidden layer widths of the MLP controller.", default=(8,))
+    activation: str = _opt("Hidden activation: tanh, relu, sigmoid or elu.", default="tanh")
+    head: str = _opt(
+        "Action head; empty means the task's (linear: an unbounded force).", default=""
+    )
+    loss: str = _opt("Training loss; empty means the task's default (see `list`).", default="")
+    eval_every: int = _opt(
+        "Updates between evaluation points; also the length of one compiled training chunk.",
+        default=50,
+    )
+    keep_best: bool = _opt(
+        "Return the controller (and population member) with the lowest loss over the "
+        "evaluation points, each a full-horizon solve, instead of the last one.",
+        default=True,
+    )
+    params: tuple[tuple[str, float], ...] = _opt(
+        "Overrides of the simulator's physical parameters, as (name, value) pairs.",
+        default=(),
+    )
+
+    def __post_init__(self) -> None:
+        for name in ("saves", "max_steps", "population"):
+            value = getattr(self, name)
+            if not isinstance(value, int) or isinstance(value, bool) or value <= 0:
+                raise ConfigError(f"{name} must be a positive integer, got {value!r}")
+        if self.saves < 2:
             raise ConfigError(
-                f"learning_rate must be a positive finite number, got {self.learning_rate!r}"
+                f"saves must be at least 2 (both ends of the horizon), got {self.saves}"
             )
-        if not isinstance(self.keep_best, bool):
-            raise ConfigError(f"keep_best must be true or false, got {self.keep_best!r}")
-        if not (math.isfinite(self.grad_clip) and self.grad_clip >= 0):
-            raise ConfigError(f"grad_clip must be >= 0 (0 disables), got {self.grad_clip!r}")
-        if not (0 <= self.lr_final_fraction <= 1):
+        if not (math.isfinite(self.horizon_s) and self.horizon_s > 0):
             raise ConfigError(
-                f"lr_final_fraction must be in [0, 1], got {self.lr_final_fraction!r}"
+                f"horizon_s must be a positive number of seconds, got {self.horizon_s!r}"
             )
-        if self.lr_schedule not in SCHEDULES:
+        for name in ("rtol", "atol"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ConfigError(
+                    f"{name} must be a positive tolerance such as 1e-3 or 1e-6, got {value!r}"
+                )
+        if self.solver not in SOLVER_NAMES:
             raise ConfigError(
-                f"lr_schedule must be one of {', '.join(SCHEDULES)}, got {self.lr_schedule!r}"
+                f"solver must be one of {', '.join(SOLVER_NAMES)}, got {self.solver!r}"
             )
-        if not self.hidden or any((not isinstance(h, int)) or h <= 0 for h in self.hidden):
-            raise ConfigError(f"hidden must be positive layer widths, got {self.hidden!r}")
-        for name, value in self.params:
-            if not math.isfinite(value):
-                raise ConfigError(f"parameter override {name}={value!r} is not a finite number")
+        if self.gradient not in GRADIENT_METHODS:
+            raise ConfigError(
+                f"gradient must be one of {', '.join(GRADIENT_METHODS)}, got {self.gradient!r}"
+            )
+        if not (0 < self.curriculum_start <= 1):
+            raise ConfigError(
+                f"curriculum_start must be a fraction in (0, 1] (1 turns the curriculum off), "
+                f"got {self.curriculum_start!r}"
+            )
+        if not (0 < self.curriculum_fraction <= 1):
+            raise ConfigError(
+                f"curriculum_fraction must be a fraction in (0, 1], got {self.curriculum_fraction!r}"
+            )
+        self._check_common()
 
-    def replace(self, **changes: Any) -> TrainConfig:
-        """A copy with some fields changed (validated again)."""
-        return dataclasses.replace(self, **changes)
-
-    def to_json(self) -> dict[str, Any]:
-        """A JSON-ready dict (tuples become lists, nan becomes None)."""
-        out = dataclasses.asdict(self)
-        out["hidden"] = list(self.hidden)
-        out["params"] = [list(p) for p in self.params]
-        if math.isnan(self.target_return):
-            out["target_return"] = None
-        return out
-
-    @classmethod
-    def from_json(cls, data: dict[str, Any]) -> TrainConfig:
-        """Inverse of ``to_json``; unknown keys are an error."""
-        known = {f.name for f in dataclasses.fields(cls)}
-        unknown = set(data) - known
-        if unknown:
-            raise ConfigError(f"unknown config keys {sorted(unknown)}")
-        data = dict(data)
-        if "hidden" in data:
-            data["hidden"] = tuple(data["hidden"])
-        if "params" in data:
-            data["params"] = tuple((str(k), float(v)) for k, v in data["params"])
-        if data.get("target_return") is None and "target_return" in data:
-            data["target_return"] = math.nan
-        return cls(**data)
+    @property
+    def target_return(self) -> float:
+        """No early stop for continuous-time runs (the driver asks every config)."""
+        return math.nan
 
 
-def help_of(name: str) -> str:
-    """The help text of a ``TrainConfig`` field."""
-    for f in dataclasses.fields(TrainConfig):
+def help_of(name: str, cls: type = TrainConfig) -> str:
+    """The help text of a field of ``cls`` (``TrainConfig`` or ``ODETrainConfig``)."""
+    for f in dataclasses.fields(cls):
         if f.name == name:
             return f.metadata["help"]
     raise KeyError(name)

@@ -27,6 +27,7 @@ from jaxtyping import Array, Float, PRNGKeyArray
 
 ACTIVATIONS = {"tanh": jnp.tanh, "relu": jax.nn.relu, "sigmoid": jax.nn.sigmoid, "elu": jax.nn.elu}
 HEADS = ("linear", "tanh", "sigmoid", "sign")
+INITS = ("equinox", "glorot")
 
 
 @jax.custom_jvp
@@ -90,6 +91,7 @@ class MLPController(eqx.Module):
         action_low: Sequence[float] | None = None,
         action_high: Sequence[float] | None = None,
         final_scale: float = 0.1,
+        init: str = "equinox",
     ):
         """Build a randomly initialised controller.
 
@@ -103,6 +105,9 @@ class MLPController(eqx.Module):
             action_low, action_high: bounds of the ``"tanh"``/``"sigmoid"`` heads.
             final_scale: the last layer's initial weights are multiplied by this, so the
                 untrained controller starts near the middle of its action range.
+            init: ``"equinox"`` (Equinox's default: weights and biases uniform in
+                ``+-1/sqrt(fan_in)``) or ``"glorot"`` (Glorot-uniform weights, zero biases:
+                the default of Flux and DiffEqFlux, used by the 2019-2020 posts).
         """
         if activation not in ACTIVATIONS:
             raise ValueError(
@@ -110,9 +115,13 @@ class MLPController(eqx.Module):
             )
         if head not in HEADS:
             raise ValueError(f"unknown action head {head!r}; choose one of {HEADS}")
+        if init not in INITS:
+            raise ValueError(f"unknown init {init!r}; choose one of {INITS}")
         sizes = [obs_size, *hidden, action_size]
         keys = jax.random.split(key, len(sizes) - 1)
         layers = [eqx.nn.Linear(a, b, key=k) for a, b, k in zip(sizes[:-1], sizes[1:], keys)]
+        if init == "glorot":
+            layers = [_glorot(l, k) for l, k in zip(layers, jax.random.split(keys[0], len(layers)))]
         last = layers[-1]
         last = eqx.tree_at(
             lambda l: (l.weight, l.bias), last, (last.weight * final_scale, last.bias * 0)
@@ -139,6 +148,14 @@ class MLPController(eqx.Module):
     def num_parameters(self) -> int:
         """Number of trainable weights and biases."""
         return sum(l.weight.size + l.bias.size for l in self.layers)
+
+
+def _glorot(layer: eqx.nn.Linear, key: PRNGKeyArray) -> eqx.nn.Linear:
+    """The layer with Glorot-uniform weights, ``U(+-sqrt(6 / (fan_in + fan_out)))``, and zero bias."""
+    fan_out, fan_in = layer.weight.shape
+    limit = np.sqrt(6.0 / (fan_in + fan_out))
+    weight = jax.random.uniform(key, layer.weight.shape, minval=-limit, maxval=limit)
+    return eqx.tree_at(lambda l: (l.weight, l.bias), layer, (weight, jnp.zeros_like(layer.bias)))
 
 
 def _vector(values: Sequence[float] | None, size: int, default: float) -> Array:

@@ -1,8 +1,8 @@
 """Every diffcontrol task as a Gymnasium environment: ``gymnasium.make("diffcontrol/<Name>-v0")``.
 
-``import diffcontrol`` registers one environment per registered discrete-time task
+``import diffcontrol`` registers one environment per registered task
 (``diffcontrol/Pendulum-v0``, ``diffcontrol/PendulumUnclipped-v0``, ``diffcontrol/CartPole-v0``,
-``diffcontrol/Trebuchet-v0``), so any reinforcement-learning library that takes a Gymnasium
+``diffcontrol/Trebuchet-v0``, and the swing-ups below), so any reinforcement-learning library that takes a Gymnasium
 environment can train on exactly the simulator that diffcontrol differentiates through: the
 same ``task.reset`` distribution, the same ``task.step`` (dynamics, reward, termination) under
 one ``jax.jit``, the same observation, and the task's standard episode length as Gymnasium's
@@ -19,15 +19,16 @@ Spaces follow the task's action head:
 Observations are ``float32`` in an unbounded ``Box`` of ``task.observation_size``. The state is
 kept as a JAX array between steps, in JAX's default precision (``float32`` unless x64 is on).
 
-Tasks of other kinds (a continuous-time task solved with Diffrax, say) are skipped by
-``register_all``: only subclasses of ``diffcontrol.tasks.Task`` whose ``kind`` is in
-``SUPPORTED_KINDS`` become environments.
+Continuous-time tasks (the swing-ups: ``diffcontrol/CartPoleSwingUp-v0``, ``...Limited-v0``,
+``...Friction-v0``) are ``ContinuousTaskEnv``: the same ODE, the action held constant over each
+interval of the loss's save grid, and the episode's return minus the task's loss.
 """
 
 from __future__ import annotations
 
 from typing import Any
 
+import equinox as eqx
 import gymnasium
 import jax
 import jax.numpy as jnp
@@ -36,7 +37,7 @@ from gymnasium import spaces
 
 from . import tasks as _tasks
 from .errors import ConfigError
-from .tasks import Task
+from .tasks import ContinuousTask, Task
 
 NAMESPACE = "diffcontrol"
 VERSION = 0
@@ -61,6 +62,15 @@ def env_id(task: Task | str) -> str:
 def supports(task: Any) -> bool:
     """Whether ``task`` can be stepped as a Gymnasium environment by ``TaskEnv``."""
     return isinstance(task, Task) and task.kind in SUPPORTED_KINDS
+
+
+def _entry(task: Any) -> tuple[str, int] | None:
+    """The environment class and the episode length (steps) for ``task``, if it has one."""
+    if supports(task):
+        return f"{__name__}:TaskEnv", task.episode_length
+    if isinstance(task, ContinuousTask):
+        return f"{__name__}:ContinuousTaskEnv", task.default_config().saves - 1
+    return None
 
 
 _COMPILED: dict[str, tuple[Any, Any]] = {}
@@ -165,26 +175,28 @@ class TaskEnv(gymnasium.Env):
         return np.asarray(obs, np.float32), float(reward), bool(terminated), False, {}
 
 
-def register_env(task: Task) -> str:
+def register_env(task: Any) -> str:
     """Register ``task`` as ``diffcontrol/<Name>-v0`` (again, if already there); returns the id.
 
     Raises:
-        ConfigError: the task's kind cannot be stepped one action at a time.
+        ConfigError: the task's kind cannot be a Gymnasium environment.
     """
-    if not supports(task):
+    entry = _entry(task)
+    if entry is None:
         raise ConfigError(
             f"task {task.name!r} of kind {task.kind!r} has no Gymnasium environment; "
-            f"supported kinds: {', '.join(SUPPORTED_KINDS)}"
+            f"supported kinds: {', '.join(SUPPORTED_KINDS)} and continuous-time tasks"
         )
+    entry_point, steps = entry
     eid = env_id(task)
     if eid in gymnasium.registry:
         del gymnasium.registry[eid]
     gymnasium.register(
         id=eid,
-        entry_point=f"{__name__}:TaskEnv",
+        entry_point=entry_point,
         kwargs={"task": task.name},
-        max_episode_steps=task.episode_length,
-        reward_threshold=task.reward_threshold,
+        max_episode_steps=steps,
+        reward_threshold=getattr(task, "reward_threshold", None),
     )
     return eid
 
@@ -194,6 +206,114 @@ def register_all() -> list[str]:
     ids = []
     for name in _tasks.names():
         task = _tasks.make(name)
-        if supports(task):
+        if _entry(task) is not None:
             ids.append(register_env(task))
     return ids
+
+
+# ---------------------------------------------------------------------------------------------
+# Continuous-time tasks (the swing-ups): the same ODE, the action held over each save interval.
+
+
+class ContinuousTaskEnv(gymnasium.Env):
+    """A continuous-time diffcontrol task as a Gymnasium environment, with a zero-order hold.
+
+    An episode is the task's closed loop over ``horizon_s`` from its (deterministic) initial
+    state, cut into the ``saves - 1`` intervals of the save grid that the loss sees; each step
+    holds the action (the force, N) constant over one interval and integrates the task's own
+    vector field over it (Tsit5 at rtol 1e-6, atol 1e-8). The observation is the task's
+    (``(cos theta, sin theta, theta_dot)`` for the swing-ups; ``info["state"]`` has the full
+    state). The reward is 0 until the last step, which returns minus the task's default loss
+    of the recorded trajectory: the episode's return is exactly ``-loss``, the number
+    diffcontrol minimises. The loss's force at save ``k`` is the action held after it (the
+    last save repeats the last action).
+
+    What differs from the differentiable version: there the controller acts continuously
+    inside the ODE; here an agent can only act once per interval (0.02 s for the 1 s swing-up,
+    0.2 s for the 10 s one). With a constant force both give the same trajectory (a test
+    checks that).
+
+    Args:
+        task: a registered continuous-time task name or instance.
+        params: its physical parameters; the nominal ones when omitted.
+        max_force: the action space's bound (N); the swing-up's force is unbounded, but RL
+            needs a box (the unconstrained swing-up peaks at about 63 N).
+    """
+
+    metadata = {"render_modes": []}
+
+    def __init__(self, task: Any, params: Any = None, max_force: float = 100.0):
+        import diffrax
+
+        if isinstance(task, str):
+            task = _tasks.make(task)
+        self.task = task
+        self.config = task.default_config()
+        p = task.default_params() if params is None else params
+        self.params = jax.tree.map(lambda x: jnp.asarray(x, dtype=float), p)
+        self.dt = self.config.horizon_s / (self.config.saves - 1)
+        self.observation_space = spaces.Box(
+            -np.inf, np.inf, (task.observation_size,), dtype=np.float32
+        )
+        self.action_space = spaces.Box(-max_force, max_force, (task.action_size,), np.float32)
+        self._loss = jax.jit(self._episode_loss)
+
+        def advance(y, force):
+            sol = diffrax.diffeqsolve(
+                diffrax.ODETerm(task.vector_field),
+                diffrax.Tsit5(),
+                0.0,
+                self.dt,
+                None,
+                y,
+                args=(self.params, _Hold(force)),
+                stepsize_controller=diffrax.PIDController(rtol=1e-6, atol=1e-8),
+                max_steps=4096,
+            )
+            return sol.ys[-1]
+
+        self._advance = jax.jit(advance)
+        self._observe = jax.jit(task.observe)
+        self._ys: list[np.ndarray] = []
+        self._forces: list[float] = []
+
+    def _episode_loss(self, ys, forces):
+        ts = jnp.linspace(0.0, self.config.horizon_s, self.config.saves)
+        traj = self.task.trajectory(self.params, lambda obs: jnp.zeros((1,)), ts, ys)
+        traj = eqx.tree_at(lambda tr: tr.force, traj, forces.astype(ys.dtype))
+        return self.task.trajectory_loss(self.task.losses[0])(traj)
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)  # the start is deterministic; the seed only seeds np_random
+        y = self.task.initial_state(self.params)
+        self._ys, self._forces = [np.asarray(y)], []
+        return self._obs(y), {"state": np.asarray(y[:4])}
+
+    def _obs(self, y) -> np.ndarray:
+        return np.asarray(self._observe(jnp.asarray(y)[:4]), np.float32)
+
+    def step(self, action: Any):
+        if not self._ys:
+            raise RuntimeError("call reset() before step()")
+        force = float(np.clip(np.asarray(action, np.float64).reshape(-1)[0], *self._bounds()))
+        y = self._advance(jnp.asarray(self._ys[-1]), jnp.asarray(force, float))
+        self._ys.append(np.asarray(y))
+        self._forces.append(force)
+        done = len(self._ys) == self.config.saves
+        reward = 0.0
+        if done:
+            forces = np.asarray(self._forces + self._forces[-1:])
+            reward = -float(self._loss(jnp.asarray(np.stack(self._ys)), jnp.asarray(forces)))
+        return self._obs(y), reward, False, done, {"state": np.asarray(y[:4])}
+
+    def _bounds(self) -> tuple[float, float]:
+        return float(self.action_space.low[0]), float(self.action_space.high[0])
+
+
+class _Hold(eqx.Module):
+    """A force held constant: ``force_fn(t, state) = force``."""
+
+    force: Any
+
+    def __call__(self, t, state):
+        return self.force

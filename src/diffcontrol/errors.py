@@ -29,3 +29,11 @@ class ModelFileError(DiffcontrolError):
 
 class RunDirectoryError(DiffcontrolError):
     """An output directory that cannot be written or already holds a different run."""
+
+
+class TrainingDiverged(DiffcontrolError):
+    """The loss or the weights became non-finite; the last good checkpoint is kept."""
+
+
+class SolverFailed(TrainingDiverged):
+    """Every population member's ODE solve failed (or its loss became non-finite)."""

@@ -183,3 +183,171 @@ def evaluate_aiming(policy: Any, task: Task, targets: int = 1000, seed: int = 0)
     shortest, longest = (np.asarray(x, np.float64) for x in aim.reachable_range(wind))
     reachable = (target >= shortest) & (target <= longest)
     return AimResult(task.name, seed, target, wind, angle, weight, distance, reachable)
+
+
+# ---------------------------------------------------------------------------------------------
+# Continuous-time tasks (the swing-ups): a reference solve of the closed loop.
+
+REFERENCE_RTOL = 1e-9
+REFERENCE_ATOL = 1e-9
+"""Tolerances of the reference solve (float64, 8th-order Dormand-Prince): far tighter than
+training's, so the reported figures are the physical closed loop's, not the solver's."""
+
+
+@dataclasses.dataclass
+class ContinuousRecording:
+    """A closed loop solved on a uniform grid: ``y[k] = (x, x_dot, theta, theta_dot, impulse,
+    dissipated_energy)`` at ``t[k]`` and the controller's force ``force[k]`` (N)."""
+
+    task: str
+    t: np.ndarray
+    y: np.ndarray
+    force: np.ndarray
+    loss: float
+
+    def to_json(self) -> dict[str, Any]:
+        """``data.json``: the time series, ``theta`` wrapped to ``[-pi, pi)`` (0 upright)."""
+        wrapped = (self.y[:, 2] + np.pi) % (2 * np.pi) - np.pi
+        return {
+            "format": "diffcontrol-data",
+            "version": 1,
+            "task": self.task,
+            "units": {
+                "t": "s",
+                "x": "m",
+                "x_dot": "m/s",
+                "theta": "rad (0 = up)",
+                "theta_dot": "rad/s",
+                "force": "N",
+                "impulse": "N s",
+                "dissipated_energy": "J",
+            },
+            "t": self.t.tolist(),
+            "x": self.y[:, 0].tolist(),
+            "x_dot": self.y[:, 1].tolist(),
+            "theta": wrapped.tolist(),
+            "theta_dot": self.y[:, 3].tolist(),
+            "force": self.force.tolist(),
+            "impulse": self.y[:, 4].tolist(),
+            "dissipated_energy": self.y[:, 5].tolist(),
+        }
+
+
+@dataclasses.dataclass
+class SwingUpResult:
+    """How a swing-up ended (the reference solve): the issue's pass/fail figures and more."""
+
+    task: str
+    horizon_s: float
+    final_theta: float
+    final_theta_dot: float
+    final_x: float
+    final_x_dot: float
+    peak_force: float
+    dissipated_energy: float
+    swings: int
+    upright_time: float | None
+    loss: float
+
+    def to_json(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    def summary(self) -> str:
+        up = (
+            f"upright (|θ| < 0.1 rad) from {self.upright_time:.2f} s"
+            if self.upright_time is not None
+            else "never upright for good"
+        )
+        return (
+            f"at t = {self.horizon_s:g} s: |θ| {abs(self.final_theta):.4f} rad, θ̇ "
+            f"{self.final_theta_dot:+.3f} rad/s, ẋ {self.final_x_dot:+.3f} m/s, x "
+            f"{self.final_x:+.2f} m; peak |F| {self.peak_force:.1f} N; {self.swings} swings; "
+            f"{up}; loss {self.loss:.4f}"
+            + (f"; dissipated {self.dissipated_energy:.2f} J" if self.dissipated_energy else "")
+        )
+
+
+def simulate_continuous(
+    task: Any,
+    controller: Any,
+    params: Any = None,
+    *,
+    config: Any = None,
+    rate_hz: float = 100.0,
+) -> ContinuousRecording:
+    """Solve ``task``'s closed loop with ``controller`` (an ``MLPController``) for reporting.
+
+    A float64 reference solve (``dopri8`` at ``REFERENCE_RTOL``/``REFERENCE_ATOL``) saved at
+    ``rate_hz`` over the horizon of ``config`` (an ``ODETrainConfig``; default: the task's),
+    plus that config's loss (by name; the task's default if empty) on its own save grid
+    (``saves`` points, as in training).
+    """
+    import jax
+    import jax.numpy as jnp
+
+    from .rollout import solve_closed_loop
+
+    config = config or task.default_config()
+    horizon = float(config.horizon_s)
+    params = task.default_params() if params is None else params
+    n = int(round(horizon * rate_hz)) + 1
+    with jax.enable_x64(True):
+        ctrl = jax.tree.map(lambda x: jnp.asarray(x, jnp.float64), controller)
+        p64 = jax.tree.map(lambda x: jnp.asarray(x, jnp.float64), params)
+
+        @jax.jit
+        def run(ctrl, p, ts):
+            sol = solve_closed_loop(
+                task.vector_field,
+                task.initial_state(p),
+                ts,
+                (p, task.force_fn(ctrl)),
+                solver="dopri8",
+                rtol=REFERENCE_RTOL,
+                atol=REFERENCE_ATOL,
+                max_steps=100_000,
+            )
+            force = jax.vmap(lambda y: ctrl(task.observe(y[:4]))[0])(sol.ys)
+            return sol.ys, force, sol.ok
+
+        ts = jnp.linspace(0.0, horizon, n)
+        ys, force, ok = run(ctrl, p64, ts)
+        ts_loss = jnp.linspace(0.0, horizon, config.saves)
+        ys_loss, _, ok_loss = run(ctrl, p64, ts_loss)
+        loss_fn = task.trajectory_loss(config.loss or task.losses[0])
+        loss = float(loss_fn(task.trajectory(p64, ctrl, ts_loss, ys_loss)))
+        if not (bool(ok) and bool(ok_loss)):
+            raise ValueError("the reference solve failed: the closed loop explodes")
+    return ContinuousRecording(task.name, np.asarray(ts), np.asarray(ys), np.asarray(force), loss)
+
+
+def swingup_result(rec: ContinuousRecording) -> SwingUpResult:
+    """The end state, peak force, swings and upright time of a recorded swing-up.
+
+    ``swings`` counts the pole's direction reversals (sign changes of ``theta_dot``) before it
+    first comes within 0.1 rad of upright. ``upright_time`` is the first time from which it
+    stays within 0.1 rad to the end (``None`` if it does not end there).
+    """
+    theta = (rec.y[:, 2] + np.pi) % (2 * np.pi) - np.pi
+    up = np.abs(theta) < 0.1
+    first_up = int(np.argmax(up)) if up.any() else len(theta)
+    rate = rec.y[:first_up, 3]
+    signs = np.sign(rate[np.abs(rate) > 1e-3])  # ignore numerical jitter at rest
+    swings = int(np.sum(signs[1:] != signs[:-1])) if signs.size > 1 else 0
+    upright_time = None
+    if up[-1]:
+        last_down = np.flatnonzero(~up)
+        upright_time = float(rec.t[last_down[-1] + 1]) if last_down.size else 0.0
+    return SwingUpResult(
+        task=rec.task,
+        horizon_s=float(rec.t[-1]),
+        final_theta=float(theta[-1]),
+        final_theta_dot=float(rec.y[-1, 3]),
+        final_x=float(rec.y[-1, 0]),
+        final_x_dot=float(rec.y[-1, 1]),
+        peak_force=float(np.max(np.abs(rec.force))),
+        dissipated_energy=float(rec.y[-1, 5]),
+        swings=swings,
+        upright_time=upright_time,
+        loss=rec.loss,
+    )

@@ -24,6 +24,12 @@ Forward pass: ``h = (obs - offset) * scale``; for every layer but the last
 ``sigmoid: low + (high - low) / (1 + exp(-z))``, ``sign: +1 if tanh(z) >= 0 else -1``.
 The Gymnasium action is the action vector for ``"gym": "box"`` and
 ``1 if action[0] >= 0 else 0`` for ``"gym": "discrete_sign"`` (CartPole: 1 pushes right).
+
+A continuous-time task's controller acts on the physical state: its ``observation`` also
+holds ``"state"`` (the state's names, e.g. ``["x", "x_dot", "theta", "theta_dot"]``) and
+``"features"`` (how the observation is computed from it, each a state name, ``cos(name)`` or
+``sin(name)``, e.g. ``["cos(theta)", "sin(theta)", "theta_dot"]``); see ``StatePolicy``.
+Readers that ignore the two keys still run the network on observations.
 """
 
 from __future__ import annotations
@@ -127,16 +133,20 @@ def controller_to_dict(controller: MLPController, task: Any, metadata: dict | No
         for l in controller.layers
     ]
     bounded = controller.head in ("tanh", "sigmoid")
+    observation: dict[str, Any] = {
+        "size": int(controller.obs_offset.shape[0]),
+        "offset": np.asarray(controller.obs_offset).tolist(),
+        "scale": np.asarray(controller.obs_scale).tolist(),
+    }
+    if getattr(task, "kind", None) == "ode":
+        observation["state"] = list(task.state_names)
+        observation["features"] = list(task.feature_names)
     return {
         "format": MODEL_FORMAT,
         "version": MODEL_VERSION,
         "task": task.name,
         "gym_id": task.gym_id,
-        "observation": {
-            "size": int(controller.obs_offset.shape[0]),
-            "offset": np.asarray(controller.obs_offset).tolist(),
-            "scale": np.asarray(controller.obs_scale).tolist(),
-        },
+        "observation": observation,
         "network": {"activation": controller.activation, "layers": layers},
         "action": {
             "size": int(controller.action_low.shape[0]),
@@ -168,6 +178,11 @@ def _check_model(doc: Any, path: Path) -> None:
         size = obs["size"]
         if len(obs["offset"]) != size or len(obs["scale"]) != size:
             raise bad("observation offset/scale do not match its size")
+        if "features" in obs:
+            if len(obs["features"]) != size:
+                raise bad("observation features do not match its size")
+            for feature in obs["features"]:
+                _feature_index(feature, obs["state"])
         for i, layer in enumerate(net["layers"]):
             w, b = np.asarray(layer["weight"], float), np.asarray(layer["bias"], float)
             if w.ndim != 2 or w.shape[1] != size or b.shape != (w.shape[0],):
@@ -271,6 +286,59 @@ class AimingPolicy(NumpyPolicy):
         if angle.ndim == 0:
             return float(angle), float(weight)
         return angle, weight
+
+
+def _feature_index(feature: str, state: list[str]) -> tuple[Any, int]:
+    """``"cos(theta)"`` -> ``(np.cos, index of theta)``; ``"x"`` -> ``(None, index of x)``."""
+    fn = None
+    name = feature
+    for prefix, f in (("cos(", np.cos), ("sin(", np.sin)):
+        if feature.startswith(prefix) and feature.endswith(")"):
+            fn, name = f, feature[len(prefix) : -1]
+    if name not in state:
+        raise ModelFileError(
+            f"observation feature {feature!r} names no state variable of {state}; re-create "
+            "the model with `diffcontrol train`"
+        )
+    return fn, state.index(name)
+
+
+class StatePolicy(NumpyPolicy):
+    """A continuous-time controller from ``model.json`` as a function of the physical state.
+
+    ``policy(state)`` takes the state in the order of ``policy.state_names`` (for the swing-up
+    cart-pole ``(x, x_dot, theta, theta_dot)`` in m, m/s, rad with 0 upright, rad/s), or a
+    batch with the state on the last axis, and returns the force (N): a float for one state,
+    an array for a batch. NumPy only, so any integrator can re-simulate the closed loop.
+    The observation is built from the state by ``observation.features`` of ``model.json``:
+    each is a state name, ``cos(name)`` or ``sin(name)``.
+    """
+
+    def __init__(self, doc: dict):
+        super().__init__(doc)
+        obs = doc["observation"]
+        if "features" not in obs:
+            raise ModelFileError(
+                f"the {self.task!r} model takes observations, not states; load it as a "
+                "NumpyPolicy (diffcontrol.load does this)"
+            )
+        self.state_names = tuple(obs["state"])
+        self._features = [_feature_index(f, list(self.state_names)) for f in obs["features"]]
+
+    def features(self, state: np.ndarray) -> np.ndarray:
+        """The controller's input computed from ``state`` (last axis)."""
+        s = np.asarray(state, np.float64)
+        if s.shape[-1] != len(self.state_names):
+            raise ValueError(
+                f"expected a state of {len(self.state_names)} values {self.state_names}, got "
+                f"shape {s.shape}"
+            )
+        cols = [s[..., i] if fn is None else fn(s[..., i]) for fn, i in self._features]
+        return np.stack(cols, axis=-1)
+
+    def __call__(self, state: np.ndarray) -> Any:  # type: ignore[override]
+        force = self.action(self.features(state))[..., 0]
+        return float(force) if force.ndim == 0 else force
 
 
 def controller_from_dict(doc: dict) -> MLPController:

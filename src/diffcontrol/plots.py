@@ -139,3 +139,32 @@ def throw(throw: Any, target: float, wind: float, path: str | Path, title: str =
     ax.grid(alpha=0.3)
     fig.tight_layout()
     return _save(fig, path)
+
+
+def swingup(recording: Any, path: str | Path, title: str = "") -> Path:
+    """The post's three panels against time: pole angle (wrapped, 0 = up), cart position, force.
+
+    ``recording`` is an ``evaluation.ContinuousRecording``.
+    """
+    t, y, force = recording.t, recording.y, recording.force
+    # Wrapped into (-pi, pi] so that the start, hanging down at pi, does not jump to -pi.
+    theta = np.pi - (np.pi - y[:, 2]) % (2 * np.pi)
+    fig, axes = plt.subplots(3, 1, figsize=(7, 6.4), sharex=True)
+    panels = [
+        (theta, "angle θ (rad, 0 = up)", "C0"),
+        (y[:, 0], "position x (m)", "C1"),
+        (force, "force F (N)", "k"),
+    ]
+    for ax, (series, label, color) in zip(axes, panels):
+        ax.plot(t, series, color=color, lw=1.5)
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+    axes[0].axhline(0.0, color="C2", lw=1, ls="--")
+    axes[0].set_yticks([-np.pi, -np.pi / 2, 0, np.pi / 2, np.pi], ["−π", "−π/2", "0", "π/2", "π"])
+    axes[2].set_xlabel("time (s)")
+    peak = float(np.max(np.abs(force)))
+    axes[0].set_title(
+        title or f"{recording.task}: peak |F| {peak:.1f} N, loss {recording.loss:.3f}"
+    )
+    fig.tight_layout()
+    return _save(fig, path)

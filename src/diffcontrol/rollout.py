@@ -1,15 +1,35 @@
-"""Discrete-time rollouts: a controller in closed loop with a task's simulator, under ``lax.scan``."""
+"""Closed loops: discrete-time rollouts under ``lax.scan``, and continuous-time ODE solves.
+
+A controller in closed loop with a task's simulator, differentiable end to end: the
+discrete-time rollout is the unrolled graph that BPTT differentiates; the continuous-time
+solve puts the controller inside an ODE's right-hand side and is differentiated through an
+adaptive solver with a chosen gradient method (``GRADIENT_METHODS``).
+"""
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
+import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Bool, Float, PRNGKeyArray, PyTree
+from jaxtyping import Array, Bool, Float, Int, PRNGKeyArray, PyTree
 
+from .config import GRADIENT_METHODS
 from .tasks import Task
+
+__all__ = [
+    "GRADIENT_METHODS",
+    "SOLVERS",
+    "ODESolution",
+    "Trajectory",
+    "batch_returns",
+    "rollout",
+    "solve_closed_loop",
+    "value_and_grad",
+]
 
 Controller = Callable[[Array], Array]
 
@@ -78,3 +98,136 @@ def batch_returns(
         return rollout(task, params, controller, task.reset(key, params), num_steps).total_return
 
     return jax.vmap(one)(keys)
+
+
+# ---------------------------------------------------------------------------------------------
+# Continuous-time closed loops: one adaptive ODE solve, with the solver and the gradient method
+# as values.
+
+SOLVERS: dict[str, type] = {
+    "tsit5": diffrax.Tsit5,
+    "dopri5": diffrax.Dopri5,
+    "dopri8": diffrax.Dopri8,
+    "bosh3": diffrax.Bosh3,
+    "kvaerno5": diffrax.Kvaerno5,
+}
+"""Adaptive solvers by name: explicit Runge-Kutta pairs, and ``kvaerno5`` (implicit, for stiff
+closed loops such as sharp Coulomb friction)."""
+
+# How a loss is differentiated through the solve (``GRADIENT_METHODS``):
+#
+# - ``checkpoint``: discretise-then-optimise, reverse mode through the solver's own steps with
+#   recursive checkpointing (``diffrax.RecursiveCheckpointAdjoint``). Exact for the discretised
+#   solve, memory ``O(log steps)`` recomputations. The default.
+# - ``backsolve``: optimise-then-discretise, the continuous adjoint ODE solved backwards in time
+#   (``diffrax.BacksolveAdjoint``), the method of the neural-ODE paper. Memory ``O(1)`` in the
+#   number of steps, but **the gradient is approximate**: the adjoint and the re-solved state
+#   carry the solver's error (about the tolerances), and unstable backwards dynamics can make it
+#   worse. Use it only when memory is what limits you.
+# - ``forward``: forward mode through the solver's steps (``diffrax.ForwardMode`` under
+#   ``jax.jacfwd``): one tangent per weight, so the cost grows with the number of weights; the
+#   cheapest for a few dozen (the post's 41-weight controller).
+
+
+class ODESolution(eqx.Module):
+    """A closed-loop solve saved at ``ts``: ``ys[k] = y(ts[k])``.
+
+    ``ok`` is false when the solver failed (its step limit, a step too small); the saves after
+    the failure are then ``inf``, and whoever uses them must mask the sample out (the trainer
+    does) or report the failure (``failure_message``).
+    """
+
+    ts: Float[Array, " N"]
+    ys: Float[Array, "N state"]
+    ok: Bool[Array, ""]
+    max_steps_reached: Bool[Array, ""]
+    num_steps: Int[Array, ""]
+
+
+def _adjoint(gradient: str):
+    if gradient == "checkpoint":
+        return diffrax.RecursiveCheckpointAdjoint()
+    if gradient == "backsolve":
+        return diffrax.BacksolveAdjoint()
+    if gradient == "forward":
+        return diffrax.ForwardMode()
+    raise ValueError(f"unknown gradient method {gradient!r}; choose one of {GRADIENT_METHODS}")
+
+
+def solve_closed_loop(
+    vector_field: Callable[[Array, Array, PyTree], Array],
+    y0: Float[Array, " state"],
+    save_ts: Float[Array, " N"],
+    args: PyTree,
+    *,
+    solver: str = "tsit5",
+    rtol: float = 1e-3,
+    atol: float = 1e-6,
+    max_steps: int = 4096,
+    gradient: str = "checkpoint",
+) -> ODESolution:
+    """Solve ``dy/dt = vector_field(t, y, args)`` from ``y0`` at ``save_ts[0]`` to ``save_ts[-1]``.
+
+    Adaptive steps (a PID step-size controller at ``rtol``/``atol``) with ``solver``, saved at
+    ``save_ts`` (which may be traced, so a growing horizon does not recompile). Everything to
+    be differentiated must reach the vector field through ``args`` (not a closure): the
+    continuous adjoint only differentiates ``y0`` and ``args``. Never raises inside ``jit``:
+    a failed solve comes back with ``ok = False``.
+
+    Args:
+        vector_field: ``f(t, y, args) -> dy/dt``.
+        y0: the initial state.
+        save_ts: increasing save times (s); the solve spans ``[save_ts[0], save_ts[-1]]``.
+        args: the PyTree passed to ``vector_field`` (physical parameters, the controller).
+        solver: a name from ``SOLVERS``.
+        rtol, atol: the step-size controller's relative and absolute tolerances.
+        max_steps: the step budget; reaching it fails the solve.
+        gradient: a name from ``GRADIENT_METHODS`` (how reverse or forward mode goes through).
+    """
+    if solver not in SOLVERS:
+        raise ValueError(f"unknown solver {solver!r}; choose one of {', '.join(SOLVERS)}")
+    sol = diffrax.diffeqsolve(
+        diffrax.ODETerm(vector_field),
+        SOLVERS[solver](),
+        t0=save_ts[0],
+        t1=save_ts[-1],
+        dt0=None,
+        y0=y0,
+        args=args,
+        saveat=diffrax.SaveAt(ts=save_ts),
+        stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
+        adjoint=_adjoint(gradient),
+        max_steps=max_steps,
+        throw=False,
+    )
+    ok = sol.result == diffrax.RESULTS.successful
+    return ODESolution(
+        ts=save_ts,
+        ys=sol.ys,
+        ok=ok,
+        max_steps_reached=sol.result == diffrax.RESULTS.max_steps_reached,
+        num_steps=jnp.asarray(sol.stats["num_steps"]),
+    )
+
+
+def value_and_grad(fun: Callable[..., tuple[Array, Any]], gradient: str) -> Callable:
+    """``fun(x, *args) -> (scalar, aux)`` to ``(value, aux), grad_x`` by the named method.
+
+    ``checkpoint`` and ``backsolve`` are reverse mode (``equinox.filter_value_and_grad``);
+    ``forward`` is ``equinox.filter_jacfwd`` (one tangent per weight of ``x``). The solve
+    inside ``fun`` must use the same ``gradient`` (``solve_closed_loop(..., gradient=...)``).
+    """
+    if gradient == "forward":
+
+        def forward(x, *args):
+            def f(x):
+                value, aux = fun(x, *args)
+                return value, (value, aux)
+
+            grads, (value, aux) = eqx.filter_jacfwd(f, has_aux=True)(x)
+            return (value, aux), grads
+
+        return forward
+    if gradient in ("checkpoint", "backsolve"):
+        return eqx.filter_value_and_grad(fun, has_aux=True)
+    raise ValueError(f"unknown gradient method {gradient!r}; choose one of {GRADIENT_METHODS}")

@@ -7,15 +7,22 @@
 from __future__ import annotations
 
 from ..errors import UnknownTaskError
-from ._base import StepLoss, Task
+from ._base import ContinuousTask, StepLoss, Task, TrajectoryLoss
 from .cartpole import CartPole
 from .pendulum import Pendulum, PendulumUnclipped
+from .swingup import (
+    CartPoleSwingUp,
+    CartPoleSwingUpFriction,
+    CartPoleSwingUpLimited,
+    SwingUpTrajectory,
+)
 from .trebuchet import TrebuchetAiming
 
-_REGISTRY: dict[str, Task] = {}
+AnyTask = Task | ContinuousTask
+_REGISTRY: dict[str, AnyTask] = {}
 
 
-def register(task: Task) -> Task:
+def register(task: AnyTask) -> AnyTask:
     """Add a task instance to the registry under ``task.name``; returns it."""
     if task.name in _REGISTRY and type(_REGISTRY[task.name]) is not type(task):
         raise ValueError(f"a different task is already registered as {task.name!r}")
@@ -23,7 +30,7 @@ def register(task: Task) -> Task:
     return task
 
 
-def make(name: str) -> Task:
+def make(name: str) -> AnyTask:
     """The registered task called ``name``.
 
     Raises:
@@ -43,12 +50,27 @@ def names() -> list[str]:
     return list(_REGISTRY)
 
 
-for _task in (Pendulum(), PendulumUnclipped(), CartPole(), TrebuchetAiming()):
+for _task in (
+    Pendulum(),
+    PendulumUnclipped(),
+    CartPole(),
+    TrebuchetAiming(),
+    CartPoleSwingUp(),
+    CartPoleSwingUpLimited(),
+    CartPoleSwingUpFriction(),
+):
     register(_task)
 
 __all__ = [
+    "AnyTask",
     "Task",
+    "ContinuousTask",
     "StepLoss",
+    "TrajectoryLoss",
+    "SwingUpTrajectory",
+    "CartPoleSwingUp",
+    "CartPoleSwingUpLimited",
+    "CartPoleSwingUpFriction",
     "make",
     "names",
     "register",

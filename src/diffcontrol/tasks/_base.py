@@ -6,6 +6,7 @@ import abc
 from collections.abc import Callable
 from typing import Any, ClassVar
 
+import equinox as eqx
 import numpy as np
 from jaxtyping import Array, PRNGKeyArray, PyTree
 
@@ -13,7 +14,59 @@ StepLoss = Callable[[PyTree, Array, Array, Array, Array], Array]
 """``loss(params, state, action, next_state, reward) -> scalar``: the training loss of one step."""
 
 
-class Task(abc.ABC):
+class _TaskBase(abc.ABC):
+    """What every task has: a name, a controller's shape, losses, settings and recipes."""
+
+    name: ClassVar[str]
+    summary: ClassVar[str]
+    kind: ClassVar[str] = "control"
+    gym_id: ClassVar[str | None] = None
+    observation_size: ClassVar[int]
+    action_size: ClassVar[int]
+    action_head: ClassVar[str]
+    action_low: ClassVar[tuple[float, ...] | None] = None
+    action_high: ClassVar[tuple[float, ...] | None] = None
+    obs_offset: ClassVar[tuple[float, ...] | None] = None
+    obs_scale: ClassVar[tuple[float, ...] | None] = None
+    losses: ClassVar[tuple[str, ...]]
+    state_labels: ClassVar[tuple[str, ...]] = ()
+    action_labels: ClassVar[tuple[str, ...]] = ()
+    env_name: ClassVar[str | None] = None
+
+    @abc.abstractmethod
+    def default_params(self) -> PyTree:
+        """The nominal physical parameters (a PyTree of floats)."""
+
+    @abc.abstractmethod
+    def default_config(self) -> Any:
+        """The training configuration that ``diffcontrol train NAME`` uses by default."""
+
+    def recipes(self) -> dict[str, dict[str, Any]]:
+        """Named sets of configuration overrides (``--recipe``), e.g. the 2019 original."""
+        return {}
+
+    @property
+    def gym_label(self) -> str:
+        """How evaluation results name the environment (``gym_id`` plus any changes)."""
+        return self.gym_id or self.name
+
+    def controller_kwargs(self) -> dict[str, Any]:
+        """Keyword arguments that make an ``MLPController`` fit this task."""
+        return dict(
+            obs_size=self.observation_size,
+            action_size=self.action_size,
+            head=self.action_head,
+            obs_offset=self.obs_offset,
+            obs_scale=self.obs_scale,
+            action_low=self.action_low,
+            action_high=self.action_high,
+        )
+
+    def __repr__(self) -> str:
+        return f"<task {self.name}>"
+
+
+class Task(_TaskBase):
     """A discrete-time control task.
 
     Subclasses are stateless singletons: everything that varies between calls (physical
@@ -40,29 +93,10 @@ class Task(abc.ABC):
             (``pendulum-unclipped`` -> ``PendulumUnclipped``).
     """
 
-    name: ClassVar[str]
-    summary: ClassVar[str]
-    kind: ClassVar[str] = "control"
-    gym_id: ClassVar[str | None] = None
     episode_length: ClassVar[int]
-    observation_size: ClassVar[int]
-    action_size: ClassVar[int]
-    action_head: ClassVar[str]
-    action_low: ClassVar[tuple[float, ...] | None] = None
-    action_high: ClassVar[tuple[float, ...] | None] = None
-    obs_offset: ClassVar[tuple[float, ...] | None] = None
-    obs_scale: ClassVar[tuple[float, ...] | None] = None
     reward_threshold: ClassVar[float | None] = None
-    losses: ClassVar[tuple[str, ...]]
-    state_labels: ClassVar[tuple[str, ...]] = ()
-    action_labels: ClassVar[tuple[str, ...]] = ()
-    env_name: ClassVar[str | None] = None
 
     # --- the differentiable simulator -------------------------------------------------------
-
-    @abc.abstractmethod
-    def default_params(self) -> PyTree:
-        """The nominal physical parameters (a PyTree of floats)."""
 
     @abc.abstractmethod
     def reset(self, key: PRNGKeyArray, params: PyTree) -> Array:
@@ -90,15 +124,6 @@ class Task(abc.ABC):
     def default_config(self) -> Any:
         """The ``TrainConfig`` that ``diffcontrol train NAME`` uses by default."""
 
-    def recipes(self) -> dict[str, dict[str, Any]]:
-        """Named sets of ``TrainConfig`` overrides (``--recipe``), e.g. the 2019 original."""
-        return {}
-
-    @property
-    def gym_label(self) -> str:
-        """How evaluation results name the environment (``gym_id`` plus any changes)."""
-        return self.gym_id or self.name
-
     def gym_action(self, action: np.ndarray) -> Any:
         """Convert a controller output to a valid action of ``gym_id``."""
         return np.asarray(action, dtype=np.float32)
@@ -111,17 +136,68 @@ class Task(abc.ABC):
             raise ValueError(f"task {self.name!r} has no Gymnasium environment")
         return gymnasium.make(self.gym_id, **kwargs)
 
-    def controller_kwargs(self) -> dict[str, Any]:
-        """Keyword arguments that make an ``MLPController`` fit this task."""
-        return dict(
-            obs_size=self.observation_size,
-            action_size=self.action_size,
-            head=self.action_head,
-            obs_offset=self.obs_offset,
-            obs_scale=self.obs_scale,
-            action_low=self.action_low,
-            action_high=self.action_high,
-        )
 
-    def __repr__(self) -> str:
-        return f"<task {self.name}>"
+TrajectoryLoss = Callable[[Any], Array]
+"""``loss(trajectory) -> scalar``: the training loss of a continuous-time task, a function of
+the saved trajectory (for the swing-up, a ``SwingUpTrajectory``)."""
+
+
+class StateFeedback(eqx.Module):
+    """``force_fn(t, state) = controller(observe(state))[0]``, the weights as PyTree leaves."""
+
+    controller: Any
+    observe: Any = eqx.field(static=True)
+
+    def __call__(self, t: Array, state: Array) -> Array:
+        return self.controller(self.observe(state))[0]
+
+
+class ContinuousTask(_TaskBase):
+    """A continuous-time control task: a closed-loop ODE and a loss on its saved trajectory.
+
+    The controller sits inside the ODE's right-hand side: ``dy/dt = f(t, y, (params, u))``
+    with ``u(t, state) = controller(observe(state))``. The trainer solves the closed loop from
+    ``initial_state`` over the horizon with an adaptive solver, saves ``saves`` equally spaced
+    points, builds the task's trajectory object from them, and differentiates the loss of
+    that trajectory through the solve (``diffcontrol.rollout.solve_closed_loop``).
+
+    Class attributes (besides those of every task):
+        kind: ``"ode"``.
+        state_names: names of the mechanical state (the controller's input in ``model.json``).
+        feature_names: how the observation is computed from the state, in the small language
+            of ``model.json`` (a state name, ``cos(name)`` or ``sin(name)``).
+    """
+
+    kind: ClassVar[str] = "ode"
+    episode_length: ClassVar[int] = 1  # one closed-loop solve
+    state_names: ClassVar[tuple[str, ...]]
+    feature_names: ClassVar[tuple[str, ...]]
+
+    @abc.abstractmethod
+    def initial_state(self, params: PyTree) -> Array:
+        """The closed loop's initial state ``y0``."""
+
+    @abc.abstractmethod
+    def vector_field(self, t: Array, y: Array, args: tuple[PyTree, Any]) -> Array:
+        """``dy/dt`` with ``args = (params, force_fn)``; ``force_fn(t, state)`` is the action."""
+
+    @abc.abstractmethod
+    def observe(self, state: Array) -> Array:
+        """The controller's input computed from the mechanical state."""
+
+    @abc.abstractmethod
+    def trajectory(self, params: PyTree, controller: Any, ts: Array, ys: Array) -> Any:
+        """The trajectory object that losses see, from the saved times and states."""
+
+    @abc.abstractmethod
+    def trajectory_loss(self, name: str) -> TrajectoryLoss:
+        """The built-in loss ``name`` (one of ``losses``) of a saved trajectory."""
+
+    def force_fn(self, controller: Any) -> StateFeedback:
+        """The controller as the ODE's input ``(t, state) -> action``: state feedback through
+        ``observe``, as a PyTree whose leaves are the controller's weights."""
+        return StateFeedback(controller, self.observe)
+
+    def controller_kwargs(self) -> dict[str, Any]:
+        """As for every task, with the Glorot-uniform weights and zero biases of the post."""
+        return {**super().controller_kwargs(), "init": "glorot", "final_scale": 1.0}

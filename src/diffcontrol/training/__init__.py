@@ -1,9 +1,16 @@
-"""Trainers: windowed BPTT through a task's simulator, on one shared driver."""
+"""Trainers: windowed BPTT through a discrete-time simulator, and differentiation through an
+ODE solve for continuous-time tasks, on one shared driver."""
 
+from ..errors import SolverFailed, TrainingDiverged
 from ._bptt import Trainer, TrainState, make_optimizer, make_trainer
-from ._driver import TrainingDiverged, TrainResult, resolve_config, task_params, train
+from ._driver import TrainResult, resolve_config, task_params, train
+from ._ode import ODETrainer, ODETrainState, make_ode_trainer
 
 __all__ = [
+    "ODETrainer",
+    "ODETrainState",
+    "SolverFailed",
+    "make_ode_trainer",
     "Trainer",
     "TrainState",
     "TrainResult",

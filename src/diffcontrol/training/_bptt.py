@@ -10,14 +10,19 @@ updates under one ``jit``; the Python driver calls the same compiled chunk again
 
 from __future__ import annotations
 
+import math
+from typing import Any
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 import optax
 from jaxtyping import Array, Float, Int, PRNGKeyArray, PyTree
 
 from ..config import TrainConfig
 from ..controllers import MLPController
+from ..errors import TrainingDiverged
 from ..rollout import batch_returns
 from ..tasks import StepLoss, Task
 
@@ -165,6 +170,48 @@ class Trainer(eqx.Module):
         """Returns of ``eval_episodes`` standard-length episodes in the simulator."""
         keys = jax.random.split(key, self.config.eval_episodes)
         return batch_returns(self.task, params, controller, keys, self.task.episode_length)
+
+    # --- the driver's hooks (plain Python, between chunks) --------------------------------
+
+    @property
+    def episode_length(self) -> int:
+        return self.task.episode_length
+
+    def summarize(self, returns: np.ndarray) -> tuple[float, float]:
+        """Mean and spread of the evaluation episodes' returns."""
+        return float(np.mean(returns)), float(np.std(returns))
+
+    def pick(self, controller: MLPController, returns: np.ndarray) -> MLPController:
+        """The controller to keep for this evaluation point (there is only one)."""
+        return controller
+
+    def counts(self, ts: TrainState) -> dict[str, Any]:
+        steps = int(ts.update) * self.config.window * self.config.batch
+        return {"simulated_steps": steps, "simulated_episodes": steps / self.task.episode_length}
+
+    def point_extras(self, ts: TrainState, returns: np.ndarray) -> dict[str, Any]:
+        n_fin = int(ts.finished_episodes)
+        return {
+            "train_episodes_finished": n_fin,
+            "train_return_mean": float(ts.finished_return_sum) / n_fin if n_fin else math.nan,
+        }
+
+    def check(self, old: TrainState, new: TrainState, losses: np.ndarray) -> list[str]:
+        """Raise ``TrainingDiverged`` if the loss or the weights became non-finite."""
+        weights = eqx.filter(new.controller, eqx.is_inexact_array)
+        weights_ok = all(bool(jnp.all(jnp.isfinite(x))) for x in jax.tree.leaves(weights))
+        if not (np.all(np.isfinite(losses)) and weights_ok):
+            bad = int(old.update) + int(np.argmax(~np.isfinite(losses))) + 1
+            cfg = self.config
+            raise TrainingDiverged(
+                f"training diverged near update {bad}: the loss or the weights became "
+                f"non-finite; lower --learning-rate (now {cfg.learning_rate:g}) or set "
+                f"--grad-clip (now {cfg.grad_clip:g})"
+            )
+        return []
+
+    def num_parameters(self, controller: MLPController) -> int:
+        return controller.num_parameters
 
 
 def make_trainer(task: Task, config: TrainConfig, step_loss: StepLoss | None = None) -> Trainer:

@@ -16,25 +16,23 @@ import numpy as np
 from jaxtyping import PyTree
 
 from .. import io
-from ..config import TrainConfig
 from ..controllers import MLPController
-from ..errors import ConfigError, DiffcontrolError
-from ..tasks import StepLoss, Task
-from ._bptt import TrainState, make_trainer
+from ..errors import ConfigError, TrainingDiverged
+from ..tasks import AnyTask, ContinuousTask, StepLoss, TrajectoryLoss
+from ._bptt import make_trainer
+from ._ode import make_ode_trainer
 
 CHECKPOINT_FILE = "checkpoint.npz"
 
-
-class TrainingDiverged(DiffcontrolError):
-    """The loss or the weights became non-finite; the last good checkpoint is kept."""
+__all__ = ["TrainResult", "TrainingDiverged", "resolve_config", "task_params", "train"]
 
 
 @dataclasses.dataclass
 class TrainResult:
     """What ``train`` returns: the trained controller and everything measured on the way."""
 
-    task: Task
-    config: TrainConfig
+    task: AnyTask
+    config: Any  # TrainConfig or ODETrainConfig
     params: PyTree
     controller: MLPController
     metrics: dict[str, Any]
@@ -45,7 +43,7 @@ class TrainResult:
         return self.metrics["curve"]
 
 
-def task_params(task: Task, overrides: tuple[tuple[str, float], ...] = ()) -> PyTree:
+def task_params(task: AnyTask, overrides: tuple[tuple[str, float], ...] = ()) -> PyTree:
     """The task's nominal parameters with ``overrides`` applied, as JAX arrays."""
     params = task.default_params()
     for name, value in overrides:
@@ -58,7 +56,7 @@ def task_params(task: Task, overrides: tuple[tuple[str, float], ...] = ()) -> Py
     return jax.tree.map(lambda x: jnp.asarray(x, dtype=float), params)
 
 
-def resolve_config(task: Task, recipe: str | None = None, **overrides: Any) -> TrainConfig:
+def resolve_config(task: AnyTask, recipe: str | None = None, **overrides: Any) -> Any:
     """The task's default config, then a named recipe, then explicit overrides (``None`` skipped)."""
     config = task.default_config()
     if recipe:
@@ -73,25 +71,36 @@ def resolve_config(task: Task, recipe: str | None = None, **overrides: Any) -> T
 
 def _progress_line(point: dict[str, Any], total: int) -> str:
     pct = 100.0 * point["update"] / max(total, 1)
-    ret = point["eval_return"]
-    return (
-        f"[{pct:5.1f}%] update {point['update']:>5}/{total}  "
+    head = f"[{pct:5.1f}%] update {point['update']:>5}/{total}  "
+    tail = f"  {point['seconds']:6.1f} s"
+    if "eval_loss" in point:  # continuous-time: solves, and the best member's loss
+        return head + (
+            f"solves {point['simulated_episodes']:6d}  horizon {point['horizon_s']:5.2f} s  "
+            f"loss {point['loss']:10.4g}  eval loss {point['eval_loss']:10.4g}" + tail
+        )
+    return head + (
         f"episodes {point['simulated_episodes']:8.1f}  loss {point['loss']:10.4g}  "
-        f"eval return {ret:9.2f}  {point['seconds']:6.1f} s"
+        f"eval return {point['eval_return']:9.2f}" + tail
     )
 
 
 def train(
-    task: Task,
-    config: TrainConfig | None = None,
+    task: AnyTask,
+    config: Any | None = None,
     *,
     out_dir: str | Path | None = None,
     resume: bool = False,
     step_loss: StepLoss | None = None,
+    trajectory_loss: TrajectoryLoss | None = None,
     progress: Callable[[str], None] | None = None,
     on_point: Callable[[dict[str, Any], MLPController], None] | None = None,
 ) -> TrainResult:
-    """Train a controller for ``task`` by truncated BPTT through its simulator.
+    """Train a controller for ``task`` by differentiating through its simulator.
+
+    A discrete-time task trains by truncated BPTT (``TrainConfig``); a continuous-time one
+    (``ContinuousTask``, e.g. ``cartpole-swingup``) by differentiating a loss on its saved
+    trajectory through an ODE solve (``ODETrainConfig``). Both run on this driver: progress,
+    evaluation points, checkpoints, resume.
 
     Args:
         task: a task from ``diffcontrol.make``.
@@ -99,11 +108,13 @@ def train(
         out_dir: if given, ``run.json`` and a checkpoint after every chunk are written there,
             so an interrupted run can continue with ``resume=True``.
         resume: continue the run in ``out_dir`` from its last checkpoint.
-        step_loss: a user-supplied training loss ``f(params, state, action, next_state,
-            reward) -> scalar`` that replaces the task's built-in one.
+        step_loss: discrete-time tasks: a training loss ``f(params, state, action,
+            next_state, reward) -> scalar`` that replaces the task's built-in one.
+        trajectory_loss: continuous-time tasks: a loss ``f(trajectory) -> scalar`` of the saved
+            trajectory (a ``SwingUpTrajectory`` for the swing-ups) that replaces the task's.
         progress: called with one human-readable line per evaluation point.
         on_point: called with each evaluation point (the dict that joins the curve) and the
-            controller at that point, e.g. to evaluate it elsewhere. The time spent in it is
+            controller at that point (a continuous-time run's best member), e.g. to evaluate it elsewhere. The time spent in it is
             left out of every ``seconds`` and of ``train_seconds`` (and reported as
             ``callback_seconds``); it is not saved in checkpoints, so a resumed run calls it
             only for the points after the resume.
@@ -112,26 +123,43 @@ def train(
         A ``TrainResult`` whose controller is the one of the best evaluation point when
         ``config.keep_best`` (the default), else the last; ``metrics`` holds
         ``train_seconds`` (wall clock, compilation and evaluation included), ``compile_seconds``, ``simulated_steps``,
-        ``simulated_episodes`` (in the task's standard episode length), the ``curve``, and
+        ``simulated_episodes`` (in the task's standard episode length; closed-loop solves for
+        continuous-time tasks, whose ``simulated_steps`` are solver steps), the ``curve``, and
         ``returned_update`` with ``final_eval_return`` (the returned controller's).
 
     Raises:
-        ConfigError, RunDirectoryError, ModelFileError: bad settings or directories.
+        ConfigError, RunDirectoryError, ModelFileError: bad settings or directories, or a
+            loss that does not return a scalar.
         TrainingDiverged: the loss became non-finite (lower the learning rate or clip).
+        SolverFailed: every ODE solve of a continuous-time run failed (say why and what to
+            change, e.g. raise max_steps).
     """
     t_start = time.perf_counter()
     config = config or task.default_config()
+    expected = type(task.default_config())
+    if not isinstance(config, expected):
+        raise ConfigError(
+            f"task {task.name!r} is trained with a {expected.__name__}, got a "
+            f"{type(config).__name__}; start from task.default_config()"
+        )
     say = progress or (lambda line: None)
     params = task_params(task, config.params)
-    trainer = make_trainer(task, config, step_loss)
-    if step_loss is not None and out_dir is not None and resume:
-        say("note: resuming with a custom step loss; it must be the same function as before")
+    if isinstance(task, ContinuousTask):
+        if step_loss is not None:
+            raise ConfigError(f"task {task.name!r} is continuous-time: pass trajectory_loss")
+        trainer = make_ode_trainer(task, config, trajectory_loss)
+    else:
+        if trajectory_loss is not None:
+            raise ConfigError(f"task {task.name!r} is discrete-time: pass step_loss")
+        trainer = make_trainer(task, config, step_loss)
+    custom = step_loss is not None or trajectory_loss is not None
+    if custom and out_dir is not None and resume:
+        say("note: resuming with a custom loss; it must be the same function as before")
 
     key = jax.random.PRNGKey(config.seed)
     k_train, k_eval = jax.random.split(key)
-    ts = trainer.init(k_train, params)
-    best = ts.controller  # the controller of the best evaluation point so far
-    steps_per_update = config.window * config.batch
+    ts = eqx.filter_jit(trainer.init)(k_train, params)  # one program, not op by op
+    best = None  # the controller of the best evaluation point so far
 
     out = None
     meta: dict[str, Any] = {
@@ -145,13 +173,14 @@ def train(
         out = io.prepare_run_dir(out_dir, run, resume)
         ckpt = out / CHECKPOINT_FILE
         if resume and ckpt.exists():
-            (ts, best), meta = io.load_checkpoint(ckpt, (ts, ts.controller))
+            like_best = trainer.pick(ts.controller, np.zeros(_population(config)))
+            (ts, best), meta = io.load_checkpoint(ckpt, (ts, like_best))
             say(f"resuming {task.name} from update {int(ts.update)} ({ckpt})")
 
     # Compile once, ahead of time, so that compile time is measured apart from training time.
+    # The evaluation first: a loss or a solve that fails on the untrained controller is
+    # reported before the (longer) compilation of the training chunk.
     t0 = time.perf_counter()
-    total = jnp.asarray(config.updates, jnp.int32)
-    chunk = jax.jit(trainer.chunk).lower(ts, params, total).compile()
     evaluate = jax.jit(trainer.evaluate).lower(ts.controller, params, k_eval).compile()
     compile_seconds = time.perf_counter() - t0
 
@@ -159,43 +188,49 @@ def train(
     seconds_before = float(meta["seconds_before"])
     eval_seconds = 0.0
     callback_seconds = 0.0  # time spent in on_point, left out of the training time
-
     best_index = int(meta["best_index"])
+    last_returns = None
 
-    def record(ts: TrainState, loss: float, grad_norm: float) -> dict[str, Any]:
-        nonlocal eval_seconds, best, best_index, callback_seconds
+    def record(ts: Any, loss: float, grad_norm: float) -> dict[str, Any]:
+        nonlocal eval_seconds, best, best_index, last_returns, callback_seconds
         t_eval = time.perf_counter()
         returns = np.asarray(evaluate(ts.controller, params, k_eval))
         eval_seconds += time.perf_counter() - t_eval
-        update = int(ts.update)
-        steps = update * steps_per_update
-        n_fin = int(ts.finished_episodes)
+        last_returns = returns
+        eval_return, eval_std = trainer.summarize(returns)
         point = {
-            "update": update,
-            "simulated_steps": steps,
-            "simulated_episodes": steps / task.episode_length,
+            "update": int(ts.update),
+            **trainer.counts(ts),
             "seconds": seconds_before + time.perf_counter() - t_start - callback_seconds,
             "loss": loss,
             "grad_norm": grad_norm,
-            "eval_return": float(returns.mean()),
-            "eval_return_std": float(returns.std()),
-            "train_episodes_finished": n_fin,
-            "train_return_mean": float(ts.finished_return_sum) / n_fin if n_fin else math.nan,
+            "eval_return": eval_return,
+            "eval_return_std": eval_std,
+            **trainer.point_extras(ts, returns),
         }
         curve.append(point)
         # ">=": among equal returns (CartPole's 500s) the later, longer-trained controller.
         so_far = curve[best_index]["eval_return"]
-        if len(curve) == 1 or math.isnan(so_far) or point["eval_return"] >= so_far:
-            best, best_index = ts.controller, len(curve) - 1
+        if best is None or len(curve) == 1 or math.isnan(so_far) or eval_return >= so_far:
+            best, best_index = trainer.pick(ts.controller, returns), len(curve) - 1
         say(_progress_line(point, config.updates))
         if on_point is not None:
             t_cb = time.perf_counter()
-            on_point(point, ts.controller)
+            on_point(point, trainer.pick(ts.controller, returns))
             callback_seconds += time.perf_counter() - t_cb
         return point
 
     if not curve:
-        record(ts, math.nan, math.nan)
+        first = record(ts, math.nan, math.nan)
+        if isinstance(task, ContinuousTask) and not math.isfinite(first["eval_return"]):
+            _check_first_solve(trainer, ts, params)
+    elif best is None:
+        best = trainer.pick(ts.controller, np.zeros(_population(config)))
+
+    t0 = time.perf_counter()
+    total = jnp.asarray(config.updates, jnp.int32)
+    chunk = jax.jit(trainer.chunk).lower(ts, params, total).compile()
+    compile_seconds += time.perf_counter() - t0
 
     stopped_early = False
     target = config.target_return
@@ -206,18 +241,18 @@ def train(
         new_ts, stats = chunk(ts, params, total)
         done = int(new_ts.update - ts.update)  # updates past the budget were skipped
         losses = np.asarray(stats.loss)[:done]
-        weights = eqx.filter(new_ts.controller, eqx.is_inexact_array)
-        weights_ok = all(bool(jnp.all(jnp.isfinite(x))) for x in jax.tree.leaves(weights))
-        if not (np.all(np.isfinite(losses)) and weights_ok):
-            bad = int(ts.update) + int(np.argmax(~np.isfinite(losses))) + 1
-            raise TrainingDiverged(
-                f"training diverged near update {bad}: the loss or the weights became non-finite; "
-                f"lower --learning-rate (now {config.learning_rate:g}) or set --grad-clip "
-                f"(now {config.grad_clip:g})"
-                + (f"; the last good checkpoint is in {out}" if out else "")
-            )
+        try:
+            notes = trainer.check(ts, new_ts, losses)
+        except TrainingDiverged as e:
+            where = f"; the last good checkpoint is in {out}" if out else ""
+            raise type(e)(f"{e}{where}") from None
+        for note in notes:
+            say("note: " + note)
         ts = new_ts
-        record(ts, float(np.mean(losses)), float(np.mean(np.asarray(stats.grad_norm)[:done])))
+        with np.errstate(all="ignore"):  # chunks whose members all failed hold only nan
+            record(
+                ts, float(np.nanmean(losses)), float(np.nanmean(np.asarray(stats.grad_norm)[:done]))
+            )
         if out is not None:
             io.save_checkpoint(
                 out / CHECKPOINT_FILE,
@@ -234,10 +269,15 @@ def train(
                 },
             )
 
-    updates_done = int(ts.update)
-    steps = updates_done * steps_per_update
     wall = seconds_before + time.perf_counter() - t_start - callback_seconds
     chosen = curve[best_index] if config.keep_best else curve[-1]
+    if config.keep_best:
+        controller = best
+    else:
+        if last_returns is None:  # resumed after the last chunk: evaluate once more
+            last_returns = np.asarray(evaluate(ts.controller, params, k_eval))
+        controller = trainer.pick(ts.controller, last_returns)
+    counts = trainer.counts(ts)
     metrics = {
         "task": task.name,
         "gym_id": task.gym_id,
@@ -246,22 +286,43 @@ def train(
         "compile_seconds": float(meta["compile_seconds_before"]) + compile_seconds,
         "eval_seconds_in_training": eval_seconds,
         "callback_seconds": callback_seconds,
-        "updates": updates_done,
-        "simulated_steps": steps,
-        "simulated_episodes": steps / task.episode_length,
-        "episode_length": task.episode_length,
+        "updates": int(ts.update),
+        **counts,
+        "episode_length": trainer.episode_length,
         "stopped_early": stopped_early,
         "returned_update": chosen["update"],
         "final_eval_return": chosen["eval_return"],
         "final_eval_return_std": chosen["eval_return_std"],
-        "eval_episodes": config.eval_episodes,
-        "num_parameters": ts.controller.num_parameters,
+        "eval_episodes": getattr(config, "eval_episodes", 1),
+        "num_parameters": trainer.num_parameters(controller),
         "curve": curve,
         "config": config.to_json(),
         "jax_version": jax.__version__,
         "device": str(jax.devices()[0].platform),
     }
-    controller = best if config.keep_best else ts.controller
     return TrainResult(
         task=task, config=config, params=params, controller=controller, metrics=metrics
     )
+
+
+def _population(config: Any) -> int:
+    """How many controllers a run trains side by side (1 for discrete-time runs)."""
+    return getattr(config, "population", 1)
+
+
+def _check_first_solve(trainer: Any, ts: Any, params: PyTree) -> None:
+    """Before any update, no member's loss is finite: the loss or the solve is at fault."""
+    from ._ode import FAIL_MAX_STEPS, FAIL_NAN, FAIL_SOLVER, failure_message
+
+    ctrl = trainer.pick(ts.controller, np.zeros(_population(trainer.config)))
+    loss, (ok, hit_max, _) = jax.jit(trainer.member_loss)(
+        ctrl, params, jnp.asarray(trainer.config.horizon_s)
+    )
+    code = FAIL_MAX_STEPS if bool(hit_max) else FAIL_SOLVER if not bool(ok) else FAIL_NAN
+    what = failure_message(code, trainer.config)
+    if code == FAIL_NAN:
+        raise ConfigError(
+            f"the loss is {float(loss)} for the untrained controller although the ODE solve "
+            "succeeded; the loss function must return a finite number"
+        )
+    raise ConfigError(f"the untrained controller's closed loop cannot be solved: {what}")

@@ -1,0 +1,52 @@
+"""The ``diffcontrol`` command line. It sits on top of everything; nothing imports it.
+
+One module a group of commands: ``_train`` (train), ``_runs`` (list, evaluate, animate, aim),
+``_compare`` (compare); ``_args`` holds the argument types and the one-line-error parser.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from ..errors import DiffcontrolError
+from . import _compare, _runs, _train
+from ._args import EXIT_USAGE, Parser
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = Parser(
+        prog="diffcontrol",
+        description=(
+            "Train controllers by differentiating through simulators. "
+            "Start with `diffcontrol list`, then `diffcontrol train pendulum --out runs/pendulum`."
+        ),
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
+    sub.required = True
+
+    _runs.add_parsers(sub)
+    _train.add_parser(sub)
+    _compare.add_parser(sub)
+    return parser
+
+
+COMMANDS = {
+    "list": _runs.cmd_list,
+    "train": _train.cmd_train,
+    "evaluate": _runs.cmd_evaluate,
+    "animate": _runs.cmd_animate,
+    "aim": _runs.cmd_aim,
+    "compare": _compare.cmd_compare,
+}
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the ``diffcontrol`` command; returns the exit status."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return COMMANDS[args.command](args)
+    except DiffcontrolError as e:
+        print(f"diffcontrol {args.command}: error: {e}", file=sys.stderr)
+        return EXIT_USAGE

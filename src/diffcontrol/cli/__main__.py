@@ -1,0 +1,5 @@
+"""``python -m diffcontrol.cli``."""
+
+from . import main
+
+raise SystemExit(main())

@@ -1,0 +1,300 @@
+"""``diffcontrol train``: train a controller and write the run's files."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import os
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from ..config import ODETrainConfig, TrainConfig, help_of
+from ..errors import DiffcontrolError
+from ._args import (
+    add_common,
+    finite_float,
+    nonneg_int,
+    param,
+    positive_float,
+    positive_int,
+    widths,
+    yes_no,
+)
+from ._runs import example_throw
+
+_CONFIG_OPTIONS: dict[str, tuple[Any, str]] = {
+    "seed": (int, "N"),
+    "updates": (positive_int, "N"),
+    "batch": (positive_int, "N"),
+    "window": (positive_int, "STEPS"),
+    "horizon": (nonneg_int, "STEPS"),
+    "learning_rate": (finite_float, "LR"),
+    "lr_schedule": (str, "NAME"),
+    "lr_final_fraction": (finite_float, "F"),
+    "grad_clip": (finite_float, "NORM"),
+    "hidden": (widths, "W,W"),
+    "activation": (str, "NAME"),
+    "head": (str, "NAME"),
+    "loss": (str, "NAME"),
+    "eval_every": (positive_int, "N"),
+    "eval_episodes": (positive_int, "N"),
+    "target_return": (float, "R"),
+    "keep_best": (yes_no, "yes|no"),
+}
+
+_ODE_OPTIONS: dict[str, tuple[Any, str]] = {
+    "horizon_s": (positive_float, "S"),
+    "saves": (positive_int, "N"),
+    "solver": (str, "NAME"),
+    "rtol": (positive_float, "TOL"),
+    "atol": (positive_float, "TOL"),
+    "max_steps": (positive_int, "N"),
+    "gradient": (str, "METHOD"),
+    "population": (positive_int, "N"),
+    "curriculum_start": (finite_float, "F"),
+    "curriculum_fraction": (finite_float, "F"),
+}
+
+
+def _add_options(group: Any, options: dict[str, tuple[Any, str]], config_cls: type) -> None:
+    """One ``--name`` option per config field, its help the field's documentation."""
+    for name, (typ, metavar) in options.items():
+        group.add_argument(
+            "--" + name.replace("_", "-"),
+            dest=name,
+            type=typ,
+            metavar=metavar,
+            default=None,
+            help=help_of(name, config_cls).replace("%", "%%"),
+        )
+
+
+def add_parser(sub: Any) -> None:
+    p = sub.add_parser(
+        "train",
+        help="train a controller and write model, metrics, plots and an animation",
+        description=(
+            "Train a controller for TASK by differentiating through its simulator, with the "
+            "task's tuned defaults unless options change them: backpropagation through time "
+            "for discrete-time tasks, through an adaptive ODE solve for continuous-time ones "
+            "(cartpole-swingup*). Writes to DIR: model.json (the controller, runnable with "
+            "NumPy alone), metrics.json (timings, simulated steps and episodes, learning "
+            "curve, evaluation), learning_curve.png, rollout.png and rollout.gif (swing-ups: "
+            "data.json with the time series, swingup.png with angle, position and force), "
+            "and checkpoint.npz (for --resume)."
+        ),
+    )
+    p.add_argument("task", metavar="TASK", help="task name (see `diffcontrol list`)")
+    p.add_argument("--out", required=True, metavar="DIR", help="output directory (new or empty)")
+    p.add_argument(
+        "--recipe",
+        metavar="NAME",
+        help="start from a named set of settings, e.g. 'original' for the 2019 Flux recipe",
+    )
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue the interrupted run in DIR from its last checkpoint",
+    )
+    p.add_argument(
+        "--final-eval",
+        type=nonneg_int,
+        default=None,
+        metavar="N",
+        help="evaluate after training: Gymnasium episodes on seeds 0..N-1 (default 100), or "
+        "random targets for aiming tasks (default 1000); 0 skips",
+    )
+    p.add_argument("--no-animation", action="store_true", help="skip the GIF (saves a few seconds)")
+    add_common(p)
+    group = p.add_argument_group(
+        "training settings (defaults depend on the task; see `diffcontrol list`)"
+    )
+    _add_options(group, _CONFIG_OPTIONS, TrainConfig)
+    ode = p.add_argument_group(
+        "continuous-time tasks only (cartpole-swingup*): the ODE solve and its gradient"
+    )
+    _add_options(ode, _ODE_OPTIONS, ODETrainConfig)
+    group.add_argument(
+        "--param",
+        dest="params",
+        type=param,
+        action="append",
+        metavar="NAME=VALUE",
+        help="override a physical parameter of the simulator (repeatable), e.g. --param g=9.81",
+    )
+
+
+def cmd_train(args: argparse.Namespace) -> int:
+    from .. import _jax_setup, io, tasks
+    from ..evaluation import evaluate, record_episode
+    from ..training import resolve_config, train
+
+    task = tasks.make(args.task)
+    config_cls = type(task.default_config())
+    fields = {f.name for f in dataclasses.fields(config_cls)}
+    overrides = {name: getattr(args, name) for name in {**_CONFIG_OPTIONS, **_ODE_OPTIONS}}
+    foreign = sorted(n for n, v in overrides.items() if v is not None and n not in fields)
+    if foreign:
+        kind = "a continuous-time" if task.kind == "ode" else "a discrete-time"
+        flags = ", ".join("--" + n.replace("_", "-") for n in foreign)
+        raise DiffcontrolError(
+            f"{flags} do{'es' if len(foreign) == 1 else ''} not apply to {task.name!r} ({kind} "
+            "task); see `diffcontrol train --help` for the settings of each kind"
+        )
+    overrides = {n: v for n, v in overrides.items() if n in fields}
+    if args.params:
+        overrides["params"] = tuple(args.params)
+    out = Path(args.out)
+    explicit = args.recipe is not None or any(v is not None for v in overrides.values())
+    if args.resume and not explicit and (out / io.RUN_FILE).exists():
+        config = config_cls.from_json(io.read_json(out / io.RUN_FILE, "run file")["config"])
+    else:
+        config = resolve_config(task, args.recipe, **overrides)
+
+    cache_dir = None
+    if not (args.no_compile_cache or os.environ.get("DIFFCONTROL_NO_COMPILE_CACHE")):
+        cache_dir = _jax_setup.enable_compile_cache()
+    say = (lambda line: None) if args.quiet else (lambda line: print(line, flush=True))
+    if task.kind == "ode":
+        say(
+            f"training {task.name}: {config.updates} updates of {config.population} closed-loop "
+            f"solve(s) over {config.horizon_s:g} s ({config.solver}, rtol {config.rtol:g}, atol "
+            f"{config.atol:g}, gradient {config.gradient}; seed {config.seed}) -> {out}"
+        )
+    else:
+        say(
+            f"training {task.name}: {config.updates} updates x window {config.window} x batch "
+            f"{config.batch} (seed {config.seed}) -> {out}"
+        )
+    try:
+        result = train(task, config, out_dir=out, resume=args.resume, progress=say)
+    except KeyboardInterrupt:
+        print(
+            f"\ninterrupted; the last checkpoint is in {out}. Continue with: "
+            f"diffcontrol train {task.name} --out {out} --resume",
+            file=sys.stderr,
+        )
+        return 130
+    metrics = result.metrics
+    metrics["compile_cache"] = {
+        "dir": str(cache_dir) if cache_dir else None,
+        **_jax_setup.cache_events(),
+    }
+    metrics["command"] = " ".join(["diffcontrol", *sys.argv[1:]])
+    metrics["created"] = io.now_iso()
+
+    from .. import __version__
+
+    doc = io.controller_to_dict(
+        result.controller,
+        task,
+        {
+            "diffcontrol_version": __version__,
+            "created": metrics["created"],
+            "seed": config.seed,
+            "train_seconds": metrics["train_seconds"],
+            "config": config.to_json(),
+        },
+    )
+    io.write_json(out / "model.json", doc)
+    if task.kind == "aiming":
+        return _finish_aiming(args, task, out, doc, metrics, say)
+    if task.kind == "ode":
+        return _finish_ode(args, task, out, result, metrics, say)
+    policy = io.NumpyPolicy(doc)
+    final_eval = 100 if args.final_eval is None else args.final_eval
+    if final_eval and task.gym_id:
+        t0 = time.perf_counter()
+        ev = evaluate(policy, task, episodes=final_eval, seed=0)
+        metrics["gym_eval"] = {**ev.to_json(), "seconds": time.perf_counter() - t0}
+        say(f"Gymnasium {ev.env_id}, seeds 0-{final_eval - 1}: return {ev.mean:.1f} ± {ev.std:.1f}")
+    io.write_json(out / "metrics.json", metrics)
+
+    from .. import plots
+
+    plots.learning_curve(metrics, out / "learning_curve.png", task.reward_threshold)
+    files = ["model.json", "metrics.json", "learning_curve.png"]
+    if task.gym_id:
+        rec = record_episode(policy, task, seed=0)
+        plots.rollout(rec, task, out / "rollout.png")
+        files.append("rollout.png")
+        if not args.no_animation:
+            from ..animation import animate
+
+            animate(rec, task, out / "rollout.gif")
+            files.append("rollout.gif")
+    print(
+        f"done in {metrics['train_seconds']:.1f} s (compile {metrics['compile_seconds']:.1f} s): "
+        f"{metrics['simulated_episodes']:.4g} simulated episodes ({metrics['simulated_steps']} steps)"
+        + (
+            f"; Gymnasium return {metrics['gym_eval']['mean_return']:.1f} ± "
+            f"{metrics['gym_eval']['std_return']:.1f}"
+            if "gym_eval" in metrics
+            else ""
+        )
+    )
+    print(f"wrote {', '.join(str(out / f) for f in files)}")
+    return 0
+
+
+def _finish_aiming(args, task, out: Path, doc: dict, metrics: dict, say) -> int:
+    """The end of `train` for aiming tasks: miss statistics, the throw plot and animation."""
+    from .. import io, plots
+    from ..evaluation import evaluate_aiming
+
+    policy = io.AimingPolicy(doc)
+    n = 1000 if args.final_eval is None else args.final_eval
+    if n:
+        t0 = time.perf_counter()
+        ev = evaluate_aiming(policy, task, targets=n, seed=0)
+        metrics["aim_eval"] = {**ev.to_json(), "seconds": time.perf_counter() - t0}
+        say(f"{n} random targets (seed 0): {ev.summary()}")
+    io.write_json(out / "metrics.json", metrics)
+    plots.learning_curve(metrics, out / "learning_curve.png", None)
+    files = ["model.json", "metrics.json", "learning_curve.png", "rollout.png"]
+    target, wind = 80.0, -3.0
+    throw = example_throw(policy, target, wind)
+    plots.throw(throw, target, wind, out / "rollout.png")
+    if not args.no_animation:
+        from ..animation import animate_throw
+
+        animate_throw(throw, target, wind, out / "rollout.gif")
+        files.append("rollout.gif")
+    summary = f"; mean |miss| {metrics['aim_eval']['mean_miss_m']:.3f} m" if n else ""
+    print(
+        f"done in {metrics['train_seconds']:.1f} s (compile {metrics['compile_seconds']:.1f} s): "
+        f"{metrics['simulated_episodes']:.4g} simulated throws{summary}"
+    )
+    print(f"wrote {', '.join(str(out / f) for f in files)}")
+    return 0
+
+
+def _finish_ode(args, task, out: Path, result, metrics: dict, say) -> int:
+    """The end of `train` for continuous-time tasks: a reference solve, data.json, plots, GIF."""
+    from .. import io, plots
+    from ..evaluation import simulate_continuous, swingup_result
+
+    rec = simulate_continuous(task, result.controller, result.params, config=result.config)
+    report = swingup_result(rec)
+    metrics["swingup"] = report.to_json()
+    say(f"reference solve: {report.summary()}")
+    io.write_json(out / "metrics.json", metrics)
+    io.write_json(out / "data.json", rec.to_json())
+    plots.learning_curve(metrics, out / "learning_curve.png", None)
+    plots.swingup(rec, out / "swingup.png")
+    files = ["model.json", "data.json", "metrics.json", "learning_curve.png", "swingup.png"]
+    if not args.no_animation:
+        from ..animation import animate_swingup
+
+        animate_swingup(rec, out / "rollout.gif")
+        files.append("rollout.gif")
+    print(
+        f"done in {metrics['train_seconds']:.1f} s (compile {metrics['compile_seconds']:.1f} s): "
+        f"{metrics['simulated_episodes']} closed-loop solves ({metrics['simulated_steps']} solver "
+        f"steps); final |θ| {abs(report.final_theta):.3f} rad, ẋ {report.final_x_dot:+.3f} m/s, "
+        f"peak |F| {report.peak_force:.1f} N"
+    )
+    print(f"wrote {', '.join(str(out / f) for f in files)}")
+    return 0

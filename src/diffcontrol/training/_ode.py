@@ -1,0 +1,323 @@
+"""Training through an ODE solve: the pure, jitted part of the continuous-time trainer.
+
+One *update* solves the closed loop of every population member from the task's initial state
+over the (possibly growing) horizon, differentiates each member's loss on its saved
+trajectory through its solve, and takes one optimiser step per member, all under ``vmap``.
+A member whose solve fails (its step limit, a step too small) or whose loss or gradient is
+not finite is frozen and flagged, never updated with a NaN; the Python driver reports it and
+stops with a clear error when no member is left. A *chunk* is ``lax.scan`` over
+``eval_every`` updates under one ``jit``, as for the discrete-time trainer.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+from jaxtyping import Array, Float, Int, PRNGKeyArray, PyTree
+
+from ..config import ODETrainConfig
+from ..controllers import MLPController
+from ..errors import ConfigError, SolverFailed
+from ..rollout import solve_closed_loop, value_and_grad
+from ..tasks import ContinuousTask, TrajectoryLoss
+from ._bptt import make_optimizer
+
+FAIL_NONE, FAIL_MAX_STEPS, FAIL_SOLVER, FAIL_NAN = 0, 1, 2, 3
+
+
+class ODETrainState(eqx.Module):
+    """What a continuous-time run carries between updates (and checkpoints).
+
+    ``controller`` and ``opt_state`` have a leading population axis on every array.
+    ``fail_code[i]`` is 0 while member ``i`` trains, else why it was frozen (``FAIL_*``), and
+    ``fail_update[i]`` the update at which that happened.
+    """
+
+    controller: MLPController
+    opt_state: PyTree
+    fail_code: Int[Array, " population"]
+    fail_update: Int[Array, " population"]
+    update: Int[Array, ""]
+    solves: Int[Array, ""]
+    solver_steps: Int[Array, ""]
+    simulated_seconds: Float[Array, ""]
+
+
+class ODEUpdateStats(eqx.Module):
+    """Per-update diagnostics (means over the members still training), stacked over a chunk."""
+
+    loss: Float[Array, ""]
+    grad_norm: Float[Array, ""]
+
+
+def _trainable(controller: MLPController) -> Any:
+    """A filter spec: the weights and biases of the layers (not the fixed scalings)."""
+    spec = jax.tree.map(lambda _: False, controller)
+    return eqx.tree_at(
+        lambda c: c.layers, spec, replace=jax.tree.map(eqx.is_inexact_array, controller.layers)
+    )
+
+
+class ODETrainer(eqx.Module):
+    """The pure functions of one continuous-time training configuration."""
+
+    task: ContinuousTask = eqx.field(static=True)
+    config: ODETrainConfig = eqx.field(static=True)
+    loss_fn: TrajectoryLoss = eqx.field(static=True)
+    optimizer: optax.GradientTransformation = eqx.field(static=True)
+
+    episode_length = 1  # one closed-loop solve counts as one simulated episode
+
+    # --- pure parts -----------------------------------------------------------------------
+
+    def new_controller(self, key: PRNGKeyArray) -> MLPController:
+        cfg = self.config
+        kwargs = self.task.controller_kwargs()
+        if cfg.head:
+            kwargs["head"] = cfg.head
+        return MLPController(key, hidden=cfg.hidden, activation=cfg.activation, **kwargs)
+
+    def horizon_at(self, update: Array) -> Array:
+        """The curriculum's horizon (s) at ``update``: growing linearly, then the full one."""
+        cfg = self.config
+        if cfg.curriculum_start >= 1:
+            return jnp.asarray(cfg.horizon_s, float)
+        growth = max(1.0, cfg.curriculum_fraction * cfg.updates)
+        frac = cfg.curriculum_start + (1 - cfg.curriculum_start) * update / growth
+        return cfg.horizon_s * jnp.minimum(1.0, frac)
+
+    def solve(self, controller: MLPController, params: PyTree, horizon: Array, gradient: str):
+        """One member's closed-loop solve, saved at ``saves`` points of ``[0, horizon]``."""
+        cfg = self.config
+        ts = jnp.linspace(0.0, 1.0, cfg.saves) * horizon
+        args = (params, self.task.force_fn(controller))
+        return solve_closed_loop(
+            self.task.vector_field,
+            self.task.initial_state(params),
+            ts,
+            args,
+            solver=cfg.solver,
+            rtol=cfg.rtol,
+            atol=cfg.atol,
+            max_steps=cfg.max_steps,
+            gradient=gradient,
+        )
+
+    def member_loss(self, controller: MLPController, params: PyTree, horizon: Array):
+        """``(loss, (solution flags))`` of one member: the loss of its saved trajectory."""
+        sol = self.solve(controller, params, horizon, self.config.gradient)
+        traj = self.task.trajectory(params, controller, sol.ts, sol.ys)
+        loss = jnp.reshape(self.loss_fn(traj), ())
+        return loss, (sol.ok, sol.max_steps_reached, sol.num_steps)
+
+    def init(self, key: PRNGKeyArray, params: PyTree) -> ODETrainState:
+        """``population`` random controllers (one key each) and their optimiser states."""
+        n = self.config.population
+        controllers = eqx.filter_vmap(self.new_controller)(jax.random.split(key, n))
+        diff = eqx.filter(controllers, _trainable(self.new_controller(key)))
+        opt_state = eqx.filter_vmap(self.optimizer.init)(diff)
+        zero = jnp.zeros((), jnp.int32)
+        return ODETrainState(
+            controller=controllers,
+            opt_state=opt_state,
+            fail_code=jnp.zeros((n,), jnp.int32),
+            fail_update=jnp.full((n,), -1, jnp.int32),
+            update=zero,
+            solves=zero,
+            solver_steps=zero,
+            simulated_seconds=jnp.zeros((), float),
+        )
+
+    def _member_update(self, controller, opt_state, fail_code, params, horizon):
+        spec = _trainable(controller)
+        diff, static = eqx.partition(controller, spec)
+
+        def loss_of(diff):
+            return self.member_loss(eqx.combine(diff, static), params, horizon)
+
+        grad_fn = value_and_grad(loss_of, self.config.gradient)
+        (loss, (ok, hit_max, num_steps)), grads = grad_fn(diff)
+        grad_norm = optax.tree_utils.tree_norm(grads)
+        finite = jnp.isfinite(loss) & jnp.isfinite(grad_norm)
+        code = jnp.where(ok, jnp.where(finite, FAIL_NONE, FAIL_NAN), FAIL_SOLVER)
+        code = jnp.where(hit_max, FAIL_MAX_STEPS, code)
+        live = fail_code == FAIL_NONE
+        good = live & (code == FAIL_NONE)
+        # Never let a failed solve's inf/nan reach the weights: zero the gradient, keep the old
+        # weights and optimiser state, and freeze the member.
+        grads = jax.tree.map(lambda g: jnp.where(good, g, 0.0), grads)
+        updates, new_opt = self.optimizer.update(grads, opt_state, diff)
+        new_diff = eqx.apply_updates(diff, updates)
+        new_diff = jax.tree.map(lambda n, o: jnp.where(good, n, o), new_diff, diff)
+        new_opt = jax.tree.map(lambda n, o: jnp.where(good, n, o), new_opt, opt_state)
+        new_code = jnp.where(live, code, fail_code)
+        return (
+            eqx.combine(new_diff, static),
+            new_opt,
+            new_code,
+            jnp.where(good, loss, jnp.nan),
+            jnp.where(good, grad_norm, jnp.nan),
+            jnp.where(live, num_steps, 0),
+            live,
+        )
+
+    def update(self, ts: ODETrainState, params: PyTree) -> tuple[ODETrainState, ODEUpdateStats]:
+        """One update of every member still training."""
+        horizon = self.horizon_at(ts.update)
+        ctrl, opt, code, loss, gnorm, steps, live = eqx.filter_vmap(
+            self._member_update, in_axes=(0, 0, 0, None, None)
+        )(ts.controller, ts.opt_state, ts.fail_code, params, horizon)
+        newly = (code != FAIL_NONE) & (ts.fail_code == FAIL_NONE)
+        n_live = jnp.sum(live)
+        new = ODETrainState(
+            controller=ctrl,
+            opt_state=opt,
+            fail_code=code,
+            fail_update=jnp.where(newly, ts.update + 1, ts.fail_update),
+            update=ts.update + 1,
+            solves=ts.solves + n_live.astype(jnp.int32),
+            solver_steps=ts.solver_steps + jnp.sum(steps).astype(jnp.int32),
+            simulated_seconds=ts.simulated_seconds + n_live * horizon,
+        )
+        stats = ODEUpdateStats(loss=jnp.nanmean(loss), grad_norm=jnp.nanmean(gnorm))
+        return new, stats
+
+    def chunk(self, ts: ODETrainState, params: PyTree, total_updates: Array):
+        """``eval_every`` updates under one ``lax.scan``; updates past ``total_updates`` skipped."""
+
+        def body(ts, _):
+            def skip(ts, params):
+                nan = jnp.full((), jnp.nan, float)
+                return ts, ODEUpdateStats(loss=nan, grad_norm=nan)
+
+            return jax.lax.cond(ts.update < total_updates, self.update, skip, ts, params)
+
+        return jax.lax.scan(body, ts, None, length=self.config.eval_every)
+
+    def evaluate(self, controller: MLPController, params: PyTree, key: PRNGKeyArray) -> Array:
+        """Each member's return, minus its loss over the full horizon (``-inf`` if it failed)."""
+        del key  # the initial state is deterministic
+
+        def one(ctrl):
+            loss, (ok, _, _) = self.member_loss(ctrl, params, jnp.asarray(self.config.horizon_s))
+            return jnp.where(ok & jnp.isfinite(loss), -loss, -jnp.inf)
+
+        return eqx.filter_vmap(one)(controller)
+
+    # --- the driver's hooks (plain Python, between chunks) --------------------------------
+
+    def summarize(self, returns: np.ndarray) -> tuple[float, float]:
+        """The best member's return, and the spread over the members that are finite."""
+        ok = np.isfinite(returns)
+        if not ok.any():
+            return -math.inf, math.nan
+        return float(np.max(returns[ok])), float(np.std(returns[ok]))
+
+    def pick(self, controller: MLPController, returns: np.ndarray) -> MLPController:
+        """The member with the best return (the first if none is finite)."""
+        i = int(np.argmax(np.where(np.isfinite(returns), returns, -np.inf)))
+        return jax.tree.map(lambda x: x[i] if eqx.is_array(x) else x, controller)
+
+    def counts(self, ts: ODETrainState) -> dict[str, Any]:
+        return {
+            "simulated_episodes": int(ts.solves),
+            "simulated_steps": int(ts.solver_steps),
+            "simulated_seconds": float(ts.simulated_seconds),
+            "horizon_s": float(self.horizon_at(ts.update)),
+        }
+
+    def point_extras(self, ts: ODETrainState, returns: np.ndarray) -> dict[str, Any]:
+        return {
+            "eval_loss": -self.summarize(returns)[0],
+            "members_training": int(np.sum(np.asarray(ts.fail_code) == FAIL_NONE)),
+        }
+
+    def check(self, old: ODETrainState, new: ODETrainState, losses: np.ndarray) -> list[str]:
+        """Notes on members frozen in this chunk; raises ``SolverFailed`` if none is left."""
+        old_code, code = np.asarray(old.fail_code), np.asarray(new.fail_code)
+        notes = []
+        for i in np.flatnonzero((old_code == FAIL_NONE) & (code != FAIL_NONE)):
+            why = failure_message(int(code[i]), self.config)
+            at = int(np.asarray(new.fail_update)[i])
+            who = f"member {i} of {len(code)}" if len(code) > 1 else "the controller"
+            notes.append(f"update {at}: {who} stopped training: {why}")
+        if np.all(code != FAIL_NONE):
+            raise SolverFailed(
+                "training stopped: " + "; ".join(notes or ["every member had failed before"])
+            )
+        return notes
+
+    def num_parameters(self, controller: MLPController) -> int:
+        return sum(int(np.prod(l.weight.shape[-2:])) + l.bias.shape[-1] for l in controller.layers)
+
+
+def failure_message(code: int, config: ODETrainConfig) -> str:
+    """What went wrong (a ``FAIL_*`` code) and what to change."""
+    if code == FAIL_MAX_STEPS:
+        return (
+            f"the ODE solve reached its step limit (max_steps={config.max_steps}); raise "
+            "--max-steps, loosen --rtol/--atol, or lower --learning-rate"
+        )
+    if code == FAIL_SOLVER:
+        return (
+            "the ODE solver failed (its step size became too small: a stiff or exploding "
+            "closed loop); try --solver kvaerno5, tighter --rtol/--atol, or a lower "
+            "--learning-rate"
+        )
+    return (
+        "the loss or its gradient became non-finite although the solve succeeded; check the "
+        "loss function, or lower --learning-rate / set --grad-clip"
+    )
+
+
+def make_ode_trainer(
+    task: ContinuousTask, config: ODETrainConfig, trajectory_loss: TrajectoryLoss | None = None
+) -> ODETrainer:
+    """Build the ``ODETrainer`` for ``task``, checking the loss on an abstract trajectory.
+
+    Raises:
+        ConfigError: an unknown loss name, or a loss that does not return a scalar.
+    """
+    if trajectory_loss is None:
+        name = config.loss or task.losses[0]
+        if name not in task.losses:
+            raise ConfigError(
+                f"unknown loss {name!r} for task {task.name!r}; choose one of {', '.join(task.losses)}"
+            )
+        trajectory_loss = task.trajectory_loss(name)
+    trainer = ODETrainer(
+        task=task, config=config, loss_fn=trajectory_loss, optimizer=make_optimizer(config)
+    )
+    _check_loss(trainer)
+    return trainer
+
+
+def _check_loss(trainer: ODETrainer) -> None:
+    """Trace the loss once on an abstract trajectory: it must return one number."""
+    task, cfg = trainer.task, trainer.config
+
+    def traj_loss(params):
+        ctrl = trainer.new_controller(jax.random.PRNGKey(0))
+        ts = jnp.linspace(0.0, cfg.horizon_s, cfg.saves)
+        ys = jnp.zeros((cfg.saves, task.initial_state(params).shape[0]))
+        return trainer.loss_fn(task.trajectory(params, ctrl, ts, ys))
+
+    try:
+        out = jax.eval_shape(traj_loss, task.default_params())
+    except Exception as e:  # a user's loss can fail in any way; say whose fault it is
+        raise ConfigError(
+            f"the loss function failed on a {type(e).__name__}: {e}; it must take the task's "
+            "trajectory object and return a scalar"
+        ) from None
+    shape = getattr(out, "shape", None)
+    if shape is None or int(np.prod(shape)) != 1:
+        raise ConfigError(
+            f"the loss must return a scalar, but it returned shape {shape}; reduce it (e.g. "
+            "with jnp.sum or jnp.mean)"
+        )
