@@ -274,9 +274,67 @@ def test_window_loss_gradient_matches_fd(task_name, overrides):
 # --- (d) the contract battery over every registered task ---------------------------------------
 
 
-@pytest.fixture(scope="module", params=diffcontrol.tasks.names())
+def _names_of(kind: type) -> list[str]:
+    return [n for n in diffcontrol.tasks.names() if isinstance(diffcontrol.tasks.make(n), kind)]
+
+
+@pytest.fixture(scope="module", params=_names_of(diffcontrol.tasks.Task))
 def task(request):
     return diffcontrol.tasks.make(request.param)
+
+
+@pytest.mark.parametrize("name", _names_of(diffcontrol.tasks.ContinuousTask))
+def test_continuous_task_contract(name):
+    """Every continuous-time task: its vector field under jit, vmap and grad, its controller,
+    its trajectory and every built-in loss on a short solve."""
+    from diffcontrol.tasks._base import StateFeedback
+
+    task = diffcontrol.tasks.make(name)
+    params = jax.tree.map(jnp.asarray, task.default_params())
+    y0 = task.initial_state(params)
+    assert y0.ndim == 1 and np.all(np.isfinite(np.asarray(y0)))
+    controller = MLPController(jax.random.key(0), hidden=(4,), **task.controller_kwargs())
+    force = StateFeedback(controller, task.observe)
+    field = jax.jit(task.vector_field)
+    rng = np.random.default_rng(0)
+    ys = jnp.asarray(rng.normal(size=(8, y0.size)), y0.dtype)
+    dy = field(0.0, ys[0], (params, force))
+    assert dy.shape == y0.shape and np.all(np.isfinite(np.asarray(dy)))
+    np.testing.assert_allclose(
+        np.asarray(task.vector_field(0.0, ys[0], (params, force))), np.asarray(dy), rtol=1e-5
+    )
+    batch = jax.jit(jax.vmap(task.vector_field, in_axes=(None, 0, None)))(0.0, ys, (params, force))
+    for i in range(8):
+        np.testing.assert_allclose(
+            np.asarray(batch[i]),
+            np.asarray(field(0.0, ys[i], (params, force))),
+            rtol=1e-5,
+            atol=1e-6,
+        )
+
+    def scalar(params, y, ctrl):
+        return jnp.sum(task.vector_field(0.0, y, (params, StateFeedback(ctrl, task.observe))) ** 2)
+
+    g_params, g_state, g_ctrl = eqx.filter_jit(eqx.filter_grad(lambda args: scalar(*args)))(
+        (params, ys[1], controller)
+    )
+    leaves = [
+        *jax.tree.leaves(g_params),
+        g_state,
+        *jax.tree.leaves(eqx.filter(g_ctrl.layers, eqx.is_array)),
+    ]
+    assert all(np.all(np.isfinite(np.asarray(g))) for g in leaves)
+    assert np.any(np.asarray(g_state) != 0) and np.any(np.asarray(g_ctrl.layers[-1].bias) != 0)
+
+    trainer = diffcontrol.training.make_ode_trainer(
+        task, task.default_config().replace(horizon_s=0.3, saves=7)
+    )
+    sol = trainer.solve(controller, params, jnp.asarray(0.3), "checkpoint")
+    assert bool(sol.ok) and sol.ys.shape == (7, y0.size)
+    traj = task.trajectory(params, controller, sol.ts, sol.ys)
+    for loss_name in task.losses:
+        value = task.trajectory_loss(loss_name)(traj)
+        assert value.shape == () and np.isfinite(float(value)), loss_name
 
 
 def test_registry_is_not_empty():

@@ -15,12 +15,15 @@ from pathlib import Path as _Path
 
 __version__ = "0.1.0"
 
-from . import controllers, envs, rollout, systems, tasks  # noqa: E402
+from . import controllers, data, envs, rollout, systems, tasks, wrappers  # noqa: E402
 from .config import ODETrainConfig, TrainConfig  # noqa: E402
 from .controllers import MLPController, straight_through_sign  # noqa: E402, F401
+from .data import TrajectoryData, read_trajectories  # noqa: E402
 from .errors import (  # noqa: E402
     ConfigError,
+    DataFileError,
     DiffcontrolError,
+    InsufficientDataError,
     ModelFileError,
     RunDirectoryError,
     SolverFailed,
@@ -29,11 +32,13 @@ from .errors import (  # noqa: E402
 )
 from .evaluation import AimResult, EvalResult, evaluate, evaluate_aiming  # noqa: E402
 from .io import AimingPolicy, NumpyPolicy, StatePolicy  # noqa: E402
+from .recording import record  # noqa: E402
 from .rollout import Trajectory  # noqa: E402
 from .tasks import ContinuousTask, Task, make, register  # noqa: E402
 from .training import TrainResult, resolve_config, train  # noqa: E402
 
 envs.register_all()  # gymnasium.make("diffcontrol/<Name>-v0") for every registered task
+wrappers.register()  # gymnasium.make("diffcontrol/PendulumFriction-v0", g=..., friction=...)
 
 
 def load(run_dir: str | _os.PathLike) -> NumpyPolicy:
@@ -70,8 +75,10 @@ __all__ = [
     "AimingPolicy",
     "ConfigError",
     "ContinuousTask",
+    "DataFileError",
     "DiffcontrolError",
     "EvalResult",
+    "InsufficientDataError",
     "MLPController",
     "ModelFileError",
     "NumpyPolicy",
@@ -84,18 +91,23 @@ __all__ = [
     "TrainResult",
     "Trajectory",
     "TrainingDiverged",
+    "TrajectoryData",
     "UnknownTaskError",
     "controllers",
+    "data",
     "envs",
     "evaluate",
     "evaluate_aiming",
     "list_tasks",
     "load",
     "make",
+    "read_trajectories",
+    "record",
     "register",
     "resolve_config",
     "rollout",
     "systems",
     "tasks",
     "train",
+    "wrappers",
 ]

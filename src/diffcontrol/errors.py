@@ -37,3 +37,11 @@ class TrainingDiverged(DiffcontrolError):
 
 class SolverFailed(TrainingDiverged):
     """Every population member's ODE solve failed (or its loss became non-finite)."""
+
+
+class DataFileError(DiffcontrolError):
+    """A trajectory data file (CSV or NPZ) that is missing, malformed or inconsistent."""
+
+
+class InsufficientDataError(DiffcontrolError):
+    """Too little recorded data for the model asked for (the message says how much is needed)."""

@@ -1,7 +1,8 @@
 """The ``diffcontrol`` command line. It sits on top of everything; nothing imports it.
 
 One module a group of commands: ``_train`` (train), ``_runs`` (list, evaluate, animate, aim),
-``_compare`` (compare); ``_args`` holds the argument types and the one-line-error parser.
+``_compare`` (compare), ``_data`` (record), ``_fit`` (fit); ``_args`` holds the argument types
+and the one-line-error parser.
 """
 
 from __future__ import annotations
@@ -10,7 +11,7 @@ import argparse
 import sys
 
 from ..errors import DiffcontrolError
-from . import _compare, _runs, _train
+from . import _compare, _data, _fit, _runs, _train
 from ._args import EXIT_USAGE, Parser
 
 
@@ -28,6 +29,8 @@ def build_parser() -> argparse.ArgumentParser:
     _runs.add_parsers(sub)
     _train.add_parser(sub)
     _compare.add_parser(sub)
+    _data.add_parser(sub)
+    _fit.add_parser(sub)
     return parser
 
 
@@ -38,6 +41,8 @@ COMMANDS = {
     "animate": _runs.cmd_animate,
     "aim": _runs.cmd_aim,
     "compare": _compare.cmd_compare,
+    "record": _data.cmd_record,
+    "fit": _fit.cmd_fit,
 }
 
 

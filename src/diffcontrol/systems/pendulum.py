@@ -6,8 +6,15 @@ pendulum.PendulumEnv.step``:
 
     u        = clip(u, -max_torque, max_torque)
     cost     = wrap(theta)^2 + 0.1 theta_dot^2 + 0.001 u^2          (on the pre-step state)
-    theta_dot' = clip(theta_dot + (3 g / (2 l) sin theta + 3 / (m l^2) u) dt, -max_speed, max_speed)
+    theta_dot' = clip(theta_dot + (3 g / (2 l) sin theta + 3 / (m l^2) (u - b theta_dot)) dt,
+                      -max_speed, max_speed)
     theta'   = theta + theta_dot' dt
+
+``b = friction`` is viscous joint friction (N m s/rad), which Gymnasium's ``Pendulum-v1`` does not
+have: a torque ``-b theta_dot`` (on the pre-step speed) added to the applied torque **after** the
+torque clip, so the motor's limit does not limit the friction. With ``b = 0`` (the default) the
+step is Gymnasium's, operation for operation. ``diffcontrol.wrappers.PendulumFriction`` adds the
+same friction to Gymnasium's own environment (the "real system" of the fitting demonstration).
 
 Where the derivative is non-smooth:
 
@@ -49,6 +56,9 @@ class PendulumParams(eqx.Module):
     """Angular speed clip (rad/s)."""
     max_torque: Float[Array, ""] | float = 2.0
     """Torque clip (N m). ``jnp.inf`` gives the unclipped variant of the 2019 original."""
+    friction: Float[Array, ""] | float = 0.0
+    """Viscous joint friction (N m s/rad): the torque ``-friction * theta_dot`` is added to the
+    applied torque after the torque clip. 0 (Gymnasium's ``Pendulum-v1``) by default."""
 
 
 def angle_normalize(theta: Array) -> Array:
@@ -78,9 +88,13 @@ def cost(params: PendulumParams, state: Float[Array, 2], torque: Float[Array, ""
 def step(
     params: PendulumParams, state: Float[Array, 2], torque: Float[Array, ""]
 ) -> Float[Array, 2]:
-    """One Gymnasium step (semi-implicit Euler with the speed clip); returns the next state."""
+    """One Gymnasium step (semi-implicit Euler with the speed clip); returns the next state.
+
+    The joint friction ``-friction * theta_dot`` is added to the clipped torque (module
+    docstring); with ``friction = 0`` the result is Gymnasium's to the last bit.
+    """
     theta, theta_dot = state[0], state[1]
-    u = clip_torque(params, torque)
+    u = clip_torque(params, torque) - params.friction * theta_dot
     accel = 3 * params.g / (2 * params.l) * jnp.sin(theta) + 3.0 / (params.m * params.l**2) * u
     new_theta_dot = jnp.clip(theta_dot + accel * params.dt, -params.max_speed, params.max_speed)
     new_theta = theta + new_theta_dot * params.dt

@@ -118,6 +118,15 @@ class Task(_TaskBase):
     def step_loss(self, name: str) -> StepLoss:
         """The built-in training loss ``name`` (one of ``losses``) of one step."""
 
+    def state_from_observation(self, observation: Array) -> Array:
+        """The state that ``observe`` maps to ``observation`` (the inverse of ``observe``), so
+        that a model can be fitted to recorded observations (``diffcontrol.fitting``).
+
+        Raises:
+            NotImplementedError: the task cannot reconstruct its state (the default).
+        """
+        raise NotImplementedError(f"task {self.name!r} cannot reconstruct a state")
+
     # --- configuration and the outside world ------------------------------------------------
 
     @abc.abstractmethod

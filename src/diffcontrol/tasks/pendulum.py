@@ -51,6 +51,12 @@ class Pendulum(Task):
     def observe(self, state):
         return pend.observe(state)
 
+    def state_from_observation(self, observation):
+        # theta = atan2(sin, cos) in [-pi, pi]: the observation cannot tell theta from
+        # theta + 2 pi, and nothing downstream (dynamics, observation) can either.
+        cos_theta, sin_theta, theta_dot = observation[0], observation[1], observation[2]
+        return jnp.stack([jnp.arctan2(sin_theta, cos_theta), theta_dot])
+
     def step_loss(self, name: str) -> StepLoss:
         if name == "cost":
             return lambda params, state, action, next_state, reward: -reward

@@ -1,0 +1,87 @@
+"""``prediction.png``: a fitted and the nominal model's predictions against recorded episodes."""
+
+from __future__ import annotations
+
+import io as _io
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+import jax  # noqa: E402
+import jax.numpy as jnp  # noqa: E402
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from .data import TrajectoryData  # noqa: E402
+from .fitting import predict  # noqa: E402
+from .io import write_bytes  # noqa: E402
+
+
+def _segments(task: Any, params: Any, obs: np.ndarray, actions: np.ndarray, every: int):
+    """Open-loop predictions restarted from the recorded observation every ``every`` steps:
+    a list of (first step, predicted observations [<= every + 1, k]) pieces."""
+    out = []
+    with jax.enable_x64(True):
+        params = jax.tree.map(lambda x: jnp.asarray(x, jnp.float64), params)
+        for t in range(0, len(actions), every):
+            state = task.state_from_observation(jnp.asarray(obs[t]))
+            pred = np.asarray(predict(task, params, state, jnp.asarray(actions[t : t + every])))
+            out.append((t, np.concatenate([obs[t : t + 1], pred])))
+    return out
+
+
+def prediction_plot(
+    task: Any,
+    models: dict[str, Any],
+    data: TrajectoryData,
+    path: str | Path,
+    every: int = 50,
+    episodes: int = 2,
+    title: str = "",
+) -> Path:
+    """Plot each observation of the first ``episodes`` episodes of ``data`` (grey) against the
+    open-loop predictions of every model in ``models`` (label -> parameters), restarted from
+    the recorded state every ``every`` steps with the recorded actions; write a PNG atomically.
+    """
+    eps = list(data.episodes())[:episodes]
+    names = list(data.observation_columns)
+    fig, axes = plt.subplots(
+        len(names), len(eps), figsize=(5.5 * len(eps), 2.2 * len(names)), squeeze=False
+    )
+    dt = data.metadata.get("dt_s") or 1.0
+    for j, ep in enumerate(eps):
+        t_axis = np.arange(len(ep.observations)) * dt
+        pieces = {
+            label: _segments(task, p, ep.observations, ep.actions, every)
+            for label, p in models.items()
+        }
+        for i, name in enumerate(names):
+            ax = axes[i, j]
+            ax.plot(t_axis, ep.observations[:, i], color="0.55", lw=3.0, label="recorded")
+            for c, (label, segs) in enumerate(pieces.items()):
+                for s, (t0, pred) in enumerate(segs):
+                    ax.plot(
+                        t_axis[t0 : t0 + len(pred)],
+                        pred[:, i],
+                        color=f"C{c}",
+                        ls="--" if c else "-",
+                        lw=1.0,
+                        label=label if s == 0 else None,
+                    )
+            ax.set_ylabel(name)
+            if i == 0:
+                ax.set_title(f"episode {ep.id}")
+        axes[-1, j].set_xlabel("time (s)" if data.metadata.get("dt_s") else "step")
+    axes[0, 0].legend(loc="best", fontsize=8)
+    fig.suptitle(
+        title or f"open-loop predictions, restarted from the recorded state every {every} steps",
+        fontsize=9,
+    )
+    fig.tight_layout()
+    buf = _io.BytesIO()
+    fig.savefig(buf, format="png", dpi=100)
+    plt.close(fig)
+    write_bytes(path, buf.getvalue())
+    return Path(path)

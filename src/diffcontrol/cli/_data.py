@@ -1,0 +1,124 @@
+"""``diffcontrol record``: record trajectories from a Gymnasium environment to CSV or NPZ."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+from pathlib import Path
+from typing import Any
+
+from ..errors import DataFileError
+from ._args import param, positive_int
+
+
+def add_parser(sub: Any) -> None:
+    p = sub.add_parser(
+        "record",
+        help="record trajectories from a Gymnasium environment (CSV or NPZ)",
+        description=(
+            "Record N episodes of the Gymnasium environment ENV_ID (e.g. Pendulum-v1, "
+            "CartPole-v1, diffcontrol/Pendulum-v0) with the controller saved in DIR, or with "
+            "random actions, and write them as a diffcontrol-trajectories file: CSV or NPZ by "
+            "the extension of FILE. Episode i is reset with seed S+i. Each row is a time step "
+            "(time, episode, observations, the action applied); the last row of an episode "
+            "holds the final observation and no action."
+        ),
+    )
+    p.add_argument("env_id", metavar="ENV_ID", help="a registered Gymnasium environment id")
+    p.add_argument("--episodes", type=positive_int, required=True, metavar="N", help="episodes")
+    p.add_argument(
+        "--controller",
+        metavar="DIR",
+        default=None,
+        help="a run directory (or model.json) written by `diffcontrol train`; "
+        "random actions if omitted",
+    )
+    p.add_argument(
+        "--seed",
+        type=int,
+        default=0,
+        metavar="S",
+        help="first reset seed, and the seed of the random actions (default 0)",
+    )
+    p.add_argument(
+        "--env-arg",
+        type=param,
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="a numeric keyword argument of gymnasium.make, e.g. g=9.0 for Pendulum-v1 "
+        "(repeatable)",
+    )
+    p.add_argument(
+        "--max-steps",
+        type=positive_int,
+        default=None,
+        metavar="N",
+        help="cut episodes after N steps (default: the environment's own limit)",
+    )
+    p.add_argument(
+        "--out",
+        metavar="FILE",
+        default=None,
+        help="a .csv or .npz file (default: ENV_ID with / as -, .csv, in this directory)",
+    )
+    p.add_argument("--force", action="store_true", help="overwrite FILE if it exists")
+    p.add_argument("--quiet", action="store_true", help="print only the final summary")
+
+
+def _check_out(out: Path, force: bool) -> None:
+    """Refuse, before recording anything, an output the recording could not be written to."""
+    if out.is_dir():
+        raise DataFileError(f"--out {out} is a directory; give a file name ending in .csv/.npz")
+    if out.suffix.lower() not in (".csv", ".npz"):
+        raise DataFileError(
+            f"--out {out}: unknown file type {out.suffix or '(none)'!r}; use a .csv or .npz file"
+        )
+    if out.exists() and not force:
+        raise DataFileError(
+            f"--out {out} already exists; pass --force to overwrite it or choose another --out"
+        )
+    parent = out.parent if str(out.parent) else Path(".")
+    if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK):
+        raise DataFileError(
+            f"cannot write --out {out}: {parent} is not a writable directory; choose a "
+            "writable --out"
+        )
+
+
+def cmd_record(args: argparse.Namespace) -> int:
+    from ..data import write_trajectories
+    from ..io import NumpyPolicy, read_model
+    from ..recording import record
+
+    out = Path(args.out or args.env_id.replace("/", "-") + ".csv")
+    _check_out(out, args.force)
+    # The network alone (observations -> Gymnasium action), whatever the task's kind.
+    policy = NumpyPolicy(read_model(args.controller)) if args.controller else None
+    say = (lambda line: None) if args.quiet else print
+    what = f"controller {args.controller}" if policy else "random actions"
+    say(f"recording {args.episodes} episode(s) of {args.env_id} with {what}")
+    t0 = time.perf_counter()
+    data = record(
+        args.env_id,
+        args.episodes,
+        policy=policy,
+        seed=args.seed,
+        env_kwargs=dict(args.env_arg),
+        max_steps=args.max_steps,
+        progress=say,
+        source=f"controller {args.controller} (task {policy.task!r})" if policy else None,
+    )
+    try:
+        write_trajectories(out, data)
+    except OSError as e:
+        raise DataFileError(
+            f"cannot write --out {out} ({e.strerror}); choose a writable --out"
+        ) from None
+    print(
+        f"wrote {out}: {data.num_episodes} episode(s), {data.num_steps} steps, "
+        f"{len(data.observation_columns)} observation and {len(data.action_columns)} action "
+        f"column(s) ({time.perf_counter() - t0:.1f} s)"
+    )
+    return 0

@@ -1,0 +1,177 @@
+"""Trajectory files: CSV and NPZ writers (atomic) and validating readers."""
+
+from __future__ import annotations
+
+import csv
+import io as _io
+import json
+import math
+import os
+import zipfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import DataFileError
+from ..io import _finite, write_bytes
+from ._format import FORMAT, VERSION, parse_column, validate
+from ._table import TrajectoryData
+
+
+def _header(data: TrajectoryData) -> dict:
+    return {"format": FORMAT, "version": VERSION, "metadata": _finite(data.metadata)}
+
+
+def _number(x: float) -> str:
+    return "" if math.isnan(x) else repr(x)
+
+
+def write_csv(path: str | os.PathLike, data: TrajectoryData) -> None:
+    """Write ``data`` as a CSV file (atomically; see the module docstring for the format)."""
+    out = _io.StringIO()
+    out.write("# " + json.dumps(_header(data), allow_nan=False) + "\n")
+    writer = csv.writer(out, lineterminator="\n")
+    writer.writerow(data.columns)
+    values = np.concatenate([data.observations, data.actions], axis=1).tolist()
+    for t, e, v in zip(data.time.tolist(), data.episode.tolist(), values):
+        writer.writerow([_number(t), e, *map(_number, v)])
+    write_bytes(path, out.getvalue().encode())
+
+
+def write_npz(path: str | os.PathLike, data: TrajectoryData) -> None:
+    """Write ``data`` as an ``.npz`` of plain arrays and a JSON header (atomically)."""
+    header = {**_header(data), "columns": list(data.columns)}
+    buf = _io.BytesIO()
+    np.savez(
+        buf,
+        time=data.time,
+        episode=data.episode,
+        observations=data.observations,
+        actions=data.actions,
+        header=np.frombuffer(json.dumps(header, allow_nan=False).encode(), dtype=np.uint8),
+    )
+    write_bytes(path, buf.getvalue())
+
+
+def write_trajectories(path: str | os.PathLike, data: TrajectoryData) -> None:
+    """Write ``data`` as CSV or NPZ, by the extension of ``path`` (``.csv``, ``.npz``)."""
+    {".csv": write_csv, ".npz": write_npz}[_suffix(path)](path, data)
+
+
+def _suffix(path: str | os.PathLike) -> str:
+    suffix = Path(path).suffix.lower()
+    if suffix not in (".csv", ".npz"):
+        raise DataFileError(
+            f"{path}: unknown trajectory file type {suffix or '(none)'!r}; use a .csv or .npz file"
+        )
+    return suffix
+
+
+def _check_header(header: Any, path: Path) -> dict:
+    line = f'{{"format": "{FORMAT}", "version": {VERSION}}}'
+    if not isinstance(header, dict) or header.get("format") != FORMAT:
+        raise DataFileError(f"{path}: not a {FORMAT} file (its header must be {line})")
+    if header.get("version") != VERSION:
+        raise DataFileError(
+            f"{path}: format version {header.get('version')!r} is not supported (this "
+            f"diffcontrol reads version {VERSION}); write it again with this diffcontrol"
+        )
+    meta = header.get("metadata", {})
+    if not isinstance(meta, dict):
+        raise DataFileError(f"{path}: 'metadata' in the header must be a JSON object")
+    return meta
+
+
+def read_trajectories(path: str | os.PathLike) -> TrajectoryData:
+    """Read and validate a trajectory file, CSV or NPZ by its extension.
+
+    Raises:
+        DataFileError: the file is missing, empty, of an unknown type or version, or breaks
+            a rule of the format; the message names the file, the line or row, the column
+            and the fix.
+    """
+    path = Path(path)
+    suffix = _suffix(path)
+    if not path.is_file():
+        raise DataFileError(f"{path} does not exist (or is not a file); check the path")
+    if path.stat().st_size == 0:
+        raise DataFileError(f"{path} is empty; record it again (`diffcontrol record`)")
+    return _read_csv(path) if suffix == ".csv" else _read_npz(path)
+
+
+def _read_csv(path: Path) -> TrajectoryData:
+    try:
+        lines = path.read_text(encoding="utf-8-sig").splitlines()  # -sig: a spreadsheet's BOM
+    except UnicodeDecodeError:
+        raise DataFileError(f"{path} is not a text file; is it an .npz named .csv?") from None
+    first = lines[0]
+    try:
+        header = json.loads(first[1:]) if first.startswith("#") else None
+    except json.JSONDecodeError as e:
+        raise DataFileError(f"{path}, line 1: the header is not valid JSON ({e})") from None
+    if header is None:
+        raise DataFileError(
+            f"{path}, line 1: no header; the first line must be "
+            f'# {{"format": "{FORMAT}", "version": {VERSION}, "metadata": {{...}}}}'
+        )
+    meta = _check_header(header, path)
+    body = [(n, row) for n, row in enumerate(csv.reader(lines[1:]), start=2) if row]
+    if not body:
+        raise DataFileError(f"{path}: no column names after the header line; see the format")
+    columns = [c.strip() for c in body[0][1]]
+    n_cols, rows = len(columns), body[1:]
+    if not rows:
+        raise DataFileError(f"{path} holds no rows; record at least one episode")
+    table = np.empty((len(rows), n_cols))
+    for i, (line, cells) in enumerate(rows):
+        if len(cells) != n_cols:
+            raise DataFileError(
+                f"{path}, line {line}: {len(cells)} cells but {n_cols} columns; every row "
+                "needs one cell per column (an empty cell for a missing action)"
+            )
+        for j, cell in enumerate(cells):
+            try:
+                table[i, j] = float(cell) if cell.strip() else np.nan
+            except ValueError:
+                raise DataFileError(
+                    f"{path}, line {line}, column {columns[j]!r}: {cell!r} is not a number"
+                ) from None
+    lines_of = [line for line, _ in rows]
+    episode = table[:, 1] if n_cols > 1 else np.zeros(0)
+    k = sum(parse_column(c)[0] in ("obs", "state") for c in columns)
+    args = (table[:, 0], episode, table[:, 2 : 2 + k], table[:, 2 + k :], columns, meta)
+    validate(*args, where=str(path), row=lambda i: f"line {lines_of[i]}")
+    return TrajectoryData(*args[:4], columns=tuple(columns), metadata=meta)
+
+
+_NPZ_ARRAYS = ("time", "episode", "observations", "actions", "header")
+
+
+def _read_npz(path: Path) -> TrajectoryData:
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            missing = [name for name in _NPZ_ARRAYS if name not in npz.files]
+            if missing:
+                raise DataFileError(
+                    f"{path}: missing array(s) {missing}; a trajectory .npz holds "
+                    f"{list(_NPZ_ARRAYS)} (write it with diffcontrol.data.write_npz)"
+                )
+            arrays = {name: npz[name] for name in _NPZ_ARRAYS}
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as e:
+        raise DataFileError(f"{path} is not a readable .npz ({e}); write it again") from None
+    try:
+        header = json.loads(arrays.pop("header").tobytes().decode())
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise DataFileError(f"{path}: the header array is not JSON ({e}); write it again") from None
+    meta = _check_header(header, path)
+    columns = header.get("columns")
+    if not isinstance(columns, list) or not all(isinstance(c, str) for c in columns):
+        raise DataFileError(f"{path}: the header has no list of column names under 'columns'")
+    for name, arr in arrays.items():
+        if arr.dtype.kind not in "iuf":
+            raise DataFileError(
+                f"{path}: array {name!r} has dtype {arr.dtype}; it must hold real numbers"
+            )
+    validate(*arrays.values(), columns, meta, where=str(path))
+    return TrajectoryData(**arrays, columns=tuple(columns), metadata=meta)

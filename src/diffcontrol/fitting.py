@@ -1,0 +1,372 @@
+"""Grey-box fitting: a task's physical parameters from recorded trajectories.
+
+The model is the task's own simulator (``task.step``) with some of its parameters unknown.
+They are fitted by differentiating the simulator through **short windows** (multiple
+shooting): from every recorded observation ``y_t`` of an episode (turned into a state by
+``task.state_from_observation``; for the Pendulum ``theta = atan2(sin, cos)``), the model is
+stepped ``window`` times with the recorded actions ``u_t .. u_{t+window-1}``, and the loss is
+the mean squared difference between the predicted and the recorded observations
+``y_{t+1} .. y_{t+window}``, over every start of every episode. Short windows keep the
+gradient informative where a long open-loop rollout of a chaotic system would not.
+
+The optimiser is Adam (optax) on unconstrained coordinates ``z`` (``value = exp(z)`` for a
+parameter whose nominal value is positive, so it stays positive; ``value = z`` for one whose
+nominal value is 0, such as the Pendulum's ``friction``), then ``lm_steps`` Levenberg-Marquardt
+steps (optimistix) on the residuals. Everything runs in float64.
+
+**Uncertainty** from the curvature at the fit (Gauss-Newton): with ``r`` the ``R`` residuals and
+``J = dr/dθ`` their Jacobian with respect to the ``p`` physical parameters,
+``cov = sigma^2 (J^T J)^-1`` with ``sigma^2 = r^T r / (R - p)``, and the standard errors are
+``sqrt(diag(cov))``. The overlapping windows reuse every recorded point up to ``window`` times
+and carry the noise of their start state through the whole window, so the residuals are not
+independent and this textbook formula is too narrow; the covariance is therefore multiplied by
+``window`` (each recorded point counted once). Checked against an episode-clustered sandwich
+estimate on 8 noisy Pendulum data sets: the two agree within a factor of 2, and the truth lies
+within 1.5 of these standard errors in every one (``benchmarks/fit_pendulum.py``: within 1.2).
+The standard errors do not include the small bias that sensor noise in the start states
+causes (errors in variables): about +0.04 % on g and +0.4 % on the friction in that benchmark.
+Parameters that the data cannot tell apart give a singular ``J^T J`` and the standard error
+``inf`` (for the Pendulum, g, m and l enter only as ``g / l`` and ``1 / (m l^2)``: fit at most
+two of them).
+
+**Divergence** is reported, not hidden: the best parameters seen so far are kept, a
+non-finite loss stops the fit with ``diverged=True`` and a message, and no NaN is returned.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+import optimistix as optx
+
+from .data import KNOWN_COLUMNS, TrajectoryData, parse_column
+from .errors import ConfigError, DataFileError, InsufficientDataError
+from .tasks._base import Task
+
+MIN_TRANSITIONS_PER_PARAMETER = 50
+"""The fewest recorded transitions ``(y_t, u_t, y_{t+1})`` per fitted parameter."""
+
+HORIZONS = (1, 10, 50)
+"""The prediction horizons (steps) of the held-out errors."""
+
+
+@dataclasses.dataclass(frozen=True)
+class FitResult:
+    """The outcome of ``fit_parameters``.
+
+    Attributes:
+        params: the task's full parameter PyTree with the fitted values.
+        names: the fitted parameters' names.
+        values, nominal, standard_errors: per name, in the parameter's unit (the standard
+            error is ``inf`` where the data cannot determine the parameter).
+        loss: the mean squared window prediction error at the fit; ``nominal_loss`` at the
+            nominal parameters (in the observations' units squared).
+        loss_history: the loss before each Adam step taken, then (with ``lm_steps``) one
+            entry after the Levenberg-Marquardt refinement (NaN if that diverged).
+        diverged: a step gave a non-finite loss; ``params`` are then the best seen before it.
+        message: one line on how the fit ended.
+        window, windows, transitions: the window length (steps), how many windows and how
+            many recorded transitions the fit used.
+    """
+
+    params: Any
+    names: tuple[str, ...]
+    values: dict[str, float]
+    nominal: dict[str, float]
+    standard_errors: dict[str, float]
+    loss: float
+    nominal_loss: float
+    loss_history: np.ndarray
+    diverged: bool
+    message: str
+    window: int
+    windows: int
+    transitions: int
+
+
+def parameter_names(task: Any) -> tuple[str, ...]:
+    """The names of the task's physical parameters (the fields of ``task.default_params()``)."""
+    return tuple(f.name for f in dataclasses.fields(task.default_params()))
+
+
+def check_data(task: Any, data: TrajectoryData) -> None:
+    """Refuse data that is not from the task's system: other columns (names or units), another
+    time step, or a task that cannot reconstruct states from observations.
+
+    Raises:
+        DataFileError: the data's columns or time step do not fit the task (naming both).
+        ConfigError: the task cannot be fitted to recorded observations.
+    """
+    where = data.metadata.get("env_id") or "the data"
+    expected = KNOWN_COLUMNS.get(task.gym_id or "")
+    if expected is None or type(task).state_from_observation is Task.state_from_observation:
+        raise ConfigError(
+            f"task {task.name!r} cannot be fitted to recorded data yet (it does not reconstruct "
+            "its state from observations); fit the pendulum"
+        )
+    want = [parse_column(c) for c in (*expected[0], *expected[1])]
+    got = [parse_column(c) for c in (*data.observation_columns, *data.action_columns)]
+    if got != want:
+        raise DataFileError(
+            f"{where} has the columns {list(data.columns[2:])}, but task {task.name!r} "
+            f"({task.gym_id}) needs {[*expected[0], *expected[1]]}; record the task's system "
+            f"(`diffcontrol record {task.gym_id}`) or fit the task the data is from"
+        )
+    dt = data.metadata.get("dt_s")
+    model_dt = getattr(task.default_params(), "dt", None)
+    if isinstance(dt, int | float) and model_dt is not None and not math.isclose(dt, model_dt):
+        raise DataFileError(
+            f"{where} was recorded every {dt} s but task {task.name!r} steps {model_dt} s; "
+            "record at the task's time step"
+        )
+
+
+def _windows(task, data: TrajectoryData, window: int):
+    """Every start of every episode with ``window`` recorded steps after it: the start
+    states [N, n], actions [N, window, m] and recorded observations [N, window, k]."""
+    starts, actions, targets = [], [], []
+    for ep in data.episodes():
+        n = len(ep.actions)
+        for t in range(n - window + 1):
+            starts.append(ep.observations[t])
+            actions.append(ep.actions[t : t + window])
+            targets.append(ep.observations[t + 1 : t + window + 1])
+    if not starts:
+        return None
+    obs0 = jnp.asarray(np.stack(starts))
+    states = jax.vmap(task.state_from_observation)(obs0)
+    return states, jnp.asarray(np.stack(actions)), jnp.asarray(np.stack(targets))
+
+
+def predict(task: Any, params: Any, state: jax.Array, actions: jax.Array) -> jax.Array:
+    """Open-loop prediction: the observations [len(actions), k] after each of ``actions``
+    [T, m], stepping the task's simulator with ``params`` from ``state``."""
+
+    def body(s, a):
+        s_next = task.step(params, s, a)[0]
+        return s_next, task.observe(s_next)
+
+    return jax.lax.scan(body, state, actions)[1]
+
+
+def _set(params: Any, names: Sequence[str], values: jax.Array) -> Any:
+    """``params`` with the fields ``names`` replaced by ``values`` [len(names)]."""
+    return eqx.tree_at(
+        lambda p: tuple(getattr(p, n) for n in names),
+        params,
+        tuple(values[i] for i in range(len(names))),
+    )
+
+
+def fit_parameters(
+    task: Any,
+    data: TrajectoryData,
+    names: Sequence[str] = ("g", "friction"),
+    *,
+    window: int = 10,
+    steps: int = 300,
+    learning_rate: float = 0.02,
+    lm_steps: int = 20,
+    init: dict[str, float] | None = None,
+) -> FitResult:
+    """Fit the parameters ``names`` of ``task`` to the recorded ``data`` (module docstring).
+
+    Args:
+        task: a discrete-time task whose ``state_from_observation`` is implemented.
+        data: recorded episodes of the task's system (its observation and action columns).
+        names: the parameters to fit, fields of ``task.default_params()``; the others keep
+            their nominal values.
+        window: steps predicted from every recorded state (>= 1).
+        steps: Adam steps (>= 0) at ``learning_rate`` (in the unconstrained coordinates:
+            0.02 is about 2 % of a positive parameter's value per step).
+        lm_steps: Levenberg-Marquardt steps after Adam (0: none); kept only if they lower the
+            loss.
+        init: starting values by name (default: the nominal ones).
+
+    Returns:
+        A ``FitResult``: fitted parameters with standard errors, the loss history, whether the
+        fit diverged.
+
+    Raises:
+        ConfigError: an unknown or repeated name (the message lists the task's parameters), a
+            bad ``window``/``steps``/``learning_rate``, or a task that cannot be fitted.
+        DataFileError: data from another system (columns or time step).
+        InsufficientDataError: fewer than ``MIN_TRANSITIONS_PER_PARAMETER`` transitions per
+            fitted parameter, or no episode longer than ``window``.
+    """
+    names = tuple(names)
+    known = parameter_names(task)
+    bad = [n for n in names if n not in known]
+    if bad or not names or len(set(names)) != len(names):
+        what = f"unknown parameter(s) {bad}" if bad else f"parameter names {list(names)}"
+        raise ConfigError(
+            f"{what} for task {task.name!r}; choose distinct names among {list(known)}"
+        )
+    if not isinstance(window, int) or window < 1:
+        raise ConfigError(f"window must be a positive number of steps, got {window!r}")
+    if not isinstance(steps, int) or steps < 0 or not isinstance(lm_steps, int) or lm_steps < 0:
+        raise ConfigError(f"steps and lm_steps must be integers >= 0, got {steps!r}, {lm_steps!r}")
+    if not (math.isfinite(learning_rate) and learning_rate > 0):
+        raise ConfigError(f"learning_rate must be a positive number, got {learning_rate!r}")
+    check_data(task, data)
+    need = MIN_TRANSITIONS_PER_PARAMETER * len(names)
+    if data.num_steps < need:
+        raise InsufficientDataError(
+            f"{data.num_steps} recorded transitions are too few to fit {len(names)} "
+            f"parameter(s) {list(names)}: at least {need} are needed "
+            f"({MIN_TRANSITIONS_PER_PARAMETER} per parameter); record more episodes"
+        )
+    with jax.enable_x64(True):
+        return _fit(task, data, names, window, steps, learning_rate, lm_steps, init or {})
+
+
+def _fit(task, data, names, window, steps, learning_rate, lm_steps, init) -> FitResult:
+    nominal_params = jax.tree.map(lambda x: jnp.asarray(x, jnp.float64), task.default_params())
+    nominal = {n: float(getattr(nominal_params, n)) for n in names}
+    batch = _windows(task, data, window)
+    if batch is None:
+        longest = max(len(e.actions) for e in data.episodes())
+        raise InsufficientDataError(
+            f"no episode has {window} steps to predict (the longest has {longest}); "
+            f"choose a window of at most {longest} steps or record longer episodes"
+        )
+    positive = jnp.array([nominal[n] > 0 for n in names])
+    start = jnp.array([float(init.get(n, nominal[n])) for n in names])
+    if bool(jnp.any(positive & (start <= 0))):
+        raise ConfigError(f"initial values {dict(zip(names, start.tolist()))} must be positive")
+
+    def to_values(z):
+        return jnp.where(positive, jnp.exp(z), z)
+
+    def to_z(values):
+        return jnp.where(positive, jnp.log(jnp.where(positive, values, 1.0)), values)
+
+    def residuals(values, batch):
+        states, actions, targets = batch
+        params = _set(nominal_params, names, values)
+        pred = jax.vmap(predict, in_axes=(None, None, 0, 0))(task, params, states, actions)
+        return (pred - targets).reshape(-1)
+
+    def loss(z, batch):
+        return jnp.mean(residuals(to_values(z), batch) ** 2)
+
+    optimiser = optax.adam(learning_rate)
+
+    @jax.jit
+    def adam_step(z, opt_state, batch):
+        value, grad = jax.value_and_grad(loss)(z, batch)
+        updates, opt_state = optimiser.update(grad, opt_state)
+        return optax.apply_updates(z, updates), opt_state, value
+
+    z = to_z(start)
+    opt_state = optimiser.init(z)
+    nominal_loss = float(loss(to_z(jnp.array([nominal[n] for n in names])), batch))
+    best_z, best_loss, history, diverged, message = z, math.inf, [], False, ""
+    for i in range(steps):
+        new_z, opt_state, value = adam_step(z, opt_state, batch)
+        value = float(value)  # the loss at z, before this step
+        history.append(value)
+        if not (math.isfinite(value) and bool(jnp.all(jnp.isfinite(new_z)))):
+            diverged = True
+            message = f"Adam step {i + 1} gave a non-finite loss; kept the best parameters so far"
+            break
+        if value < best_loss:
+            best_z, best_loss = z, value
+        z = new_z
+    else:
+        final = float(loss(z, batch))
+        if math.isfinite(final) and final < best_loss:
+            best_z, best_loss = z, final
+    if not math.isfinite(best_loss):  # no step at all, or the very first diverged
+        best_loss = float(loss(best_z, batch))
+    if lm_steps and not diverged:
+        solution = optx.least_squares(
+            lambda z, b: residuals(to_values(z), b),
+            optx.LevenbergMarquardt(rtol=1e-10, atol=1e-12),
+            best_z,
+            args=batch,
+            max_steps=lm_steps,
+            throw=False,
+        )
+        lm_loss = float(loss(solution.value, batch))
+        if math.isfinite(lm_loss) and lm_loss < best_loss:
+            best_z, best_loss = solution.value, lm_loss
+        elif not math.isfinite(lm_loss):
+            message = "the Levenberg-Marquardt refinement diverged; kept the Adam fit"
+        history.append(lm_loss if math.isfinite(lm_loss) else math.nan)
+    values = to_values(best_z)
+    # * sqrt(window): the overlapping windows count each recorded point `window` times
+    errors = _standard_errors(lambda v: residuals(v, batch), values) * math.sqrt(window)
+    fitted = _set(nominal_params, names, values)
+    if not message:
+        message = (
+            f"mean squared window error {best_loss:.3g} (nominal parameters: {nominal_loss:.3g})"
+        )
+    return FitResult(
+        params=fitted,
+        names=names,
+        values=dict(zip(names, np.asarray(values).tolist())),
+        nominal=nominal,
+        standard_errors=dict(zip(names, np.asarray(errors).tolist())),
+        loss=best_loss,
+        nominal_loss=nominal_loss,
+        loss_history=np.asarray(history, np.float64),
+        diverged=diverged,
+        message=message,
+        window=window,
+        windows=int(batch[0].shape[0]),
+        transitions=data.num_steps,
+    )
+
+
+def _standard_errors(residual_fn, values: jax.Array) -> jax.Array:
+    """``sqrt(diag(sigma^2 (J^T J)^-1))`` at ``values``; ``inf`` where ``J^T J`` is singular."""
+    r = residual_fn(values)
+    jac = jax.jacfwd(residual_fn)(values)  # [R, p]
+    dof = max(r.size - values.size, 1)
+    sigma2 = jnp.sum(r**2) / dof
+    jtj = jac.T @ jac
+    eig = jnp.linalg.eigvalsh(jtj)
+    if not bool(jnp.all(jnp.isfinite(jtj))) or float(eig[0]) <= 1e-12 * float(eig[-1]):
+        return jnp.full(values.shape, jnp.inf)
+    cov = sigma2 * jnp.linalg.inv(jtj)
+    return jnp.sqrt(jnp.clip(jnp.diag(cov), 0.0))
+
+
+def prediction_errors(
+    task: Any, params: Any, data: TrajectoryData, horizons: Sequence[int] = HORIZONS
+) -> dict[int, dict[str, Any]]:
+    """Open-loop prediction error ``horizon`` steps ahead, from every recorded state of every
+    episode with the recorded actions, against the recorded observation.
+
+    Returns:
+        Per horizon: ``rmse`` (root mean square over starts and observation columns, in the
+        observations' units), ``rmse_by_column`` (per observation column) and ``starts`` (how
+        many predictions; 0 and ``rmse`` NaN where no episode is that long).
+    """
+    out = {}
+    with jax.enable_x64(True):
+        params = jax.tree.map(lambda x: jnp.asarray(x, jnp.float64), params)
+        run = jax.jit(jax.vmap(lambda s, a: predict(task, params, s, a)[-1]))
+        columns = [parse_column(c)[1] for c in data.observation_columns]
+        for h in horizons:
+            batch = _windows(task, data, h)
+            if batch is None:
+                nan = {c: math.nan for c in columns}
+                out[h] = {"rmse": math.nan, "rmse_by_column": nan, "starts": 0}
+                continue
+            err = np.asarray(run(batch[0], batch[1]) - batch[2][:, -1])
+            out[h] = {
+                "rmse": float(np.sqrt(np.mean(err**2))),
+                "rmse_by_column": dict(zip(columns, np.sqrt(np.mean(err**2, axis=0)).tolist())),
+                "starts": int(err.shape[0]),
+            }
+    return out

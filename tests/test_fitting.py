@@ -1,0 +1,179 @@
+"""Grey-box fitting (``diffcontrol.fitting``, ``diffcontrol fit``) on a mismatched "real" pendulum.
+
+The data is recorded from Gymnasium's own ``Pendulum-v1`` with ``g = 12`` (the nominal model
+has 10) and the ``PendulumFriction`` wrapper's joint friction 0.1 N m s/rad (the nominal has
+none), with random torques in [-2, 2] N m: 10 episodes of 200 steps, the first 8 fitted, the
+last 2 held out. "Noisy" adds Gaussian sensor noise to every recorded observation: standard
+deviation 0.01 on cos(theta) and sin(theta), 0.05 rad/s on theta_dot.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+import diffcontrol
+from diffcontrol import fitting
+from diffcontrol.cli import main
+from diffcontrol.data import write_trajectories
+from diffcontrol.errors import ConfigError, DataFileError, InsufficientDataError
+from diffcontrol.wrappers import PENDULUM_FRICTION_ID
+
+TRUTH = {"g": 12.0, "friction": 0.1}
+NOISE = np.array([0.01, 0.01, 0.05])  # cos, sin (1), theta_dot (rad/s)
+FIT = dict(steps=100, lm_steps=20)
+
+
+def _record(episodes, seed=0, **kw):
+    return diffcontrol.record(PENDULUM_FRICTION_ID, episodes, seed=seed, env_kwargs=TRUTH, **kw)
+
+
+@pytest.fixture(scope="module")
+def task():
+    return diffcontrol.make("pendulum")
+
+
+@pytest.fixture(scope="module")
+def clean():
+    return _record(10).split(8)
+
+
+@pytest.fixture(scope="module")
+def noisy(clean):
+    rng = np.random.default_rng(1)
+
+    def add_noise(d):
+        obs = d.observations + rng.normal(size=d.observations.shape) * NOISE
+        return dataclasses.replace(d, observations=obs)
+
+    return tuple(add_noise(d) for d in clean)
+
+
+@pytest.fixture(scope="module")
+def clean_fit(task, clean):
+    return fitting.fit_parameters(task, clean[0], ("g", "friction"), **FIT)
+
+
+@pytest.fixture(scope="module")
+def noisy_fit(task, noisy):
+    return fitting.fit_parameters(task, noisy[0], ("g", "friction"), **FIT)
+
+
+def _relative_errors(result):
+    return {n: abs(result.values[n] - TRUTH[n]) / TRUTH[n] for n in TRUTH}
+
+
+def test_recovers_g_and_friction_from_noise_free_data(clean_fit):
+    errors = _relative_errors(clean_fit)
+    assert all(e < 0.02 for e in errors.values()), errors
+    assert not clean_fit.diverged and clean_fit.loss < 1e-3 * clean_fit.nominal_loss
+    assert all(np.isfinite(list(clean_fit.standard_errors.values())))
+    assert all(se > 0 for se in clean_fit.standard_errors.values())
+    assert np.all(np.isfinite(clean_fit.loss_history))
+
+
+def test_recovers_with_sensor_noise_and_the_errors_cover_the_truth(noisy_fit):
+    errors = _relative_errors(noisy_fit)
+    assert all(e < 0.10 for e in errors.values()), errors
+    for n, truth in TRUTH.items():
+        se = noisy_fit.standard_errors[n]
+        assert np.isfinite(se) and 0 < se < 0.02 * truth, (n, se)  # informative, not vacuous
+        assert abs(noisy_fit.values[n] - truth) < 3 * se, (n, noisy_fit.values[n], se)
+
+
+def test_fitted_model_predicts_held_out_episodes_better(task, clean, noisy, clean_fit, noisy_fit):
+    for (_, held_out), result, factor in ((clean, clean_fit, 0.01), (noisy, noisy_fit, 0.5)):
+        nominal = fitting.prediction_errors(task, task.default_params(), held_out)
+        fitted = fitting.prediction_errors(task, result.params, held_out)
+        assert set(fitted) == {1, 10, 50} and fitted[10]["starts"] == 2 * (200 - 10 + 1)
+        assert fitted[10]["rmse"] < factor * nominal[10]["rmse"], (fitted[10], nominal[10])
+        assert fitted[50]["rmse"] < nominal[50]["rmse"]
+
+
+def test_parameters_the_data_cannot_separate_get_infinite_errors(task, clean):
+    # g, m and l enter the Pendulum only as g / l and 1 / (m l^2): one direction is flat
+    result = fitting.fit_parameters(task, clean[0], ("g", "m", "l"), steps=5, lm_steps=0)
+    assert all(se == np.inf for se in result.standard_errors.values())
+    assert all(np.isfinite(v) for v in result.values.values())
+
+
+def test_divergence_is_reported_and_the_best_parameters_kept(task, clean):
+    result = fitting.fit_parameters(task, clean[0], learning_rate=1000.0, steps=5, lm_steps=0)
+    assert result.diverged and "non-finite" in result.message
+    assert all(np.isfinite(v) for v in result.values.values())
+    assert np.isfinite(result.loss) and result.loss <= result.nominal_loss
+
+
+def test_too_little_data_says_how_much_is_needed(task):
+    short = _record(1, max_steps=60)
+    with pytest.raises(InsufficientDataError, match="60 recorded transitions .* at least 100"):
+        fitting.fit_parameters(task, short, ("g", "friction"))
+    with pytest.raises(InsufficientDataError, match="no episode has 80 steps"):
+        fitting.fit_parameters(task, short, ("g",), window=80)
+
+
+def test_unknown_names_and_other_systems_are_refused(task, clean):
+    with pytest.raises(ConfigError, match=r"\['mass'\].*'max_torque', 'friction'"):
+        fitting.fit_parameters(task, clean[0], ("g", "mass"))
+    cartpole = diffcontrol.record("CartPole-v1", 2)
+    with pytest.raises(DataFileError, match="CartPole-v1 has the columns"):
+        fitting.fit_parameters(task, cartpole, ("g",))
+
+
+def test_cli_fit_end_to_end(tmp_path, capsys):
+    data = tmp_path / "real.csv"
+    write_trajectories(data, _record(3, seed=7, max_steps=100))
+    out = tmp_path / "fit"
+    args = ["fit", "pendulum", "--data", str(data), "--model", "params", "--out", str(out)]
+    tiny = ["--steps", "40", "--lm-steps", "10", "--holdout", "0.3", "--quiet"]
+    assert main([*args, *tiny]) == 0
+    doc = json.loads((out / "fitted.json").read_text())
+    assert (doc["format"], doc["version"], doc["model"]) == (
+        "diffcontrol-fitted-model",
+        1,
+        "params",
+    )
+    assert abs(doc["parameters"]["g"]["value"] - 12.0) < 0.24  # 2 %
+    assert (
+        doc["parameters"]["g"]["nominal"] == 10.0 and doc["parameters"]["g"]["standard_error"] > 0
+    )
+    assert doc["data"]["fit_episodes"] == [0, 1] and doc["data"]["held_out_episodes"] == [2]
+    errors = doc["prediction_error"]
+    assert errors["fitted"]["10"]["rmse"] < 0.01 * errors["nominal"]["10"]["rmse"]
+    assert (out / "prediction.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+    capsys.readouterr()
+    assert main([*args, *tiny]) == 2  # fitted.json exists
+    assert "pass --force" in capsys.readouterr().err
+    assert main([*args[:-4], "--model", "hybrid", "--out", str(tmp_path / "h")]) == 2
+    assert "--model hybrid is not implemented yet" in capsys.readouterr().err
+    assert main([*args, "--force", "--params", "g,wind", *tiny]) == 2
+    assert "unknown parameter(s) ['wind']" in capsys.readouterr().err
+
+
+def test_cli_fit_refuses_bad_data_in_one_line(tmp_path, capsys):
+    def fit(data, *extra):
+        argv = ["fit", "pendulum", "--data", str(data), "--model", "params"]
+        code = main([*argv, "--out", str(tmp_path / "out"), "--quiet", *extra])
+        return code, capsys.readouterr().err
+
+    code, err = fit(tmp_path / "missing.csv")
+    assert code == 2 and "missing.csv" in err and len(err.strip().splitlines()) == 1
+    broken = tmp_path / "broken.csv"
+    broken.write_text("time [s],episode\n0.0,0\n")
+    code, err = fit(broken)
+    assert code == 2 and "broken.csv" in err
+    cartpole = tmp_path / "cartpole.csv"
+    write_trajectories(cartpole, diffcontrol.record("CartPole-v1", 2))
+    code, err = fit(cartpole)
+    assert code == 2 and "CartPole-v1 has the columns" in err and "pendulum" in err
+    one = tmp_path / "one.csv"
+    write_trajectories(one, _record(1, max_steps=120))
+    code, err = fit(one)  # --holdout 0.2 of one episode
+    assert code == 2 and "leaves none to fit" in err and "--holdout 0" in err
+    code, err = fit(one, "--holdout", "0", "--params", "g,friction,m")
+    assert code == 2 and "at least 150 are needed" in err
+    assert not (tmp_path / "out").exists()  # nothing created for a refused fit
