@@ -174,3 +174,16 @@ def test_compare_help(capsys):
     for option in ("--seeds", "--rl-steps", "--updates", "--eval-every", "--resume", "--out"):
         assert option in out
     assert "leave out these evaluations" in " ".join(out.split())
+
+
+def test_compare_trebuchet_rl_in_the_diffcontrol_environment(tmp_path):
+    pytest.importorskip("stable_baselines3")
+    out = tmp_path / "t"
+    args = ["compare", "trebuchet", "--out", str(out), "--methods", "sac,td3"]
+    assert main([*args, "--rl-steps", "40", "--eval-every", "20", *TINY]) == 0
+    doc = json.loads((out / "comparison.json").read_text())
+    assert doc["eval_env"] == "diffcontrol/Trebuchet-v0" and doc["thresholds"] == [-2.0, -1.0]
+    for run in doc["runs"]:
+        assert [p["env_steps"] for p in run["curve"]] == [20, 40]
+        assert run["episodes"] == run["env_steps"]  # one throw per episode
+        assert all(r <= 0 for r in run["final"]["returns"])  # minus the miss in metres

@@ -59,7 +59,12 @@ def _rollout_side_by_side(name: str, steps: int, seed: int) -> int:
     env = gymnasium.make(IDS[name])
     base = env.unwrapped
     obs, _ = env.reset(seed=seed)
+    env.action_space.seed(seed)
     rng = np.random.default_rng(seed)
+    # Same function, compiled differently (under jit with constant parameters), so float32
+    # rounding differs. A throw is hundreds of float32 Euler steps with located events, where
+    # it grows: measured at most 1.1e-3 relative (1 cm) over 300 random throws.
+    rtol, atol = (2e-3, 2e-2) if name == "trebuchet" else (1e-5, 1e-5)
     params = base.params
     n = 0
     for _ in range(steps):
@@ -71,12 +76,10 @@ def _rollout_side_by_side(name: str, steps: int, seed: int) -> int:
         )
         obs, reward, terminated, truncated, _ = env.step(action)
         n += 1
-        # Same function, compiled differently (under jit with constant parameters): float32
-        # rounding may differ in the last place.
         np.testing.assert_allclose(
-            np.asarray(base.state), np.asarray(ref_state), rtol=1e-5, atol=1e-5
+            np.asarray(base.state), np.asarray(ref_state), rtol=rtol, atol=atol
         )
-        assert reward == pytest.approx(float(ref_reward), rel=1e-5, abs=1e-5)
+        assert reward == pytest.approx(float(ref_reward), rel=rtol, abs=atol)
         assert terminated == bool(ref_term)
         if terminated or truncated:
             break

@@ -108,28 +108,32 @@ def _median_curve(curves: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarr
     """Median, min and max over seeds of step functions ``x -> return`` on a common grid.
 
     Each seed's return at ``x`` is that of its last evaluation at or before ``x``; past its
-    last evaluation it keeps that value (the controller it ended with). The grid starts
-    where every seed has been evaluated once.
+    last evaluation it keeps that value (the controller it ended with); before its first
+    it has none, and the statistics are over the seeds evaluated by then.
     """
-    start = max(float(x[0]) for x, _ in curves)
     grid = np.unique(np.concatenate([x for x, _ in curves]))
-    grid = grid[grid >= start]
-    vals = np.stack([y[np.searchsorted(x, grid, side="right") - 1] for x, y in curves])
-    return grid, np.median(vals, axis=0), vals.min(axis=0), vals.max(axis=0)
+    rows = []
+    for x, y in curves:
+        i = np.searchsorted(x, grid, side="right") - 1
+        rows.append(np.where(i >= 0, y[np.maximum(i, 0)], np.nan))
+    vals = np.stack(rows)
+    return grid, np.nanmedian(vals, axis=0), np.nanmin(vals, axis=0), np.nanmax(vals, axis=0)
 
 
 def plot(task_name: str, results: list[dict], thresholds: tuple[float, ...], path: str | Path):
     """Return against environment steps and against training seconds, all methods on one
-    figure, log-scaled x, the median over seeds drawn and its min–max range shaded.
+    figure, log-scaled x, the median over seeds drawn and its min–max range shaded (over the
+    seeds evaluated by then).
 
     Points at zero steps or seconds are left out (log scale). Written atomically.
     """
     import matplotlib
+    import matplotlib.ticker
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from ..plots import _save
+    from ..io import write_bytes
 
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.5), sharey=True)
     methods: list[str] = []
@@ -160,10 +164,17 @@ def plot(task_name: str, results: list[dict], thresholds: tuple[float, ...], pat
         for t in thresholds:
             axis.axhline(t, color="k", ls="--", lw=0.8)
         axis.set_xscale("log")
+        axis.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
         axis.set_xlabel(label)
         axis.grid(True, which="both", alpha=0.3)
     axes[0].set_ylabel("evaluation return (median; shaded: min–max over seeds)")
     axes[0].legend(loc="lower right")
     fig.suptitle(f"{task_name}: diffcontrol against RL baselines")
     fig.tight_layout()
-    return _save(fig, path)
+    import io as _io
+
+    buf = _io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110)
+    plt.close(fig)
+    write_bytes(path, buf.getvalue())
+    return Path(path)
