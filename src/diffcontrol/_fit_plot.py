@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import io as _io
 from pathlib import Path
 from typing import Any
 
@@ -16,7 +15,7 @@ import numpy as np  # noqa: E402
 
 from .data import TrajectoryData  # noqa: E402
 from .fitting import predict  # noqa: E402
-from .io import write_bytes  # noqa: E402
+from .io import write_figure  # noqa: E402
 
 
 def _segments(task: Any, params: Any, obs: np.ndarray, actions: np.ndarray, every: int):
@@ -80,8 +79,4 @@ def prediction_plot(
         fontsize=9,
     )
     fig.tight_layout()
-    buf = _io.BytesIO()
-    fig.savefig(buf, format="png", dpi=100)
-    plt.close(fig)
-    write_bytes(path, buf.getvalue())
-    return Path(path)
+    return write_figure(fig, path, dpi=100)

@@ -16,15 +16,9 @@ from .tasks import Task  # noqa: E402
 
 
 def _save(fig: Any, path: str | Path) -> Path:
-    import io as _io
+    from .io import write_figure
 
-    from .io import write_bytes
-
-    buf = _io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
-    plt.close(fig)
-    write_bytes(path, buf.getvalue())
-    return Path(path)
+    return write_figure(fig, path)
 
 
 def learning_curve(

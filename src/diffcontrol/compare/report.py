@@ -133,7 +133,7 @@ def plot(task_name: str, results: list[dict], thresholds: tuple[float, ...], pat
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from ..io import write_bytes
+    from ..io import write_figure
 
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.5), sharey=True)
     methods: list[str] = []
@@ -171,10 +171,4 @@ def plot(task_name: str, results: list[dict], thresholds: tuple[float, ...], pat
     axes[0].legend(loc="lower right")
     fig.suptitle(f"{task_name}: diffcontrol against RL baselines")
     fig.tight_layout()
-    import io as _io
-
-    buf = _io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
-    plt.close(fig)
-    write_bytes(path, buf.getvalue())
-    return Path(path)
+    return write_figure(fig, path)
