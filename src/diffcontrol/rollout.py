@@ -117,8 +117,9 @@ closed loops such as sharp Coulomb friction)."""
 # How a loss is differentiated through the solve (``GRADIENT_METHODS``):
 #
 # - ``checkpoint``: discretise-then-optimise, reverse mode through the solver's own steps with
-#   recursive checkpointing (``diffrax.RecursiveCheckpointAdjoint``). Exact for the discretised
-#   solve, memory ``O(log steps)`` recomputations. The default.
+#   recursive checkpointing (``diffrax.RecursiveCheckpointAdjoint``): the exact gradient of the
+#   discretised solve, storing a few checkpoints and recomputing the steps between them. The
+#   default.
 # - ``backsolve``: optimise-then-discretise, the continuous adjoint ODE solved backwards in time
 #   (``diffrax.BacksolveAdjoint``), the method of the neural-ODE paper. Memory ``O(1)`` in the
 #   number of steps, but **the gradient is approximate**: the adjoint and the re-solved state
@@ -133,8 +134,8 @@ class ODESolution(eqx.Module):
     """A closed-loop solve saved at ``ts``: ``ys[k] = y(ts[k])``.
 
     ``ok`` is false when the solver failed (its step limit, a step too small); the saves after
-    the failure are then ``inf``, and whoever uses them must mask the sample out (the trainer
-    does) or report the failure (``failure_message``).
+    the failure are then ``inf``, and whoever uses them must mask the sample out or report the
+    failure (the ODE trainer does both).
     """
 
     ts: Float[Array, " N"]

@@ -163,6 +163,13 @@ def cmd_train(args: argparse.Namespace) -> int:
             f"solve(s) over {config.horizon_s:g} s ({config.solver}, rtol {config.rtol:g}, atol "
             f"{config.atol:g}, gradient {config.gradient}; seed {config.seed}) -> {out}"
         )
+        if config.gradient == "backsolve":
+            print(
+                "note: --gradient backsolve is the continuous adjoint: its gradient is "
+                "approximate (the backward solve re-creates the state with the solver's error); "
+                "checkpoint is exact for the computed solve",
+                file=sys.stderr,
+            )
     else:
         say(
             f"training {task.name}: {config.updates} updates x window {config.window} x batch "
