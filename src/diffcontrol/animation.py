@@ -58,6 +58,13 @@ def _frames_cartpole(rec: Recording, every: int):
     plt.close(fig)
 
 
+def _write_gif(frames: list[np.ndarray], duration_ms: float, path: str | Path) -> Path:
+    """Encode RGB frames as a looping GIF (``duration_ms`` per frame) and write it atomically."""
+    data = iio.imwrite("<bytes>", np.stack(frames), extension=".gif", duration=duration_ms, loop=0)
+    write_bytes(path, data)
+    return Path(path)
+
+
 def animate(recording: Recording, task: Task, path: str | Path, max_frames: int = 250) -> Path:
     """Write an animated GIF of ``recording`` (played at real time, subsampled to at most
     ``max_frames`` frames)."""
@@ -73,9 +80,7 @@ def animate(recording: Recording, task: Task, path: str | Path, max_frames: int 
         fig.canvas.draw()
         frames.append(np.asarray(fig.canvas.buffer_rgba())[..., :3].copy())
     duration_ms = 1000.0 * recording.dt * every
-    data = iio.imwrite("<bytes>", np.stack(frames), extension=".gif", duration=duration_ms, loop=0)
-    write_bytes(path, data)
-    return Path(path)
+    return _write_gif(frames, duration_ms, path)
 
 
 def animate_throw(throw: Any, target: float, wind: float, path: str | Path, fps: int = 30) -> Path:
@@ -105,11 +110,7 @@ def animate_throw(throw: Any, target: float, wind: float, path: str | Path, fps:
         fig.canvas.draw()
         frames.append(np.asarray(fig.canvas.buffer_rgba())[..., :3].copy())
     plt.close(fig)
-    data = iio.imwrite(
-        "<bytes>", np.stack(frames), extension=".gif", duration=1000.0 * every * dt, loop=0
-    )
-    write_bytes(path, data)
-    return Path(path)
+    return _write_gif(frames, 1000.0 * every * dt, path)
 
 
 def animate_swingup(recording: Any, path: str | Path, fps: int = 25) -> Path:
@@ -149,8 +150,4 @@ def animate_swingup(recording: Any, path: str | Path, fps: int = 25) -> Path:
         fig.canvas.draw()
         frames.append(np.asarray(fig.canvas.buffer_rgba())[..., :3].copy())
     plt.close(fig)
-    data = iio.imwrite(
-        "<bytes>", np.stack(frames), extension=".gif", duration=1000.0 * every * dt, loop=0
-    )
-    write_bytes(path, data)
-    return Path(path)
+    return _write_gif(frames, 1000.0 * every * dt, path)

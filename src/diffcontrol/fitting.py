@@ -260,27 +260,42 @@ def _fit(task, data, names, window, steps, learning_rate, lm_steps, init) -> Fit
 
     optimiser = optax.adam(learning_rate)
 
-    @jax.jit
-    def adam_step(z, opt_state, batch):
-        value, grad = jax.value_and_grad(loss)(z, batch)
-        updates, opt_state = optimiser.update(grad, opt_state)
-        return optax.apply_updates(z, updates), opt_state, value
+    def adam_steps(z, opt_state, batch):
+        """All Adam steps under one ``lax.scan``. A step whose loss or new parameters are
+        non-finite freezes the run there (``alive`` turns false); the best parameters are
+        those with the lowest loss before it."""
+
+        def body(carry, _):
+            z, opt_state, best_z, best_loss, alive = carry
+            value, grad = jax.value_and_grad(loss)(z, batch)  # the loss at z, before the step
+            updates, new_opt = optimiser.update(grad, opt_state)
+            new_z = optax.apply_updates(z, updates)
+            ok = jnp.isfinite(value) & jnp.all(jnp.isfinite(new_z))
+            step = alive & ok
+            better = step & (value < best_loss)
+            carry = (
+                jnp.where(step, new_z, z),
+                jax.tree.map(lambda n, o: jnp.where(step, n, o), new_opt, opt_state),
+                jnp.where(better, z, best_z),
+                jnp.where(better, value, best_loss),
+                step,
+            )
+            return carry, (value, alive)
+
+        init = (z, opt_state, z, jnp.asarray(jnp.inf, z.dtype), jnp.asarray(True))
+        return jax.lax.scan(body, init, None, length=steps)
 
     z = to_z(start)
     opt_state = optimiser.init(z)
     nominal_loss = float(loss(to_z(jnp.array([nominal[n] for n in names])), batch))
-    best_z, best_loss, history, diverged, message = z, math.inf, [], False, ""
-    for i in range(steps):
-        new_z, opt_state, value = adam_step(z, opt_state, batch)
-        value = float(value)  # the loss at z, before this step
-        history.append(value)
-        if not (math.isfinite(value) and bool(jnp.all(jnp.isfinite(new_z)))):
-            diverged = True
-            message = f"Adam step {i + 1} gave a non-finite loss; kept the best parameters so far"
-            break
-        if value < best_loss:
-            best_z, best_loss = z, value
-        z = new_z
+    (z, _, best_z, best_loss, alive), (values_seen, was_alive) = jax.jit(adam_steps)(
+        z, opt_state, batch
+    )
+    taken = int(np.sum(np.asarray(was_alive)))  # the steps run, the diverging one included
+    history = [float(v) for v in np.asarray(values_seen)[:taken]]
+    best_loss, diverged, message = float(best_loss), not bool(alive), ""
+    if diverged:
+        message = f"Adam step {taken} gave a non-finite loss; kept the best parameters so far"
     else:
         final = float(loss(z, batch))
         if math.isfinite(final) and final < best_loss:
