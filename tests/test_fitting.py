@@ -148,8 +148,10 @@ def test_cli_fit_end_to_end(tmp_path, capsys):
     capsys.readouterr()
     assert main([*args, *tiny]) == 2  # fitted.json exists
     assert "pass --force" in capsys.readouterr().err
-    assert main([*args[:-4], "--model", "hybrid", "--out", str(tmp_path / "h")]) == 2
-    assert "--model hybrid is not implemented yet" in capsys.readouterr().err
+    assert main([*args[:-4], "--model", "neural", "--out", str(tmp_path / "n")]) == 2
+    err = capsys.readouterr().err
+    assert "200 recorded transitions are too few for a neural model: at least 1000" in err
+    assert not (tmp_path / "n").exists()
     assert main([*args, "--force", "--params", "g,wind", *tiny]) == 2
     assert "unknown parameter(s) ['wind']" in capsys.readouterr().err
 

@@ -32,8 +32,7 @@ def _segments(task: Any, params: Any, obs: np.ndarray, actions: np.ndarray, ever
 
 
 def prediction_plot(
-    task: Any,
-    models: dict[str, Any],
+    models: dict[str, tuple[Any, Any]],
     data: TrajectoryData,
     path: str | Path,
     every: int = 50,
@@ -41,7 +40,8 @@ def prediction_plot(
     title: str = "",
 ) -> Path:
     """Plot each observation of the first ``episodes`` episodes of ``data`` (grey) against the
-    open-loop predictions of every model in ``models`` (label -> parameters), restarted from
+    open-loop predictions of every model in ``models`` (label -> ``(task, params)``: a task
+    and its parameters, or ``models.model_task(task, model)`` and the model), restarted from
     the recorded state every ``every`` steps with the recorded actions; write a PNG atomically.
     """
     eps = list(data.episodes())[:episodes]
@@ -54,7 +54,7 @@ def prediction_plot(
         t_axis = np.arange(len(ep.observations)) * dt
         pieces = {
             label: _segments(task, p, ep.observations, ep.actions, every)
-            for label, p in models.items()
+            for label, (task, p) in models.items()
         }
         for i, name in enumerate(names):
             ax = axes[i, j]

@@ -259,37 +259,10 @@ def _fit(task, data, names, window, steps, learning_rate, lm_steps, init) -> Fit
         return jnp.mean(residuals(to_values(z), batch) ** 2)
 
     optimiser = optax.adam(learning_rate)
-
-    def adam_steps(z, opt_state, batch):
-        """All Adam steps under one ``lax.scan``. A step whose loss or new parameters are
-        non-finite freezes the run there (``alive`` turns false); the best parameters are
-        those with the lowest loss before it."""
-
-        def body(carry, _):
-            z, opt_state, best_z, best_loss, alive = carry
-            value, grad = jax.value_and_grad(loss)(z, batch)  # the loss at z, before the step
-            updates, new_opt = optimiser.update(grad, opt_state)
-            new_z = optax.apply_updates(z, updates)
-            ok = jnp.isfinite(value) & jnp.all(jnp.isfinite(new_z))
-            step = alive & ok
-            better = step & (value < best_loss)
-            carry = (
-                jnp.where(step, new_z, z),
-                jax.tree.map(lambda n, o: jnp.where(step, n, o), new_opt, opt_state),
-                jnp.where(better, z, best_z),
-                jnp.where(better, value, best_loss),
-                step,
-            )
-            return carry, (value, alive)
-
-        init = (z, opt_state, z, jnp.asarray(jnp.inf, z.dtype), jnp.asarray(True))
-        return jax.lax.scan(body, init, None, length=steps)
-
     z = to_z(start)
-    opt_state = optimiser.init(z)
     nominal_loss = float(loss(to_z(jnp.array([nominal[n] for n in names])), batch))
-    (z, _, best_z, best_loss, alive), (values_seen, was_alive) = jax.jit(adam_steps)(
-        z, opt_state, batch
+    (z, best_z, best_loss, alive), (values_seen, was_alive) = adam_scan(
+        loss, z, optimiser, steps, batch
     )
     taken = int(np.sum(np.asarray(was_alive)))  # the steps run, the diverging one included
     history = [float(v) for v in np.asarray(values_seen)[:taken]]
@@ -340,6 +313,51 @@ def _fit(task, data, names, window, steps, learning_rate, lm_steps, init) -> Fit
         windows=int(batch[0].shape[0]),
         transitions=data.num_steps,
     )
+
+
+def adam_scan(loss: Any, z: Any, optimiser: Any, steps: int, batch: Any):
+    """``steps`` optimiser steps on ``loss(z, batch)`` under one jitted ``lax.scan``.
+
+    ``z`` is any PyTree of arrays (parameters, or a network filtered with ``eqx.filter``). A
+    step whose loss or new ``z`` is non-finite freezes the run there (``alive`` turns false);
+    the best ``z`` is the one with the lowest loss seen before it.
+
+    Returns:
+        ``(z, best_z, best_loss, alive), (losses, was_alive)``: the last and best ``z``, the
+        best loss (``inf`` if no step ran), whether no step diverged, and per step the loss
+        before it and whether the run was still alive then.
+    """
+
+    def finite(tree):
+        return jnp.all(jnp.stack([jnp.all(jnp.isfinite(x)) for x in jax.tree.leaves(tree)]))
+
+    def where(c, a, b):
+        return jax.tree.map(lambda x, y: jnp.where(c, x, y), a, b)
+
+    @jax.jit
+    def run(z, batch):
+        def body(carry, _):
+            z, opt_state, best_z, best_loss, alive = carry
+            value, grad = jax.value_and_grad(loss)(z, batch)  # the loss at z, before the step
+            updates, new_opt = optimiser.update(grad, opt_state, z)
+            new_z = optax.apply_updates(z, updates)
+            step = alive & jnp.isfinite(value) & finite(new_z)
+            better = step & (value < best_loss)
+            carry = (
+                where(step, new_z, z),
+                where(step, new_opt, opt_state),
+                where(better, z, best_z),
+                jnp.where(better, value, best_loss),
+                step,
+            )
+            return carry, (value, alive)
+
+        inf = jnp.asarray(jnp.inf, jnp.result_type(float))
+        init = (z, optimiser.init(z), z, inf, jnp.asarray(True))
+        (z, _, best_z, best_loss, alive), history = jax.lax.scan(body, init, None, length=steps)
+        return (z, best_z, best_loss, alive), history
+
+    return run(z, batch)
 
 
 def _standard_errors(residual_fn, values: jax.Array) -> jax.Array:

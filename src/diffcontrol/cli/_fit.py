@@ -1,4 +1,4 @@
-"""``diffcontrol fit``: fit a task's model to recorded trajectories (the grey box for now)."""
+"""``diffcontrol fit``: fit a task's model to recorded trajectories (grey box, hybrid or black box)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,20 @@ from typing import Any
 from ..errors import ConfigError, RunDirectoryError
 from ._args import finite_float, names, nonneg_int, positive_float, positive_int
 
+DEFAULTS = {"params": (300, 0.02), "hybrid": (2000, 3e-3), "neural": (2000, 3e-3)}
+"""Adam steps and learning rate by model kind."""
+
 MODELS = ("params", "hybrid", "neural")
+
+
+def widths(text: str) -> tuple[int, ...]:
+    try:
+        values = tuple(int(w) for w in text.split(","))
+    except ValueError:
+        values = ()
+    if not values or any(w < 1 for w in values):
+        raise argparse.ArgumentTypeError(f"must be positive widths like 32,32, got {text!r}")
+    return values
 
 
 def holdout_fraction(text: str) -> float:
@@ -25,16 +38,20 @@ def holdout_fraction(text: str) -> float:
 def add_parser(sub: Any) -> None:
     p = sub.add_parser(
         "fit",
-        help="fit the task's model to recorded trajectories (grey box: its physical parameters)",
+        help="fit a model of the task's system to recorded trajectories",
         description=(
-            "Fit the physical parameters of TASK's simulator to the trajectories in FILE (a "
+            "Fit a model of TASK's system to the trajectories in FILE (a "
             "diffcontrol-trajectories CSV or NPZ, e.g. from `diffcontrol record`) by "
-            "differentiating the simulator through short windows: from every recorded state, "
-            "predict WINDOW steps with the recorded actions and minimise the squared error of "
-            "the predicted observations (Adam, then Levenberg-Marquardt). The last episodes "
-            "(a fraction F) are held out to measure the prediction error 1, 10 and 50 steps "
-            "ahead for the nominal and the fitted model. Writes DIR/fitted.json and "
-            "DIR/prediction.png."
+            "differentiating it through short windows: from every recorded state, predict "
+            "WINDOW steps with the recorded actions and minimise the squared error of the "
+            "predicted observations. --model params fits physical parameters of TASK's own "
+            "simulator (grey box: Adam, then Levenberg-Marquardt, with standard errors); "
+            "hybrid adds a small network to the nominal physics for what it leaves out; neural "
+            "learns the dynamics from the data alone (black box). The last episodes (a "
+            "fraction F) are held out to measure the prediction error 1, 10 and 50 steps "
+            "ahead for the nominal and the fitted model. Writes DIR/fitted.json (the model, "
+            "weights as JSON lists) and DIR/prediction.png; `diffcontrol train TASK --model "
+            "DIR` then trains a controller through it."
         ),
     )
     p.add_argument("task", metavar="TASK", help="a registered task (`diffcontrol list`)")
@@ -43,8 +60,8 @@ def add_parser(sub: Any) -> None:
         "--model",
         required=True,
         choices=MODELS,
-        help="params: the task's physics with fitted parameters (grey box); hybrid and "
-        "neural are not implemented yet",
+        help="params: the task's physics with fitted parameters (grey box); hybrid: the "
+        "nominal physics plus a network correction; neural: a network alone (black box)",
     )
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
     p.add_argument(
@@ -52,26 +69,41 @@ def add_parser(sub: Any) -> None:
         type=names,
         default=["g", "friction"],
         metavar="NAMES",
-        help="comma-separated parameters to fit (default g,friction); the others keep their "
-        "nominal values",
+        help="--model params: comma-separated parameters to fit (default g,friction); the "
+        "others keep their nominal values",
     )
+    p.add_argument(
+        "--hidden",
+        type=widths,
+        default=(32, 32),
+        metavar="W,W",
+        help="--model hybrid/neural: the network's hidden layer widths (32,32)",
+    )
+    p.add_argument("--seed", type=nonneg_int, default=0, help="the network's initial weights (0)")
     p.add_argument(
         "--window", type=positive_int, default=10, metavar="N", help="steps per window (10)"
     )
-    p.add_argument("--steps", type=nonneg_int, default=300, metavar="N", help="Adam steps (300)")
+    p.add_argument(
+        "--steps",
+        type=nonneg_int,
+        default=None,
+        metavar="N",
+        help="Adam steps (300 for params, 2000 for hybrid and neural)",
+    )
     p.add_argument(
         "--lm-steps",
         type=nonneg_int,
         default=20,
         metavar="N",
-        help="Levenberg-Marquardt steps after Adam (20; 0 for none)",
+        help="--model params: Levenberg-Marquardt steps after Adam (20; 0 for none)",
     )
     p.add_argument(
         "--learning-rate",
         type=positive_float,
-        default=0.02,
+        default=None,
         metavar="LR",
-        help="Adam's step size in log-parameter units (0.02: about 2 %% a step)",
+        help="Adam's step size: for params in log-parameter units (0.02: about 2 %% a "
+        "step); for networks 0.003, cosine-decayed",
     )
     p.add_argument(
         "--holdout",
@@ -128,17 +160,9 @@ def _params_dict(params: Any) -> dict[str, float]:
 
 
 def cmd_fit(args: argparse.Namespace) -> int:
-    from .. import __version__, tasks
-    from .._fit_plot import prediction_plot
+    from .. import tasks
     from ..data import read_trajectories
-    from ..fitting import HORIZONS, fit_parameters, prediction_errors
-    from ..io import now_iso, write_json
 
-    if args.model != "params":
-        raise ConfigError(
-            f"--model {args.model} is not implemented yet; use --model params (the task's "
-            "physics with fitted parameters)"
-        )
     task = tasks.make(args.task)
     if task.kind != "control":
         raise ConfigError(
@@ -149,55 +173,109 @@ def cmd_fit(args: argparse.Namespace) -> int:
     out = Path(args.out)
     _check_out(out, args.force)
     train, held_out = _split(data, args.holdout)
+    steps, lr = DEFAULTS[args.model]
+    args.steps = steps if args.steps is None else args.steps
+    args.learning_rate = lr if args.learning_rate is None else args.learning_rate
     say = (lambda line: None) if args.quiet else print
+    what = ", ".join(args.params) if args.model == "params" else f"a {args.model} model"
     say(
-        f"fitting {', '.join(args.params)} of {task.name} to {train.num_episodes} episode(s) "
+        f"fitting {what} of {task.name} to {train.num_episodes} episode(s) "
         f"({train.num_steps} transitions) of {args.data}, windows of {args.window} steps"
     )
     t0 = time.perf_counter()
-    result = fit_parameters(
+    fit, predictor, model_doc = _fit(args, task, train)
+    seconds = time.perf_counter() - t0
+    _write(args, task, data, train, held_out, fit, predictor, model_doc, seconds, out)
+    return 0
+
+
+def _fit(args: argparse.Namespace, task: Any, train: Any) -> tuple[Any, Any, dict]:
+    """Fit the model asked for; returns the fit result, ``(task, params)`` to predict with, and
+    the model's part of fitted.json."""
+    if args.model == "params":
+        from ..fitting import fit_parameters
+
+        result = fit_parameters(
+            task,
+            train,
+            args.params,
+            window=args.window,
+            steps=args.steps,
+            learning_rate=args.learning_rate,
+            lm_steps=args.lm_steps,
+        )
+        doc = {
+            "parameters": {
+                n: {
+                    "value": result.values[n],
+                    "standard_error": result.standard_errors[n],
+                    "nominal": result.nominal[n],
+                }
+                for n in result.names
+            },
+            "all_parameters": _params_dict(result.params),
+        }
+        return result, (task, result.params), doc
+    from ..models import correction_to_dict, fit_model, model_task
+
+    result = fit_model(
         task,
         train,
-        args.params,
+        args.model,
         window=args.window,
         steps=args.steps,
         learning_rate=args.learning_rate,
-        lm_steps=args.lm_steps,
+        hidden=args.hidden,
+        seed=args.seed,
     )
-    seconds = time.perf_counter() - t0
+    doc = {
+        "all_parameters": _params_dict(result.model.params),
+        "network": {
+            "what": "hybrid: next state = the task's step with all_parameters + network("
+            "observation, action); neural: next state = state + network(observation, action)",
+            "inputs": "observation then action",
+            "parameters": result.num_parameters,
+            **correction_to_dict(result.model.correction),
+        },
+    }
+    return result, (model_task(task, result.model), result.model), doc
+
+
+def _write(args, task, data, train, held_out, fit, predictor, model_doc, seconds, out) -> None:
+    from .. import __version__
+    from .._fit_plot import prediction_plot
+    from ..fitting import HORIZONS, prediction_errors
+    from ..io import now_iso, write_json
+
     errors = None
     if held_out is not None:
         errors = {
             "nominal": prediction_errors(task, task.default_params(), held_out),
-            "fitted": prediction_errors(task, result.params, held_out),
+            "fitted": prediction_errors(*predictor, held_out),
         }
+    fit_doc = {
+        "window_steps": fit.window,
+        "windows": fit.windows,
+        "adam_steps": args.steps,
+        "learning_rate": args.learning_rate,
+        "loss": fit.loss,
+        "nominal_loss": fit.nominal_loss,
+        "diverged": fit.diverged,
+        "message": fit.message,
+        "loss_history": fit.loss_history.tolist(),
+        "seconds": seconds,
+    }
+    if args.model == "params":
+        fit_doc["lm_steps"] = args.lm_steps
+    else:
+        fit_doc.update(hidden=list(args.hidden), seed=args.seed)
     doc = {
         "format": "diffcontrol-fitted-model",
         "version": 1,
         "task": task.name,
-        "model": "params",
-        "parameters": {
-            n: {
-                "value": result.values[n],
-                "standard_error": result.standard_errors[n],
-                "nominal": result.nominal[n],
-            }
-            for n in result.names
-        },
-        "all_parameters": _params_dict(result.params),
-        "fit": {
-            "window_steps": result.window,
-            "windows": result.windows,
-            "adam_steps": args.steps,
-            "learning_rate": args.learning_rate,
-            "lm_steps": args.lm_steps,
-            "loss": result.loss,
-            "nominal_loss": result.nominal_loss,
-            "diverged": result.diverged,
-            "message": result.message,
-            "loss_history": result.loss_history.tolist(),
-            "seconds": seconds,
-        },
+        "model": args.model,
+        **model_doc,
+        "fit": fit_doc,
         "data": {
             "file": str(args.data),
             "env_id": data.env_id,
@@ -221,22 +299,24 @@ def cmd_fit(args: argparse.Namespace) -> int:
     write_json(out / "fitted.json", doc)
     shown = held_out if held_out is not None else train
     prediction_plot(
-        task,
-        {"fitted": result.params, "nominal": task.default_params()},
+        {"fitted": predictor, "nominal": (task, task.default_params())},
         shown,
         out / "prediction.png",
-        title=f"{task.name}, {'held-out' if held_out is not None else 'fit'} episodes: open "
-        "loop from the recorded state every 50 steps",
+        title=f"{task.name} ({args.model}), {'held-out' if held_out is not None else 'fit'} "
+        "episodes: open loop, restarted every 50 steps",
     )
-    for n in result.names:
-        se = result.standard_errors[n]
+    for n, p in model_doc.get("parameters", {}).items():
+        se = p["standard_error"]
         pm = f" ± {se:.3g}" if math.isfinite(se) else " (not identifiable from this data)"
-        print(f"{n} = {result.values[n]:.6g}{pm} (nominal {result.nominal[n]:.6g})")
+        print(f"{n} = {p['value']:.6g}{pm} (nominal {p['nominal']:.6g})")
+    if "network" in model_doc:
+        print(
+            f"{args.model} model: {model_doc['network']['parameters']} weights, {fit.message}"
+        )
     if errors is not None:
         for h in HORIZONS:
-            nom, fit = errors["nominal"][h]["rmse"], errors["fitted"][h]["rmse"]
-            print(f"held-out RMS error {h:>2} steps ahead: nominal {nom:.3g}, fitted {fit:.3g}")
-    if result.diverged:
-        print(f"warning: {result.message}")
+            nom, fitted = errors["nominal"][h]["rmse"], errors["fitted"][h]["rmse"]
+            print(f"held-out RMS error {h:>2} steps ahead: nominal {nom:.3g}, fitted {fitted:.3g}")
+    if fit.diverged:
+        print(f"warning: {fit.message}")
     print(f"wrote {out / 'fitted.json'} and {out / 'prediction.png'} ({seconds:.1f} s fit)")
-    return 0
