@@ -58,17 +58,26 @@ class Recording:
 
 
 def evaluate(
-    policy: Callable[[np.ndarray], Any], task: Task, episodes: int = 100, seed: int = 0
+    policy: Callable[[np.ndarray], Any],
+    task: Task,
+    episodes: int = 100,
+    seed: int = 0,
+    real: tuple[str, dict | None] | None = None,
 ) -> EvalResult:
     """Run ``policy`` (observation -> Gymnasium action) in ``task``'s Gymnasium environment.
 
     Episode ``i`` is reset with ``seed + i``; each runs until Gymnasium terminates or
     truncates it. This is the standard protocol, so the mean return compares with any
     other method evaluated on the same seeds.
+
+    Args:
+        real: ``(env_id, env_kwargs)`` of another environment to run instead, e.g. the "real"
+            system that a fitted model was learned from
+            (``("diffcontrol/PendulumFriction-v0", {"g": 12.0, "friction": 0.1})``).
     """
     if episodes <= 0:
         raise ValueError(f"episodes must be positive, got {episodes}")
-    env = task.make_gym_env()
+    env, label = _env(task, real)
     returns, lengths = [], []
     try:
         for i in range(episodes):
@@ -83,12 +92,26 @@ def evaluate(
             lengths.append(n)
     finally:
         env.close()
-    return EvalResult(task.gym_label, seed, np.asarray(returns), np.asarray(lengths))
+    return EvalResult(label, seed, np.asarray(returns), np.asarray(lengths))
 
 
-def record_episode(policy: Any, task: Task, seed: int = 0) -> Recording:
-    """Record one Gymnasium episode of ``policy`` (a ``NumpyPolicy``) with the true states."""
-    env = task.make_gym_env()
+def _env(task: Task, real: tuple[str, dict | None] | None) -> tuple[Any, str]:
+    """The environment to evaluate in and its label: the task's own, or ``real``."""
+    if real is None:
+        return task.make_gym_env(), task.gym_label
+    from .recording import make_env
+
+    env_id, kwargs = real
+    args = ", ".join(f"{k}={v}" for k, v in (kwargs or {}).items())
+    return make_env(env_id, kwargs), f"{env_id}({args})" if args else env_id
+
+
+def record_episode(
+    policy: Any, task: Task, seed: int = 0, real: tuple[str, dict | None] | None = None
+) -> Recording:
+    """Record one Gymnasium episode of ``policy`` (a ``NumpyPolicy``) with the true states
+    (in ``real``'s environment where given, as for ``evaluate``)."""
+    env, label = _env(task, real)
     try:
         obs, _ = env.reset(seed=seed)
         states = [np.array(env.unwrapped.state, dtype=np.float64)]
@@ -104,7 +127,7 @@ def record_episode(policy: Any, task: Task, seed: int = 0) -> Recording:
     finally:
         env.close()
     return Recording(
-        env_id=task.gym_label,
+        env_id=label,
         dt=dt,
         states=np.stack(states),
         actions=np.stack(actions),

@@ -119,10 +119,15 @@ def correction_from_dict(doc: Any, where: str = "the model file") -> Correction:
         in_offset, in_scale = doc["in_offset"], doc["in_scale"]
         out_scale = doc["out_scale"]
     except (KeyError, TypeError, ValueError) as e:
-        raise ModelFileError(f"{where}: the network is malformed ({e!r}); refit the model") from None
+        raise ModelFileError(
+            f"{where}: the network is malformed ({e!r}); refit the model"
+        ) from None
     shapes_ok = (
         weights
-        and all(w.ndim == 2 and b.ndim == 1 and w.shape[0] == b.shape[0] for w, b in zip(weights, biases))
+        and all(
+            w.ndim == 2 and b.ndim == 1 and w.shape[0] == b.shape[0]
+            for w, b in zip(weights, biases)
+        )
         and all(a.shape[0] == b.shape[1] for a, b in zip(weights[:-1], weights[1:]))
         and len(in_offset) == len(in_scale) == weights[0].shape[1]
         and len(out_scale) == weights[-1].shape[0]
@@ -233,7 +238,7 @@ class ModelFitResult:
     """The outcome of ``fit_model``.
 
     Attributes:
-        model: the fitted ``HybridModel`` or ``NeuralModel`` (float32 weights).
+        model: the fitted ``HybridModel`` or ``NeuralModel`` (float32 weights and physics).
         kind: ``"hybrid"`` or ``"neural"``.
         loss, nominal_loss: the mean squared window prediction error of the observations at the
             fit and for the nominal physics.
@@ -382,7 +387,9 @@ def _fit_model(task, data, kind, params, window, steps, learning_rate, hidden, s
     schedule = optax.cosine_decay_schedule(learning_rate, max(steps, 1), alpha=0.05)
     optimiser = optax.adam(schedule)
     nominal_loss = _nominal_loss(task, physics, batch, predict)
-    (w, best_w, best_loss, alive), (seen, was_alive) = adam_scan(loss, weights, optimiser, steps, batch)
+    (w, best_w, best_loss, alive), (seen, was_alive) = adam_scan(
+        loss, weights, optimiser, steps, batch
+    )
     taken = int(np.sum(np.asarray(was_alive)))
     history = np.asarray(seen, np.float64)[:taken]
     diverged = not bool(alive)
@@ -398,10 +405,7 @@ def _fit_model(task, data, kind, params, window, steps, learning_rate, hidden, s
         if diverged
         else f"mean squared window error {best_loss:.3g} (nominal physics: {nominal_loss:.3g})"
     )
-    fitted = eqx.combine(best_w, rest, static)
-    fitted = eqx.tree_at(
-        lambda m: m.correction, fitted, jax.tree.map(_to_f32, fitted.correction)
-    )
+    fitted = jax.tree.map(_to_f32, eqx.combine(best_w, rest, static))
     return ModelFitResult(
         model=fitted,
         kind=kind,

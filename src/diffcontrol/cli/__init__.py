@@ -11,7 +11,7 @@ import argparse
 import sys
 
 from ..errors import DiffcontrolError
-from . import _compare, _data, _fit, _runs, _train
+from . import _compare, _data, _fit, _loop, _runs, _train
 from ._args import EXIT_USAGE, Parser
 
 
@@ -31,6 +31,7 @@ def build_parser() -> argparse.ArgumentParser:
     _compare.add_parser(sub)
     _data.add_parser(sub)
     _fit.add_parser(sub)
+    _loop.add_parser(sub)
     return parser
 
 
@@ -43,6 +44,7 @@ COMMANDS = {
     "compare": _compare.cmd_compare,
     "record": _data.cmd_record,
     "fit": _fit.cmd_fit,
+    "loop": _loop.cmd_loop,
 }
 
 

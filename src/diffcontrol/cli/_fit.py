@@ -310,9 +310,7 @@ def _write(args, task, data, train, held_out, fit, predictor, model_doc, seconds
         pm = f" ± {se:.3g}" if math.isfinite(se) else " (not identifiable from this data)"
         print(f"{n} = {p['value']:.6g}{pm} (nominal {p['nominal']:.6g})")
     if "network" in model_doc:
-        print(
-            f"{args.model} model: {model_doc['network']['parameters']} weights, {fit.message}"
-        )
+        print(f"{args.model} model: {model_doc['network']['parameters']} weights, {fit.message}")
     if errors is not None:
         for h in HORIZONS:
             nom, fitted = errors["nominal"][h]["rmse"], errors["fitted"][h]["rmse"]

@@ -107,6 +107,14 @@ def add_parser(sub: Any) -> None:
         "random targets for aiming tasks (default 1000); 0 skips",
     )
     p.add_argument("--no-animation", action="store_true", help="skip the GIF (saves a few seconds)")
+    p.add_argument(
+        "--model",
+        metavar="FIT_DIR",
+        help="train through the model fitted by `diffcontrol fit` in FIT_DIR instead of the "
+        "nominal simulator (fitted parameters, or the hybrid/neural model), and evaluate on "
+        "the system its data was recorded from (e.g. diffcontrol/PendulumFriction-v0 with "
+        "its arguments)",
+    )
     add_common(p)
     group = p.add_argument_group(
         "training settings (defaults depend on the task; see `diffcontrol list`)"
@@ -144,8 +152,9 @@ def cmd_train(args: argparse.Namespace) -> int:
             "task); see `diffcontrol train --help` for the settings of each kind"
         )
     overrides = {n: v for n, v in overrides.items() if n in fields}
-    if args.params:
-        overrides["params"] = tuple(args.params)
+    task, fitted_params, real = _fitted(args, task)
+    if fitted_params or args.params:
+        overrides["params"] = (*fitted_params, *(args.params or ()))  # --param wins
     out = Path(args.out)
     explicit = args.recipe is not None or any(v is not None for v in overrides.values())
     if args.resume and not explicit and (out / io.RUN_FILE).exists():
@@ -206,6 +215,8 @@ def cmd_train(args: argparse.Namespace) -> int:
         },
     )
     io.write_json(out / "model.json", doc)
+    if args.model:
+        metrics["model"] = {"dir": str(args.model), "kind": _kind_of(task), "real_system": real}
     if task.kind == "aiming":
         return _finish_aiming(args, task, out, doc, metrics, say)
     if task.kind == "ode":
@@ -214,9 +225,10 @@ def cmd_train(args: argparse.Namespace) -> int:
     final_eval = 100 if args.final_eval is None else args.final_eval
     if final_eval and task.gym_id:
         t0 = time.perf_counter()
-        ev = evaluate(policy, task, episodes=final_eval, seed=0)
+        ev = evaluate(policy, task, episodes=final_eval, seed=0, real=real)
         metrics["gym_eval"] = {**ev.to_json(), "seconds": time.perf_counter() - t0}
-        say(f"Gymnasium {ev.env_id}, seeds 0-{final_eval - 1}: return {ev.mean:.1f} ± {ev.std:.1f}")
+        where = "the real system" if real else "Gymnasium"
+        say(f"{where} {ev.env_id}, seeds 0-{final_eval - 1}: return {ev.mean:.1f} ± {ev.std:.1f}")
     io.write_json(out / "metrics.json", metrics)
 
     from .. import plots
@@ -224,7 +236,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     plots.learning_curve(metrics, out / "learning_curve.png", task.reward_threshold)
     files = ["model.json", "metrics.json", "learning_curve.png"]
     if task.gym_id:
-        rec = record_episode(policy, task, seed=0)
+        rec = record_episode(policy, task, seed=0, real=real)
         plots.rollout(rec, task, out / "rollout.png")
         files.append("rollout.png")
         if not args.no_animation:
@@ -244,6 +256,42 @@ def cmd_train(args: argparse.Namespace) -> int:
     )
     print(f"wrote {', '.join(str(out / f) for f in files)}")
     return 0
+
+
+def _fitted(args: argparse.Namespace, task: Any) -> tuple[Any, tuple, tuple | None]:
+    """``--model FIT_DIR``: the task to train (a hybrid or neural model's own), the fitted
+    physical parameters as ``--param`` overrides, and the real system ``(env_id, kwargs)``
+    its data came from (``None`` without --model, or if the data names no environment)."""
+    if not args.model:
+        return task, (), None
+    from ..models import fitted_model, model_task, read_fitted
+
+    doc = read_fitted(args.model)
+    model = fitted_model(task, doc)  # refuses a model of another task
+    data = doc.get("data") or {}
+    real = (data["env_id"], data.get("env_kwargs") or {}) if data.get("env_id") else None
+    if doc["model"] == "params":
+        return task, tuple(sorted(doc["all_parameters"].items())), real
+    if args.params:
+        raise DiffcontrolError(
+            f"--param cannot change the physics of the {doc['model']} model in {args.model}; "
+            "refit it, or train with a grey-box (--model params) fit"
+        )
+    print(
+        f"training through the {doc['model']} model in {args.model} "
+        f"({doc['network'].get('parameters', '?')} network weights)"
+    )
+    return model_task(task, model), (), real
+
+
+def _kind_of(task: Any) -> str:
+    """``params``, ``hybrid`` or ``neural``: what a --model run trains through."""
+    from ..models import HybridModel, NeuralModel
+
+    model = task.default_params()
+    if isinstance(model, HybridModel):
+        return "hybrid"
+    return "neural" if isinstance(model, NeuralModel) else "params"
 
 
 def _finish_aiming(args, task, out: Path, doc: dict, metrics: dict, say) -> int:

@@ -48,7 +48,7 @@ from ._format import (
     parse_column,
     validate,
 )
-from ._table import Episode, TrajectoryData
+from ._table import Episode, TrajectoryData, concat
 
 __all__ = [
     "DISCRETE_UNIT",
@@ -59,6 +59,7 @@ __all__ = [
     "TIME_UNITS",
     "TrajectoryData",
     "VERSION",
+    "concat",
     "parse_column",
     "read_trajectories",
     "validate",

@@ -189,3 +189,35 @@ class TrajectoryData:
             f"TrajectoryData(env_id={self.env_id!r}, episodes={self.num_episodes}, "
             f"steps={self.num_steps}, columns={list(self.columns)})"
         )
+
+
+def concat(parts: Sequence[TrajectoryData]) -> TrajectoryData:
+    """The episodes of every table in ``parts``, in order, renumbered 0, 1, ... (the metadata is
+    the first table's, with ``sources``: each part's ``source``).
+
+    Raises:
+        DataFileError: no tables, or tables with different columns.
+    """
+    if not parts:
+        raise DataFileError("nothing to concatenate: pass at least one table")
+    first = parts[0]
+    for p in parts[1:]:
+        if p.columns != first.columns:
+            raise DataFileError(
+                f"cannot join tables with the columns {list(first.columns)} and "
+                f"{list(p.columns)}; record the same system"
+            )
+    episodes, offset = [], 0
+    for p in parts:
+        order = {int(e): i for i, e in enumerate(dict.fromkeys(p.episode.tolist()))}
+        episodes.append(np.array([order[int(e)] for e in p.episode]) + offset)
+        offset += len(order)
+    meta = {**first.metadata, "sources": [p.metadata.get("source") for p in parts]}
+    return TrajectoryData(
+        time=np.concatenate([p.time for p in parts]),
+        episode=np.concatenate(episodes),
+        observations=np.concatenate([p.observations for p in parts]),
+        actions=np.concatenate([p.actions for p in parts]),
+        columns=first.columns,
+        metadata=meta,
+    )
