@@ -138,6 +138,11 @@ def test_cli_fit_hybrid_then_train_through_it_and_evaluate_on_the_real_system(
     assert metrics["model"]["kind"] == "hybrid"
     assert metrics["gym_eval"]["env_id"].startswith("diffcontrol/PendulumFriction-v0(g=12.0")
     assert (run / "model.json").exists() and (run / "rollout.png").exists()
+    capsys.readouterr()
+    assert main(["evaluate", str(run), "--episodes", "1", "--json"]) == 0  # the real system
+    assert json.loads(capsys.readouterr().out)["env_id"].startswith("diffcontrol/PendulumFr")
+    assert main(["evaluate", str(run), "--episodes", "1", "--json", "--env", "Pendulum-v1"]) == 0
+    assert json.loads(capsys.readouterr().out)["env_id"] == "Pendulum-v1"
 
     # --param cannot change a hybrid's physics; another task's model is refused
     assert main([*train[:-2], str(tmp_path / "r2"), "--param", "g=9", *tiny]) == 2

@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import DiffcontrolError
-from ._args import finite_float, positive_int
+from ._args import finite_float, param, positive_int
 
 
 def add_parsers(sub: Any) -> None:
@@ -24,10 +24,26 @@ def add_parsers(sub: Any) -> None:
             "m/s, drawn with seed S) and print the miss statistics over the reachable ones. "
             "For a continuous-time task (cartpole-swingup*), re-solve the closed loop with a "
             "float64 reference solver (dopri8 at 1e-9) and print the end state, the peak "
-            "force and the swings."
+            "force and the swings. --env (with --env-arg) runs a discrete-time controller in "
+            "another environment instead, e.g. the real system a fitted model came from "
+            "(a run trained with --model is evaluated there by default)."
         ),
     )
     p.add_argument("run_dir", metavar="DIR", help="a directory written by `diffcontrol train`")
+    p.add_argument(
+        "--env",
+        metavar="ENV_ID",
+        default=None,
+        help="evaluate in this Gymnasium environment instead (e.g. diffcontrol/PendulumFriction-v0)",
+    )
+    p.add_argument(
+        "--env-arg",
+        type=param,
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="a numeric argument of --env (repeatable), e.g. g=12",
+    )
     p.add_argument(
         "--episodes",
         type=positive_int,
@@ -207,7 +223,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     if not task.gym_id:
         raise DiffcontrolError(f"task {task.name!r} has no Gymnasium environment to evaluate in")
     args.episodes = args.episodes or 100
-    ev = evaluate(policy, task, episodes=args.episodes, seed=args.seed)
+    ev = evaluate(policy, task, episodes=args.episodes, seed=args.seed, real=_real(args))
     if args.json:
         print(json.dumps({"run_dir": str(args.run_dir), "task": task.name, **ev.to_json()}))
     else:
@@ -217,6 +233,23 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
             f"max {ev.returns.max():.1f})"
         )
     return 0
+
+
+def _real(args: argparse.Namespace) -> tuple[str, dict] | None:
+    """The environment to evaluate in: --env, else the real system of a run trained with
+    --model (from its metrics.json), else None (the task's own)."""
+    if args.env:
+        return args.env, dict(args.env_arg)
+    if args.env_arg:
+        raise DiffcontrolError("--env-arg needs --env (the environment it applies to)")
+    metrics = Path(args.run_dir) / "metrics.json"
+    if metrics.exists():
+        from ..io import read_json
+
+        real = (read_json(metrics, "metrics").get("model") or {}).get("real_system")
+        if real:
+            return real[0], dict(real[1] or {})
+    return None
 
 
 def cmd_animate(args: argparse.Namespace) -> int:
