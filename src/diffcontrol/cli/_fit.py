@@ -25,7 +25,8 @@ def holdout_fraction(text: str) -> float:
 def add_parser(sub: Any) -> None:
     p = sub.add_parser(
         "fit",
-        help="fit the task's model to recorded trajectories (grey box: its physical parameters)",
+        help="fit the task's model to recorded trajectories or throws (grey box: its physical "
+        "parameters)",
         description=(
             "Fit the physical parameters of TASK's simulator to the trajectories in FILE (a "
             "diffcontrol-trajectories CSV or NPZ, e.g. from `diffcontrol record`) by "
@@ -34,11 +35,17 @@ def add_parser(sub: Any) -> None:
             "the predicted observations (Adam, then Levenberg-Marquardt). The last episodes "
             "(a fraction F) are held out to measure the prediction error 1, 10 and 50 steps "
             "ahead for the nominal and the fitted model. Writes DIR/fitted.json and "
-            "DIR/prediction.png."
+            "DIR/prediction.png. For the trebuchet (TASK trebuchet), FILE holds recorded "
+            "throws instead (a diffcontrol-throws CSV or NPZ, e.g. from `diffcontrol record "
+            "trebuchet`): the parameters are fitted to the measured distances, the last "
+            "throws are held out, and prediction.png plots predicted against recorded "
+            "distances."
         ),
     )
     p.add_argument("task", metavar="TASK", help="a registered task (`diffcontrol list`)")
-    p.add_argument("--data", required=True, metavar="FILE", help="recorded trajectories")
+    p.add_argument(
+        "--data", required=True, metavar="FILE", help="recorded trajectories (or throws)"
+    )
     p.add_argument(
         "--model",
         required=True,
@@ -50,13 +57,17 @@ def add_parser(sub: Any) -> None:
     p.add_argument(
         "--params",
         type=names,
-        default=["g", "friction"],
+        default=None,
         metavar="NAMES",
-        help="comma-separated parameters to fit (default g,friction); the others keep their "
-        "nominal values",
+        help="comma-separated parameters to fit (default g,friction; for the trebuchet "
+        "drag_coefficient,wind_factor); the others keep their nominal values",
     )
     p.add_argument(
-        "--window", type=positive_int, default=10, metavar="N", help="steps per window (10)"
+        "--window",
+        type=positive_int,
+        default=10,
+        metavar="N",
+        help="steps per window (10; control tasks)",
     )
     p.add_argument("--steps", type=nonneg_int, default=300, metavar="N", help="Adam steps (300)")
     p.add_argument(
@@ -78,8 +89,8 @@ def add_parser(sub: Any) -> None:
         type=holdout_fraction,
         default=0.2,
         metavar="F",
-        help="fraction of the episodes (the last ones) held out for the prediction errors "
-        "(0.2; at least one episode when F > 0; 0 for none)",
+        help="fraction of the episodes (the last ones; for the trebuchet the last throws) held "
+        "out for the prediction errors (0.2; at least one when F > 0; 0 for none)",
     )
     p.add_argument("--force", action="store_true", help="replace DIR/fitted.json if it exists")
     p.add_argument("--quiet", action="store_true", help="print only the final summary")
@@ -134,12 +145,16 @@ def cmd_fit(args: argparse.Namespace) -> int:
     from ..fitting import HORIZONS, fit_parameters, prediction_errors
     from ..io import now_iso, write_json
 
+    task = tasks.make(args.task)
+    if task.kind == "aiming":  # the trebuchet: fitted to recorded throws
+        from ._throws import cmd_fit_throws
+
+        return cmd_fit_throws(args, task)
     if args.model != "params":
         raise ConfigError(
             f"--model {args.model} is not implemented yet; use --model params (the task's "
             "physics with fitted parameters)"
         )
-    task = tasks.make(args.task)
     if task.kind != "control":
         raise ConfigError(
             f"task {task.name!r} is a {task.kind!r} task; fitting needs a discrete-time "
@@ -151,14 +166,14 @@ def cmd_fit(args: argparse.Namespace) -> int:
     train, held_out = _split(data, args.holdout)
     say = (lambda line: None) if args.quiet else print
     say(
-        f"fitting {', '.join(args.params)} of {task.name} to {train.num_episodes} episode(s) "
+        f"fitting {', '.join(args.params or ['g', 'friction'])} of {task.name} to {train.num_episodes} episode(s) "
         f"({train.num_steps} transitions) of {args.data}, windows of {args.window} steps"
     )
     t0 = time.perf_counter()
     result = fit_parameters(
         task,
         train,
-        args.params,
+        args.params or ["g", "friction"],
         window=args.window,
         steps=args.steps,
         learning_rate=args.learning_rate,
