@@ -62,20 +62,20 @@ RANDOM_WIND_STD_MPS = 5.0
 """``record_throws`` draws random winds ~ N(0, 5^2) m/s clipped to +-20, as the task does."""
 
 
-def parameter_names(params: tb.TrebuchetParams | None = None) -> tuple[str, ...]:
+def parameter_names() -> tuple[str, ...]:
     """The trebuchet's fittable parameters: the float fields of ``TrebuchetParams`` (the step
     budgets and ``swap_inertias`` are static and cannot be fitted)."""
-    p = params or tb.TrebuchetParams()
+    p = tb.TrebuchetParams()
     return tuple(
         f.name
         for f in dataclasses.fields(p)
-        if not f.metadata.get("static", False) and isinstance(getattr(p, f.name), float | int)
+        if not f.metadata.get("static", False) and isinstance(getattr(p, f.name), float)
     )
 
 
 def params_dict(params: tb.TrebuchetParams) -> dict[str, float]:
     """The fittable parameters of ``params`` as plain floats (for metadata and JSON)."""
-    return {n: float(np.asarray(getattr(params, n))) for n in parameter_names(params)}
+    return {n: float(np.asarray(getattr(params, n))) for n in parameter_names()}
 
 
 def _as64(params: tb.TrebuchetParams) -> tb.TrebuchetParams:
@@ -208,7 +208,7 @@ def fit_throws(
     """
     names = tuple(names)
     base = params or tb.TrebuchetParams()
-    known = parameter_names(base)
+    known = parameter_names()
     bad = [n for n in names if n not in known]
     if bad or not names or len(set(names)) != len(names):
         what = f"unknown parameter(s) {bad}" if bad else f"parameter names {list(names)}"
