@@ -137,6 +137,16 @@ def test_fit_recovers_drag_and_wind_from_noise_free_throws(recorded):
     assert ft.distance_errors(result.params, data)["rmse_m"] < 1e-3
 
 
+def test_a_diverging_fit_keeps_the_best_parameters(recorded):
+    data = read_throws(recorded).select(slice(0, 12))
+    # a step of 1000 in log space sends the drag to exp(1000) = inf: a non-finite loss
+    result = ft.fit_throws(data, learning_rate=1000.0, steps=20, lm_steps=5)
+    assert result.diverged and "kept the best parameters so far" in result.message
+    assert result.values == result.nominal  # the best seen: the starting values
+    assert np.isfinite(result.loss) and np.all(np.isfinite(result.loss_history))
+    assert all(np.isfinite(v) for v in result.standard_errors.values())
+
+
 def test_too_few_throws_or_bad_names_are_refused():
     with pytest.raises(InsufficientDataError, match="9 recorded throw.*at least 10 are needed"):
         ft.fit_throws(_throws(9))
