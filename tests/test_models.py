@@ -215,3 +215,16 @@ def test_loop_records_fits_trains_and_resumes(tmp_path, capsys):
     assert (out / "round_2" / "run" / "model.json").exists()
     assert main([*argv[:-3], "--model", "hybrid", "--out", str(out), "--resume"]) == 2
     assert "other settings" in capsys.readouterr().err
+
+
+def test_the_real_system_of_a_fitted_model_comes_from_its_data():
+    from diffcontrol.cli._train import as_env, real_params, real_system
+
+    env = real_system({"data": {"env_id": "diffcontrol/PendulumFriction-v0", "env_kwargs": REAL}})
+    assert as_env(env) == ("diffcontrol/PendulumFriction-v0", REAL)
+    throws = {"data": {"kind": "throws", "metadata": {"params": {"drag_coefficient": 1.5}}}}
+    real = real_system(throws)
+    assert as_env(real) is None
+    params = real_params(diffcontrol.make("trebuchet"), real)
+    assert params.drag_coefficient == 1.5 and params.wind_factor == 1.0
+    assert real_system({"data": {}}) is None and real_params(None, None) is None

@@ -179,7 +179,9 @@ class AimResult:
         )
 
 
-def evaluate_aiming(policy: Any, task: Task, targets: int = 1000, seed: int = 0) -> AimResult:
+def evaluate_aiming(
+    policy: Any, task: Task, targets: int = 1000, seed: int = 0, params: Any = None
+) -> AimResult:
     """Aim ``policy`` (a ``model.json`` policy) at ``targets`` random situations.
 
     Targets ~ U(20, 100) m and winds ~ N(0, 5^2) m/s (clipped to +-20 m/s) are drawn with
@@ -187,6 +189,10 @@ def evaluate_aiming(policy: Any, task: Task, targets: int = 1000, seed: int = 0)
     throw is simulated with ``diffcontrol.systems.trebuchet.shoot``; a target counts as
     reachable when it lies between the shortest and longest throws the heads' bounds allow
     in its wind (``reachable_range``).
+
+    ``params`` (a ``TrebuchetParams``; default the nominal ones) is the trebuchet that throws:
+    pass the "real" system's to evaluate a controller trained on a model of it. The
+    reachability is then that of the real system too.
     """
     import jax
 
@@ -202,8 +208,8 @@ def evaluate_aiming(policy: Any, task: Task, targets: int = 1000, seed: int = 0)
     )
     actions = policy.action(np.stack([target, wind], axis=-1))
     angle, weight = actions[:, 0], actions[:, 1]
-    distance = np.asarray(jax.jit(tb.shoot)(wind, angle, weight), np.float64)
-    shortest, longest = (np.asarray(x, np.float64) for x in aim.reachable_range(wind))
+    distance = np.asarray(jax.jit(tb.shoot)(wind, angle, weight, params), np.float64)
+    shortest, longest = (np.asarray(x, np.float64) for x in aim.reachable_range(wind, params))
     reachable = (target >= shortest) & (target <= longest)
     return AimResult(task.name, seed, target, wind, angle, weight, distance, reachable)
 

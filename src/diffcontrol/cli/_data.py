@@ -8,8 +8,15 @@ import time
 from pathlib import Path
 from typing import Any
 
-from ..errors import DataFileError
-from ._args import param, positive_int
+from ..errors import ConfigError, DataFileError
+from ._args import finite_float, param, positive_int
+
+
+def nonneg_float(text: str) -> float:
+    value = finite_float(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be a number >= 0, got {text!r}")
+    return value
 
 
 def add_parser(sub: Any) -> None:
@@ -22,11 +29,28 @@ def add_parser(sub: Any) -> None:
             "random actions, and write them as a diffcontrol-trajectories file: CSV or NPZ by "
             "the extension of FILE. Episode i is reset with seed S+i. Each row is a time step "
             "(time, episode, observations, the action applied); the last row of an episode "
-            "holds the final observation and no action."
+            "holds the final observation and no action. "
+            "ENV_ID trebuchet records throws of the trebuchet instead (one episode is one "
+            "throw): N throws with random inputs (wind ~ N(0, 5^2) m/s, release angle 20-70 "
+            "deg, counterweight 50-450 lb), or with --controller aiming at random targets, of "
+            "a trebuchet whose parameters --env-arg sets (e.g. --env-arg drag_coefficient=1.5 "
+            "--env-arg wind_factor=1.5), written as a diffcontrol-throws file (columns wind "
+            "[m/s], release_angle [deg], counterweight [lb], distance [m]) for `diffcontrol "
+            "fit trebuchet`."
         ),
     )
-    p.add_argument("env_id", metavar="ENV_ID", help="a registered Gymnasium environment id")
-    p.add_argument("--episodes", type=positive_int, required=True, metavar="N", help="episodes")
+    p.add_argument(
+        "env_id",
+        metavar="ENV_ID",
+        help="a registered Gymnasium environment id, or trebuchet for throws",
+    )
+    p.add_argument(
+        "--episodes",
+        type=positive_int,
+        required=True,
+        metavar="N",
+        help="episodes (for trebuchet: throws)",
+    )
     p.add_argument(
         "--controller",
         metavar="DIR",
@@ -47,8 +71,17 @@ def add_parser(sub: Any) -> None:
         action="append",
         default=[],
         metavar="NAME=VALUE",
-        help="a numeric keyword argument of gymnasium.make, e.g. g=9.0 for Pendulum-v1 "
+        help="a numeric keyword argument of gymnasium.make, e.g. g=9.0 for Pendulum-v1; "
+        "for trebuchet a parameter of the trebuchet that throws, e.g. drag_coefficient=1.5 "
         "(repeatable)",
+    )
+    p.add_argument(
+        "--noise-m",
+        type=nonneg_float,
+        default=None,
+        metavar="SD",
+        help="trebuchet only: standard deviation (m) of Gaussian noise added to the recorded "
+        "distances (default 0)",
     )
     p.add_argument(
         "--max-steps",
@@ -61,7 +94,8 @@ def add_parser(sub: Any) -> None:
         "--out",
         metavar="FILE",
         default=None,
-        help="a .csv or .npz file (default: ENV_ID with / as -, .csv, in this directory)",
+        help="a .csv or .npz file (default: ENV_ID with / as -, .csv, in this directory; "
+        "trebuchet-throws.csv for trebuchet)",
     )
     p.add_argument("--force", action="store_true", help="overwrite FILE if it exists")
     p.add_argument("--quiet", action="store_true", help="print only the final summary")
@@ -92,6 +126,14 @@ def cmd_record(args: argparse.Namespace) -> int:
     from ..io import NumpyPolicy, read_model
     from ..recording import record
 
+    if args.env_id == "trebuchet":  # the task's name: throws, not Gymnasium trajectories
+        from ._throws import cmd_record_throws
+
+        return cmd_record_throws(args, _check_out)
+    if args.noise_m is not None:
+        raise ConfigError(
+            f"--noise-m applies to `diffcontrol record trebuchet` only, not {args.env_id}; drop it"
+        )
     out = Path(args.out or args.env_id.replace("/", "-") + ".csv")
     _check_out(out, args.force)
     # The network alone (observations -> Gymnasium action), whatever the task's kind.

@@ -38,7 +38,7 @@ def holdout_fraction(text: str) -> float:
 def add_parser(sub: Any) -> None:
     p = sub.add_parser(
         "fit",
-        help="fit a model of the task's system to recorded trajectories",
+        help="fit a model of the task's system to recorded trajectories (or throws)",
         description=(
             "Fit a model of TASK's system to the trajectories in FILE (a "
             "diffcontrol-trajectories CSV or NPZ, e.g. from `diffcontrol record`) by "
@@ -51,11 +51,17 @@ def add_parser(sub: Any) -> None:
             "fraction F) are held out to measure the prediction error 1, 10 and 50 steps "
             "ahead for the nominal and the fitted model. Writes DIR/fitted.json (the model, "
             "weights as JSON lists) and DIR/prediction.png; `diffcontrol train TASK --model "
-            "DIR` then trains a controller through it."
+            "DIR` then trains a controller through it. For the trebuchet (TASK trebuchet), "
+            "FILE holds recorded throws instead (a diffcontrol-throws CSV or NPZ, e.g. from "
+            "`diffcontrol record trebuchet`): its parameters are fitted to the measured "
+            "distances, the last throws are held out, and prediction.png plots predicted "
+            "against recorded distances."
         ),
     )
     p.add_argument("task", metavar="TASK", help="a registered task (`diffcontrol list`)")
-    p.add_argument("--data", required=True, metavar="FILE", help="recorded trajectories")
+    p.add_argument(
+        "--data", required=True, metavar="FILE", help="recorded trajectories (or throws)"
+    )
     p.add_argument(
         "--model",
         required=True,
@@ -67,10 +73,10 @@ def add_parser(sub: Any) -> None:
     p.add_argument(
         "--params",
         type=names,
-        default=["g", "friction"],
+        default=None,
         metavar="NAMES",
-        help="--model params: comma-separated parameters to fit (default g,friction); the "
-        "others keep their nominal values",
+        help="--model params: comma-separated parameters to fit (default g,friction; for "
+        "the trebuchet drag_coefficient,wind_factor); the others keep their nominal values",
     )
     p.add_argument(
         "--hidden",
@@ -81,7 +87,11 @@ def add_parser(sub: Any) -> None:
     )
     p.add_argument("--seed", type=nonneg_int, default=0, help="the network's initial weights (0)")
     p.add_argument(
-        "--window", type=positive_int, default=10, metavar="N", help="steps per window (10)"
+        "--window",
+        type=positive_int,
+        default=10,
+        metavar="N",
+        help="steps per window (10; control tasks)",
     )
     p.add_argument(
         "--steps",
@@ -110,8 +120,8 @@ def add_parser(sub: Any) -> None:
         type=holdout_fraction,
         default=0.2,
         metavar="F",
-        help="fraction of the episodes (the last ones) held out for the prediction errors "
-        "(0.2; at least one episode when F > 0; 0 for none)",
+        help="fraction of the episodes (the last ones; for the trebuchet the last throws) held "
+        "out for the prediction errors (0.2; at least one when F > 0; 0 for none)",
     )
     p.add_argument("--force", action="store_true", help="replace DIR/fitted.json if it exists")
     p.add_argument("--quiet", action="store_true", help="print only the final summary")
@@ -164,6 +174,13 @@ def cmd_fit(args: argparse.Namespace) -> int:
     from ..data import read_trajectories
 
     task = tasks.make(args.task)
+    steps, lr = DEFAULTS[args.model]
+    args.steps = steps if args.steps is None else args.steps
+    args.learning_rate = lr if args.learning_rate is None else args.learning_rate
+    if task.kind == "aiming":  # the trebuchet: fitted to recorded throws
+        from ._throws import cmd_fit_throws
+
+        return cmd_fit_throws(args, task)
     if task.kind != "control":
         raise ConfigError(
             f"task {task.name!r} is a {task.kind!r} task; fitting needs a discrete-time "
@@ -173,9 +190,7 @@ def cmd_fit(args: argparse.Namespace) -> int:
     out = Path(args.out)
     _check_out(out, args.force)
     train, held_out = _split(data, args.holdout)
-    steps, lr = DEFAULTS[args.model]
-    args.steps = steps if args.steps is None else args.steps
-    args.learning_rate = lr if args.learning_rate is None else args.learning_rate
+    args.params = args.params or ["g", "friction"]
     say = (lambda line: None) if args.quiet else print
     what = ", ".join(args.params) if args.model == "params" else f"a {args.model} model"
     say(

@@ -199,17 +199,22 @@ def cmd_aim(args: argparse.Namespace) -> int:
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
     from ..evaluation import evaluate
+    from ._train import as_env, real_params
 
     task, policy = _load_run(args.run_dir)
     if task.kind == "aiming":
         from ..evaluation import evaluate_aiming
 
         n = args.episodes or 1000
-        result = evaluate_aiming(policy, task, targets=n, seed=args.seed)
+        params = real_params(task, _real(args))
+        result = evaluate_aiming(policy, task, targets=n, seed=args.seed, params=params)
         if args.json:
             print(json.dumps({"run_dir": str(args.run_dir), **result.to_json()}))
         else:
-            print(f"{task.name}, {n} random targets (seed {args.seed}): {result.summary()}")
+            where = (
+                " on the real trebuchet of its fitted model's data" if params is not None else ""
+            )
+            print(f"{task.name}, {n} random targets (seed {args.seed}){where}: {result.summary()}")
         return 0
     if task.kind == "ode":
         from ..evaluation import swingup_result
@@ -223,7 +228,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     if not task.gym_id:
         raise DiffcontrolError(f"task {task.name!r} has no Gymnasium environment to evaluate in")
     args.episodes = args.episodes or 100
-    ev = evaluate(policy, task, episodes=args.episodes, seed=args.seed, real=_real(args))
+    ev = evaluate(policy, task, episodes=args.episodes, seed=args.seed, real=as_env(_real(args)))
     if args.json:
         print(json.dumps({"run_dir": str(args.run_dir), "task": task.name, **ev.to_json()}))
     else:
@@ -235,20 +240,18 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     return 0
 
 
-def _real(args: argparse.Namespace) -> tuple[str, dict] | None:
-    """The environment to evaluate in: --env, else the real system of a run trained with
-    --model (from its metrics.json), else None (the task's own)."""
+def _real(args: argparse.Namespace) -> dict | None:
+    """The system to evaluate on: --env, else the real system of a run trained with --model
+    (from its metrics.json), else None (the task's own)."""
     if args.env:
-        return args.env, dict(args.env_arg)
+        return {"env_id": args.env, "env_kwargs": dict(args.env_arg)}
     if args.env_arg:
         raise DiffcontrolError("--env-arg needs --env (the environment it applies to)")
     metrics = Path(args.run_dir) / "metrics.json"
     if metrics.exists():
         from ..io import read_json
 
-        real = (read_json(metrics, "metrics").get("model") or {}).get("real_system")
-        if real:
-            return real[0], dict(real[1] or {})
+        return (read_json(metrics, "metrics").get("model") or {}).get("real_system")
     return None
 
 

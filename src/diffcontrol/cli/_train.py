@@ -218,16 +218,16 @@ def cmd_train(args: argparse.Namespace) -> int:
     if args.model:
         metrics["model"] = {"dir": str(args.model), "kind": _kind_of(task), "real_system": real}
     if task.kind == "aiming":
-        return _finish_aiming(args, task, out, doc, metrics, say)
+        return _finish_aiming(args, task, out, doc, metrics, say, real)
     if task.kind == "ode":
         return _finish_ode(args, task, out, result, metrics, say)
     policy = io.NumpyPolicy(doc)
     final_eval = 100 if args.final_eval is None else args.final_eval
     if final_eval and task.gym_id:
         t0 = time.perf_counter()
-        ev = evaluate(policy, task, episodes=final_eval, seed=0, real=real)
+        ev = evaluate(policy, task, episodes=final_eval, seed=0, real=as_env(real))
         metrics["gym_eval"] = {**ev.to_json(), "seconds": time.perf_counter() - t0}
-        where = "the real system" if real else "Gymnasium"
+        where = "the real system" if as_env(real) else "Gymnasium"
         say(f"{where} {ev.env_id}, seeds 0-{final_eval - 1}: return {ev.mean:.1f} ± {ev.std:.1f}")
     io.write_json(out / "metrics.json", metrics)
 
@@ -236,7 +236,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     plots.learning_curve(metrics, out / "learning_curve.png", task.reward_threshold)
     files = ["model.json", "metrics.json", "learning_curve.png"]
     if task.gym_id:
-        rec = record_episode(policy, task, seed=0, real=real)
+        rec = record_episode(policy, task, seed=0, real=as_env(real))
         plots.rollout(rec, task, out / "rollout.png")
         files.append("rollout.png")
         if not args.no_animation:
@@ -268,8 +268,7 @@ def _fitted(args: argparse.Namespace, task: Any) -> tuple[Any, tuple, tuple | No
 
     doc = read_fitted(args.model)
     model = fitted_model(task, doc)  # refuses a model of another task
-    data = doc.get("data") or {}
-    real = (data["env_id"], data.get("env_kwargs") or {}) if data.get("env_id") else None
+    real = real_system(doc)
     if doc["model"] == "params":
         return task, tuple(sorted(doc["all_parameters"].items())), real
     if args.params:
@@ -284,6 +283,31 @@ def _fitted(args: argparse.Namespace, task: Any) -> tuple[Any, tuple, tuple | No
     return model_task(task, model), (), real
 
 
+def real_system(doc: dict) -> dict | None:
+    """The system a fitted model's data came from: ``{"env_id", "env_kwargs"}`` for recorded
+    trajectories, ``{"params"}`` (the simulated trebuchet's) for recorded throws, or None."""
+    data = doc.get("data") or {}
+    if data.get("env_id"):
+        return {"env_id": data["env_id"], "env_kwargs": data.get("env_kwargs") or {}}
+    params = (data.get("metadata") or {}).get("params")
+    return {"params": params} if isinstance(params, dict) else None
+
+
+def as_env(real: dict | None) -> tuple[str, dict] | None:
+    """``(env_id, env_kwargs)`` of a real system that is a Gymnasium environment, else None."""
+    return (real["env_id"], real["env_kwargs"]) if real and "env_id" in real else None
+
+
+def real_params(task: Any, real: dict | None) -> Any:
+    """The task's parameters of a real system given by its parameters (the trebuchet's recorded
+    throws), else None."""
+    if not real or "params" not in real:
+        return None
+    from ..models import fitted_physics
+
+    return fitted_physics(task, {"task": task.name, "all_parameters": real["params"]})
+
+
 def _kind_of(task: Any) -> str:
     """``params``, ``hybrid`` or ``neural``: what a --model run trains through."""
     from ..models import HybridModel, NeuralModel
@@ -294,8 +318,9 @@ def _kind_of(task: Any) -> str:
     return "neural" if isinstance(model, NeuralModel) else "params"
 
 
-def _finish_aiming(args, task, out: Path, doc: dict, metrics: dict, say) -> int:
-    """The end of `train` for aiming tasks: miss statistics, the throw plot and animation."""
+def _finish_aiming(args, task, out: Path, doc: dict, metrics: dict, say, real=None) -> int:
+    """The end of `train` for aiming tasks: miss statistics (on the real trebuchet of a
+    --model run), the throw plot and animation."""
     from .. import io, plots
     from ..evaluation import evaluate_aiming
 
@@ -303,9 +328,11 @@ def _finish_aiming(args, task, out: Path, doc: dict, metrics: dict, say) -> int:
     n = 1000 if args.final_eval is None else args.final_eval
     if n:
         t0 = time.perf_counter()
-        ev = evaluate_aiming(policy, task, targets=n, seed=0)
+        params = real_params(task, real)
+        ev = evaluate_aiming(policy, task, targets=n, seed=0, params=params)
         metrics["aim_eval"] = {**ev.to_json(), "seconds": time.perf_counter() - t0}
-        say(f"{n} random targets (seed 0): {ev.summary()}")
+        where = " on the real trebuchet" if params is not None else ""
+        say(f"{n} random targets (seed 0){where}: {ev.summary()}")
     io.write_json(out / "metrics.json", metrics)
     plots.learning_curve(metrics, out / "learning_curve.png", None)
     files = ["model.json", "metrics.json", "learning_curve.png", "rollout.png"]

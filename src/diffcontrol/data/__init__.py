@@ -35,6 +35,10 @@ Numbers are written as the shortest text that reads back to the same float64. NP
 [T, m] (float64), and ``header``: the JSON header as UTF-8 bytes (uint8) with the column names
 under ``"columns"``. No object arrays; it is read with ``allow_pickle=False``. ``metadata`` is
 free JSON; the recorder writes ``env_id``, ``dt_s``, ``source``, ``seed`` and ``recorded``.
+
+Recorded trebuchet throws (one row per throw: wind, release angle, counterweight, distance)
+have their own small format, ``diffcontrol-throws`` (``ThrowData``, ``read_throws``,
+``write_throws``; see ``data/_throws.py``).
 """
 
 from ..errors import DataFileError
@@ -49,6 +53,7 @@ from ._format import (
     validate,
 )
 from ._table import Episode, TrajectoryData, concat
+from ._throws import THROW_COLUMNS, THROWS_FORMAT, ThrowData, read_throws, write_throws
 
 __all__ = [
     "DISCRETE_UNIT",
@@ -56,14 +61,19 @@ __all__ = [
     "Episode",
     "FORMAT",
     "KNOWN_COLUMNS",
+    "THROWS_FORMAT",
+    "THROW_COLUMNS",
     "TIME_UNITS",
+    "ThrowData",
     "TrajectoryData",
     "VERSION",
     "concat",
     "parse_column",
+    "read_throws",
     "read_trajectories",
     "validate",
     "write_csv",
     "write_npz",
+    "write_throws",
     "write_trajectories",
 ]

@@ -67,6 +67,10 @@ class TrebuchetParams(eqx.Module):
     """``rho`` (kg/m^3): the original's 1.0, not sea level's 1.225. 0 turns drag off."""
     drag_coefficient: float = 1.0
     """``C_d`` of the projectile."""
+    wind_factor: float = 1.0
+    """How strongly the wind acts on the flight: the air moves at ``wind_factor * wind``
+    (the drag is relative to it). 1 is the original; a "real" trebuchet whose site has
+    gustier or stronger wind than the anemometer reads has more (``fit_throws``)."""
     dt: float = 1.0 / 60.0
     """Explicit-Euler step (s): the original's ``rate = 60``."""
     max_steps: int = eqx.field(static=True, default=600)
@@ -218,7 +222,7 @@ def hang_rates(p: TrebuchetParams, u: Float[Array, 6], m_w: ArrayLike) -> Float[
 
 def flight_rates(p: TrebuchetParams, f: Float[Array, 4], wind: ArrayLike) -> Float[Array, 4]:
     """``d(x, y, v_x, v_y)/dt`` of the released projectile, with drag relative to the wind."""
-    rel_x, v_y = f[2] - wind, f[3]
+    rel_x, v_y = f[2] - p.wind_factor * wind, f[3]
     speed2 = rel_x**2 + v_y**2
     # Double where: sqrt has an infinite slope at 0 (the projectile moving with the air).
     speed = jnp.where(speed2 > 0, jnp.sqrt(jnp.where(speed2 > 0, speed2, 1.0)), 0.0)

@@ -23,7 +23,8 @@ Phases ``GROUND -> HANG -> RELEASED -> END``, each integrated with explicit Eule
   ``phi`` is the direction of the sling end's velocity and ``r = asin(sin(angle))``.
 - ``RELEASED``: a point mass with quadratic drag relative to the wind,
   ``a = -g e_y - k |v - w e_x| (v - w e_x)``, ``k = rho C_d pi z^2 / (2 m_P)``, until it lands at
-  ``y = -h``. The distance is ``x`` at landing, measured from the pivot.
+  ``y = -h``; ``w`` is ``wind_factor`` times the wind input (1 by default). The distance is
+  ``x`` at landing, measured from the pivot.
 
 Events are located as the original's ``ContinuousCallback`` does on a fixed-step ``Euler()``
 integrator: inside the step, on the linear interpolant ``u(s) = u_n + s (u_{n+1} - u_n)`` with
