@@ -97,8 +97,10 @@ def main() -> None:
         "true": task,
     }
     runs = []
-    print(f"\ncontrollers: {config.updates} updates, population {config.population}, "
-          f"{config.horizon_s} s; loss on the real system")
+    print(
+        f"\ncontrollers: {config.updates} updates, population {config.population}, "
+        f"{config.horizon_s} s; loss on the real system"
+    )
     for seed in range(args.seeds):
         row = {"seed": seed}
         for label, t in trained.items():
@@ -116,34 +118,50 @@ def main() -> None:
                 "dissipated_energy": s.dissipated_energy,
                 "peak_force": s.peak_force,
             }
-            print(f"seed {seed} {label:<8} real loss {rec.loss:7.3f}  |theta_end| "
-                  f"{abs(s.final_theta):.3f}  E {s.dissipated_energy:6.1f} J  ({seconds:.0f} s)",
-                  flush=True)
+            print(
+                f"seed {seed} {label:<8} real loss {rec.loss:7.3f}  |theta_end| "
+                f"{abs(s.final_theta):.3f}  E {s.dissipated_energy:6.1f} J  ({seconds:.0f} s)",
+                flush=True,
+            )
         a, b, c = (row[k]["real_loss"] for k in ("nominal", "hybrid", "true"))
         row["gap_closed"] = (a - b) / (a - c)
         runs.append(row)
         print(f"seed {seed} gap closed {row['gap_closed']:.1%}")
     mean = {k: float(np.mean([r[k]["real_loss"] for r in runs])) for k in trained}
     gap = (mean["nominal"] - mean["hybrid"]) / (mean["nominal"] - mean["true"])
-    print(f"\nmean real loss: nominal {mean['nominal']:.3f}, hybrid {mean['hybrid']:.3f}, "
-          f"true {mean['true']:.3f}; gap closed {gap:.1%} (target 90 %), "
-          f"{FIT_EPISODES} recorded episodes fitted")
+    print(
+        f"\nmean real loss: nominal {mean['nominal']:.3f}, hybrid {mean['hybrid']:.3f}, "
+        f"true {mean['true']:.3f}; gap closed {gap:.1%} (target 90 %), "
+        f"{FIT_EPISODES} recorded episodes fitted"
+    )
     out = HERE / "results" / "fit_swingup.json"
     doc = {
         "machine": machine(),
         "task": TASK,
-        "real_params": {n: float(getattr(real, n)) for n in
-                        ("cart_viscous", "cart_coulomb", "pole_viscous", "pole_coulomb")},
-        "data": {"episodes": EPISODES, "fit_episodes": FIT_EPISODES, "duration_s": 5.0,
-                 "dt_s": 0.02, "fit_transitions": fit_data.num_steps, "seed": 0},
+        "real_params": {
+            n: float(getattr(real, n))
+            for n in ("cart_viscous", "cart_coulomb", "pole_viscous", "pole_coulomb")
+        },
+        "data": {
+            "episodes": EPISODES,
+            "fit_episodes": FIT_EPISODES,
+            "duration_s": 5.0,
+            "dt_s": 0.02,
+            "fit_transitions": fit_data.num_steps,
+            "seed": 0,
+        },
         "fits": fits,
         "prediction_error": {
             "what": "held-out RMS error of the state (x m, x_dot m/s, theta rad, theta_dot "
             "rad/s) H steps of 0.02 s ahead, open loop with the recorded forces",
             **{k: {str(h): v for h, v in e.items()} for k, e in errors.items()},
         },
-        "training": {"updates": config.updates, "population": config.population,
-                     "horizon_s": config.horizon_s, "loss": config.loss or task.losses[0]},
+        "training": {
+            "updates": config.updates,
+            "population": config.population,
+            "horizon_s": config.horizon_s,
+            "loss": config.loss or task.losses[0],
+        },
         "runs": runs,
         "mean_real_loss": mean,
         "gap_closed": gap,

@@ -38,9 +38,9 @@ import optax
 import optimistix as optx
 
 from .data import TrajectoryData, parse_column
-from .errors import ConfigError, DataFileError, InsufficientDataError
+from .errors import ConfigError, DataFileError, InsufficientDataError, ModelFileError
 from .fitting import HORIZONS, MIN_TRANSITIONS_PER_PARAMETER, _standard_errors
-from .models import Correction
+from .models import Correction, correction_from_dict, correction_to_dict
 from .systems import cartpole_swingup as cp
 from .tasks.fitted_swingup import FRICTION_NAMES, SwingUpModel, frictionless
 
@@ -120,8 +120,12 @@ def record_swingup(
     """
     if not isinstance(episodes, int) or episodes < 1:
         raise ConfigError(f"episodes must be a positive integer, got {episodes!r}")
-    for name, value in (("dt_s", dt_s), ("duration_s", duration_s), ("force_max", force_max),
-                        ("hold_s", hold_s)):
+    for name, value in (
+        ("dt_s", dt_s),
+        ("duration_s", duration_s),
+        ("force_max", force_max),
+        ("hold_s", hold_s),
+    ):
         if not (math.isfinite(value) and value > 0):
             raise ConfigError(f"{name} must be a positive number, got {value!r}")
     steps = int(round(duration_s / dt_s))
@@ -133,7 +137,13 @@ def record_swingup(
         def advance(y, f):
             term = diffrax.ODETerm(lambda t, y, f: model.vector_field(t, y, lambda t, s: f)[:4])
             sol = diffrax.diffeqsolve(
-                term, diffrax.Tsit5(), 0.0, dt_s, None, y, args=f,
+                term,
+                diffrax.Tsit5(),
+                0.0,
+                dt_s,
+                None,
+                y,
+                args=f,
                 stepsize_controller=diffrax.PIDController(rtol=1e-9, atol=1e-9),
                 max_steps=10_000,
             )
@@ -282,8 +292,7 @@ def _initial_model(kind, nominal, data, dt, hidden, key) -> SwingUpModel:
         acc_std = np.maximum(np.std(np.concatenate(acc), axis=0), 1e-6)
         f_std = max(float(np.std(data.actions[np.isfinite(data.actions)])), 1e-6)
         in_scale = [1 / std[1], 1.0, 1.0, 1 / std[3], 1 / f_std]
-        net = Correction(key, 5, 2, hidden, in_scale=in_scale, out_scale=acc_std,
-                         zero_output=False)
+        net = Correction(key, 5, 2, hidden, in_scale=in_scale, out_scale=acc_std, zero_output=False)
     net = jax.tree.map(lambda a: jnp.asarray(a, jnp.float64) if eqx.is_inexact_array(a) else a, net)
     return SwingUpModel(kind, nominal, net)
 
@@ -355,12 +364,25 @@ def fit_swingup_model(
             "episodes"
         )
     with jax.enable_x64(True):
-        return _fit(data, kind, params or cp.SwingUpParams(), window, steps, learning_rate,
-                    tuple(hidden), weight_decay, substeps, lm_steps, seed, dt)
+        return _fit(
+            data,
+            kind,
+            params or cp.SwingUpParams(),
+            window,
+            steps,
+            learning_rate,
+            tuple(hidden),
+            weight_decay,
+            substeps,
+            lm_steps,
+            seed,
+            dt,
+        )
 
 
-def _fit(data, kind, params, window, steps, lr, hidden, weight_decay, substeps, lm_steps,
-         seed, dt) -> ODEFitResult:
+def _fit(
+    data, kind, params, window, steps, lr, hidden, weight_decay, substeps, lm_steps, seed, dt
+) -> ODEFitResult:
     nominal = frictionless(jax.tree.map(lambda x: jnp.asarray(x, jnp.float64), params))
     batch = _windows(data, window)
     if batch is None:
@@ -404,8 +426,12 @@ def _fit(data, kind, params, window, steps, lr, hidden, weight_decay, substeps, 
     best, best_loss, history, diverged, message = _adam(loss, theta0, batch, optimiser, steps)
     if kind == "params" and lm_steps and not diverged:
         sol = optx.least_squares(
-            residuals, optx.LevenbergMarquardt(rtol=1e-10, atol=1e-12), best, args=batch,
-            max_steps=lm_steps, throw=False,
+            residuals,
+            optx.LevenbergMarquardt(rtol=1e-10, atol=1e-12),
+            best,
+            args=batch,
+            max_steps=lm_steps,
+            throw=False,
         )
         lm_loss = float(loss(sol.value, batch))
         if math.isfinite(lm_loss) and lm_loss < best_loss:
@@ -509,14 +535,18 @@ def prediction_errors(
     names = [parse_column(c)[1] for c in STATE_COLUMNS]
     out = {}
     with jax.enable_x64(True):
-        m = jax.tree.map(lambda a: jnp.asarray(a, jnp.float64) if eqx.is_inexact_array(a) else a,
-                         model)
+        m = jax.tree.map(
+            lambda a: jnp.asarray(a, jnp.float64) if eqx.is_inexact_array(a) else a, model
+        )
         run = jax.jit(jax.vmap(lambda s, f: predict(m, s, f, dt, substeps)[-1]))
         for h in horizons:
             batch = _windows(data, h)
             if batch is None:
-                out[h] = {"rmse": math.nan, "rmse_by_column": dict.fromkeys(names, math.nan),
-                          "starts": 0}
+                out[h] = {
+                    "rmse": math.nan,
+                    "rmse_by_column": dict.fromkeys(names, math.nan),
+                    "starts": 0,
+                }
                 continue
             err = np.asarray(_state_error(run(batch[0], batch[1]), batch[2][:, -1]))
             out[h] = {
@@ -525,3 +555,67 @@ def prediction_errors(
                 "starts": int(err.shape[0]),
             }
     return out
+
+
+# --- storing a fitted model ------------------------------------------------------------------
+
+NETWORK_SIGNATURES = {
+    "hybrid": (["x_dot [m/s]", "theta_dot [rad/s]"], ["cart_force [N]", "joint_torque [N m]"]),
+    "neural": (
+        ["x_dot [m/s]", "cos(theta) [1]", "sin(theta) [1]", "theta_dot [rad/s]", "force [N]"],
+        ["x_acc [m/s^2]", "theta_acc [rad/s^2]"],
+    ),
+}
+"""What a stored network takes and gives, per model kind (written next to it for readers)."""
+
+
+def model_to_dict(model: SwingUpModel) -> dict[str, Any]:
+    """The model as plain JSON: its kind, every physical parameter and, for ``hybrid`` and
+    ``neural``, the network (``models.correction_to_dict``) with its inputs and outputs."""
+    doc: dict[str, Any] = {
+        "kind": model.kind,
+        "all_parameters": {
+            f.name: float(np.asarray(getattr(model.params, f.name)))
+            for f in dataclasses.fields(model.params)
+        },
+    }
+    if model.correction is not None:
+        inputs, outputs = NETWORK_SIGNATURES[model.kind]
+        doc["network"] = {
+            "inputs": inputs,
+            "outputs": outputs,
+            **correction_to_dict(model.correction),
+        }
+    return doc
+
+
+def model_from_dict(doc: Any, where: str = "the fitted model") -> SwingUpModel:
+    """Rebuild a ``SwingUpModel`` from ``model_to_dict``'s output (or a ``fitted.json``).
+
+    Raises:
+        ModelFileError: an unknown kind, missing or non-numeric parameters, a malformed
+            network, or a network whose sizes do not fit the kind.
+    """
+    kind = doc.get("kind", doc.get("model")) if isinstance(doc, dict) else None
+    if kind not in ("nominal", *FIT_KINDS):
+        raise ModelFileError(f"{where}: unknown model kind {kind!r}; refit the model")
+    names = [f.name for f in dataclasses.fields(cp.SwingUpParams)]
+    values = doc.get("all_parameters") or {}
+    try:
+        params = cp.SwingUpParams(**{n: float(values[n]) for n in names})
+    except (KeyError, TypeError, ValueError) as e:
+        raise ModelFileError(
+            f"{where}: the physical parameters are incomplete or not numbers ({e!r}); "
+            f"it needs {names}; refit the model"
+        ) from None
+    if kind in ("nominal", "params"):
+        return SwingUpModel(kind, params)
+    net = correction_from_dict(doc.get("network"), where)
+    inputs, outputs = NETWORK_SIGNATURES[kind]
+    sizes = (net.net.layers[0].weight.shape[1], net.net.layers[-1].weight.shape[0])
+    if sizes != (len(inputs), len(outputs)):
+        raise ModelFileError(
+            f"{where}: a {kind} network takes {len(inputs)} inputs and gives {len(outputs)} "
+            f"outputs, this one {sizes}; refit the model"
+        )
+    return SwingUpModel(kind, params, net)

@@ -134,6 +134,10 @@ def cmd_fit(args: argparse.Namespace) -> int:
     from ..fitting import HORIZONS, fit_parameters, prediction_errors
     from ..io import now_iso, write_json
 
+    if tasks.make(args.task).kind == "ode":  # the swing-ups: their own branch, _fit_ode
+        from ._fit_ode import cmd_fit_ode
+
+        return cmd_fit_ode(args, tasks.make(args.task))
     if args.model != "params":
         raise ConfigError(
             f"--model {args.model} is not implemented yet; use --model params (the task's "
