@@ -69,10 +69,11 @@ def test_generalized_forces_enter_like_the_systems_friction():
 def test_hybrid_starts_at_the_nominal_physics(split):
     unfitted = of.fit_swingup_model(split[0], "hybrid", window=2, steps=0, hidden=(8,))
     nominal = of.nominal_model(REAL)
-    state, force = jnp.array([0.3, -1.0, 2.0, 4.0]), jnp.asarray(7.0)
-    np.testing.assert_allclose(
-        unfitted.model.accelerations(state, force), nominal.accelerations(state, force)
-    )
+    with jax.enable_x64(True):  # the fitted model is float64
+        state, force = jnp.array([0.3, -1.0, 2.0, 4.0]), jnp.asarray(7.0)
+        np.testing.assert_allclose(
+            unfitted.model.accelerations(state, force), nominal.accelerations(state, force)
+        )
     assert unfitted.loss_history.size == 0 and not unfitted.diverged
 
 
@@ -87,7 +88,7 @@ def test_hybrid_fit_beats_the_nominal_model_on_held_out_data(split, hybrid_fit):
 
 
 def test_grey_box_recovers_the_friction(split):
-    r = of.fit_swingup_model(split[0], "params", window=5, steps=100, learning_rate=0.02)
+    r = of.fit_swingup_model(split[0], "params", window=5, steps=30, lm_steps=10)
     for name, value in r.values.items():
         assert value == pytest.approx(getattr(REAL, name), rel=0.05, abs=2e-3), name
         assert np.isfinite(r.standard_errors[name])
@@ -101,12 +102,12 @@ def test_training_through_the_fitted_model(hybrid_fit):
     nominal = cp.vector_field(0.0, y, (frictionless(REAL), push))
     fitted = wrapped.vector_field(0.0, y, (wrapped.default_params(), push))
     assert jnp.abs(fitted[1] - nominal[1]) > 0.1  # the learned friction slows the cart
-    config = task.default_config().replace(updates=4, eval_every=2, population=1, horizon_s=1.0)
+    config = task.default_config().replace(
+        updates=4, eval_every=2, population=1, horizon_s=1.0, saves=10
+    )
     result = diffcontrol.train(wrapped, config)
     assert result.metrics["updates"] == 4
     assert np.isfinite(result.metrics["final_eval_return"])
-    rec = diffcontrol.evaluation.simulate_continuous(task, result.controller, REAL, config=config)
-    assert np.isfinite(rec.loss)
 
 
 def test_too_little_data_says_how_much_is_needed(data):

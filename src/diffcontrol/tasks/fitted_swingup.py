@@ -135,7 +135,8 @@ class FittedSwingUp(CartPoleSwingUp):
         self.losses = task.losses
 
     def default_params(self) -> cp.SwingUpParams:
-        return self.model.params
+        # plain floats, as every task's: the trainer makes them arrays of its own precision
+        return jax.tree.map(float, self.model.params)
 
     def default_config(self):
         return self.base.default_config()
