@@ -38,11 +38,17 @@ import optax
 import optimistix as optx
 
 from .data import TrajectoryData, parse_column
-from .errors import ConfigError, DataFileError, InsufficientDataError, ModelFileError
+from .errors import ConfigError, DataFileError, InsufficientDataError
 from .fitting import HORIZONS, MIN_TRANSITIONS_PER_PARAMETER, _standard_errors
-from .models import Correction, correction_from_dict, correction_to_dict
+from .models import Correction
 from .systems import cartpole_swingup as cp
-from .tasks.fitted_swingup import FRICTION_NAMES, SwingUpModel, frictionless
+from .tasks.fitted_swingup import (  # noqa: F401  (model_to_dict/from_dict: re-exported)
+    FRICTION_NAMES,
+    SwingUpModel,
+    frictionless,
+    model_from_dict,
+    model_to_dict,
+)
 
 STATE_COLUMNS = ("state.x [m]", "state.x_dot [m/s]", "state.theta [rad]", "state.theta_dot [rad/s]")
 """The recorded state of the swing-up cart-pole (theta = 0 upright, not wrapped)."""
@@ -555,67 +561,3 @@ def prediction_errors(
                 "starts": int(err.shape[0]),
             }
     return out
-
-
-# --- storing a fitted model ------------------------------------------------------------------
-
-NETWORK_SIGNATURES = {
-    "hybrid": (["x_dot [m/s]", "theta_dot [rad/s]"], ["cart_force [N]", "joint_torque [N m]"]),
-    "neural": (
-        ["x_dot [m/s]", "cos(theta) [1]", "sin(theta) [1]", "theta_dot [rad/s]", "force [N]"],
-        ["x_acc [m/s^2]", "theta_acc [rad/s^2]"],
-    ),
-}
-"""What a stored network takes and gives, per model kind (written next to it for readers)."""
-
-
-def model_to_dict(model: SwingUpModel) -> dict[str, Any]:
-    """The model as plain JSON: its kind, every physical parameter and, for ``hybrid`` and
-    ``neural``, the network (``models.correction_to_dict``) with its inputs and outputs."""
-    doc: dict[str, Any] = {
-        "kind": model.kind,
-        "all_parameters": {
-            f.name: float(np.asarray(getattr(model.params, f.name)))
-            for f in dataclasses.fields(model.params)
-        },
-    }
-    if model.correction is not None:
-        inputs, outputs = NETWORK_SIGNATURES[model.kind]
-        doc["network"] = {
-            "inputs": inputs,
-            "outputs": outputs,
-            **correction_to_dict(model.correction),
-        }
-    return doc
-
-
-def model_from_dict(doc: Any, where: str = "the fitted model") -> SwingUpModel:
-    """Rebuild a ``SwingUpModel`` from ``model_to_dict``'s output (or a ``fitted.json``).
-
-    Raises:
-        ModelFileError: an unknown kind, missing or non-numeric parameters, a malformed
-            network, or a network whose sizes do not fit the kind.
-    """
-    kind = doc.get("kind", doc.get("model")) if isinstance(doc, dict) else None
-    if kind not in ("nominal", *FIT_KINDS):
-        raise ModelFileError(f"{where}: unknown model kind {kind!r}; refit the model")
-    names = [f.name for f in dataclasses.fields(cp.SwingUpParams)]
-    values = doc.get("all_parameters") or {}
-    try:
-        params = cp.SwingUpParams(**{n: float(values[n]) for n in names})
-    except (KeyError, TypeError, ValueError) as e:
-        raise ModelFileError(
-            f"{where}: the physical parameters are incomplete or not numbers ({e!r}); "
-            f"it needs {names}; refit the model"
-        ) from None
-    if kind in ("nominal", "params"):
-        return SwingUpModel(kind, params)
-    net = correction_from_dict(doc.get("network"), where)
-    inputs, outputs = NETWORK_SIGNATURES[kind]
-    sizes = (net.net.layers[0].weight.shape[1], net.net.layers[-1].weight.shape[0])
-    if sizes != (len(inputs), len(outputs)):
-        raise ModelFileError(
-            f"{where}: a {kind} network takes {len(inputs)} inputs and gives {len(outputs)} "
-            f"outputs, this one {sizes}; refit the model"
-        )
-    return SwingUpModel(kind, params, net)

@@ -23,18 +23,25 @@ A ``SwingUpModel`` is the cart-pole's vector field as the fitted model sees it, 
 model's, so ``diffcontrol.train(FittedSwingUp(task, model))`` trains a controller through the
 fitted model; evaluate it on the real system with
 ``diffcontrol.evaluation.simulate_continuous(task, controller, real_params)``.
+
+``model_to_dict`` / ``model_from_dict`` store a model as plain JSON (the physical parameters,
+and the network as lists under ``"network"``), as ``diffcontrol fit`` writes it in
+``fitted.json``.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Float
 
-from ..models import Correction
+from ..errors import ConfigError, ModelFileError
+from ..models import Correction, correction_from_dict, correction_to_dict
 from ..systems import cartpole_swingup as cp
 from .swingup import CartPoleSwingUp
 
@@ -86,9 +93,12 @@ class SwingUpModel(eqx.Module):
 
     def __check_init__(self):
         if self.kind not in MODEL_KINDS:
-            raise ValueError(f"unknown model kind {self.kind!r}; choose one of {MODEL_KINDS}")
+            raise ConfigError(f"unknown model kind {self.kind!r}; choose one of {MODEL_KINDS}")
         if (self.correction is None) != (self.kind in ("nominal", "params")):
-            raise ValueError(f"a {self.kind!r} model needs a correction iff hybrid or neural")
+            raise ConfigError(
+                f"a {self.kind!r} model got correction={type(self.correction).__name__}: hybrid "
+                "and neural models need a correction network, nominal and params models none"
+            )
 
     def accelerations(
         self, state: Float[Array, " 4"], force: Float[Array, ""]
@@ -153,3 +163,67 @@ class FittedSwingUp(CartPoleSwingUp):
 
     def __repr__(self) -> str:
         return f"<task {self.name}>"
+
+
+# --- storing a fitted model ------------------------------------------------------------------
+
+NETWORK_SIGNATURES = {
+    "hybrid": (["x_dot [m/s]", "theta_dot [rad/s]"], ["cart_force [N]", "joint_torque [N m]"]),
+    "neural": (
+        ["x_dot [m/s]", "cos(theta) [1]", "sin(theta) [1]", "theta_dot [rad/s]", "force [N]"],
+        ["x_acc [m/s^2]", "theta_acc [rad/s^2]"],
+    ),
+}
+"""What a stored network takes and gives, per model kind (written next to it for readers)."""
+
+
+def model_to_dict(model: SwingUpModel) -> dict[str, Any]:
+    """The model as plain JSON: its kind, every physical parameter and, for ``hybrid`` and
+    ``neural``, the network (``models.correction_to_dict``) with its inputs and outputs."""
+    doc: dict[str, Any] = {
+        "kind": model.kind,
+        "all_parameters": {
+            f.name: float(np.asarray(getattr(model.params, f.name)))
+            for f in dataclasses.fields(model.params)
+        },
+    }
+    if model.correction is not None:
+        inputs, outputs = NETWORK_SIGNATURES[model.kind]
+        doc["network"] = {
+            "inputs": inputs,
+            "outputs": outputs,
+            **correction_to_dict(model.correction),
+        }
+    return doc
+
+
+def model_from_dict(doc: Any, where: str = "the fitted model") -> SwingUpModel:
+    """Rebuild a ``SwingUpModel`` from ``model_to_dict``'s output (or a ``fitted.json``).
+
+    Raises:
+        ModelFileError: an unknown kind, missing or non-numeric parameters, a malformed
+            network, or a network whose sizes do not fit the kind.
+    """
+    kind = doc.get("kind", doc.get("model")) if isinstance(doc, dict) else None
+    if kind not in MODEL_KINDS:
+        raise ModelFileError(f"{where}: unknown model kind {kind!r}; refit the model")
+    names = [f.name for f in dataclasses.fields(cp.SwingUpParams)]
+    values = doc.get("all_parameters") or {}
+    try:
+        params = cp.SwingUpParams(**{n: float(values[n]) for n in names})
+    except (KeyError, TypeError, ValueError) as e:
+        raise ModelFileError(
+            f"{where}: the physical parameters are incomplete or not numbers ({e!r}); "
+            f"it needs {names}; refit the model"
+        ) from None
+    if kind in ("nominal", "params"):
+        return SwingUpModel(kind, params)
+    net = correction_from_dict(doc.get("network"), where)
+    inputs, outputs = NETWORK_SIGNATURES[kind]
+    sizes = (net.net.layers[0].weight.shape[1], net.net.layers[-1].weight.shape[0])
+    if sizes != (len(inputs), len(outputs)):
+        raise ModelFileError(
+            f"{where}: a {kind} network takes {len(inputs)} inputs and gives {len(outputs)} "
+            f"outputs, this one {sizes}; refit the model"
+        )
+    return SwingUpModel(kind, params, net)
