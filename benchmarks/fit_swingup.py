@@ -15,7 +15,7 @@ model, for each seed, and every controller is evaluated on the real system
 (``simulate_continuous``: float64 reference solve, the task's loss). The gap closed is
 ``(a - b) / (a - c)``.
 
-    taskset -c 1 python benchmarks/fit_swingup.py [--seeds 2] [--fit-steps 500]
+    taskset -c 1 python benchmarks/fit_swingup.py [--seeds 3] [--fit-steps 500]
 
 Prints tables and writes benchmarks/results/fit_swingup.json (machine, date, every figure).
 """
@@ -45,7 +45,7 @@ EPISODES, FIT_EPISODES = 10, 8
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seeds", type=int, default=2)
+    parser.add_argument("--seeds", type=int, default=3)
     parser.add_argument("--fit-steps", type=int, default=500)
     parser.add_argument("--updates", type=int, default=0, help="0: the task's default")
     args = parser.parse_args()
