@@ -36,13 +36,18 @@ def add_parser(sub: Any) -> None:
             "a trebuchet whose parameters --env-arg sets (e.g. --env-arg drag_coefficient=1.5 "
             "--env-arg wind_factor=1.5), written as a diffcontrol-throws file (columns wind "
             "[m/s], release_angle [deg], counterweight [lb], distance [m]) for `diffcontrol "
-            "fit trebuchet`."
+            "fit trebuchet`. ENV_ID cartpole-swingup (or another swing-up task) records the "
+            "swing-up cart-pole's full state (x, x_dot, theta, theta_dot) and force at 50 Hz "
+            "for `diffcontrol fit cartpole-swingup-friction`: N episodes of 5 s with random "
+            "force levels in +-40 N, of a cart-pole whose parameters --env-arg sets (e.g. "
+            "--env-arg cart_viscous=2)."
         ),
     )
     p.add_argument(
         "env_id",
         metavar="ENV_ID",
-        help="a registered Gymnasium environment id, or trebuchet for throws",
+        help="a registered Gymnasium environment id, trebuchet for throws, or a swing-up "
+        "task (cartpole-swingup...) for its state",
     )
     p.add_argument(
         "--episodes",
@@ -130,6 +135,8 @@ def cmd_record(args: argparse.Namespace) -> int:
         from ._throws import cmd_record_throws
 
         return cmd_record_throws(args, _check_out)
+    if args.env_id.startswith("cartpole-swingup"):  # a swing-up task: its state, in Python
+        return _record_swingup(args)
     if args.noise_m is not None:
         raise ConfigError(
             f"--noise-m applies to `diffcontrol record trebuchet` only, not {args.env_id}; drop it"
@@ -162,5 +169,43 @@ def cmd_record(args: argparse.Namespace) -> int:
         f"wrote {out}: {data.num_episodes} episode(s), {data.num_steps} steps, "
         f"{len(data.observation_columns)} observation and {len(data.action_columns)} action "
         f"column(s) ({time.perf_counter() - t0:.1f} s)"
+    )
+    return 0
+
+
+def _record_swingup(args: argparse.Namespace) -> int:
+    """``diffcontrol record cartpole-swingup...``: the state of the swing-up cart-pole with the
+    task's parameters and ``--env-arg`` changes, under random forces (``record_swingup``)."""
+    from .. import tasks
+    from ..data import write_trajectories
+    from ..ode_fitting import record_swingup
+    from ..training import task_params
+
+    task = tasks.make(args.env_id)
+    for flag, value in (("--controller", args.controller), ("--max-steps", args.max_steps)):
+        if value is not None:
+            raise ConfigError(
+                f"{flag} does not apply to recording {task.name}: its episodes are 5 s of "
+                "random forces; drop it"
+            )
+    if args.noise_m is not None:
+        raise ConfigError(f"--noise-m applies to the trebuchet only, not {task.name}; drop it")
+    params = task_params(task, tuple(args.env_arg))
+    out = Path(args.out or f"{task.name}-state.csv")
+    _check_out(out, args.force)
+    if not args.quiet:
+        changed = ", ".join(f"{n}={v:g}" for n, v in args.env_arg) or "its parameters"
+        print(f"recording {args.episodes} episode(s) of the {task.name} cart-pole ({changed})")
+    t0 = time.perf_counter()
+    data = record_swingup(params, args.episodes, seed=args.seed)
+    try:
+        write_trajectories(out, data)
+    except OSError as e:
+        raise DataFileError(
+            f"cannot write --out {out} ({e.strerror}); choose a writable --out"
+        ) from None
+    print(
+        f"wrote {out}: {data.num_episodes} episode(s), {data.num_steps} steps of the state "
+        f"and force ({time.perf_counter() - t0:.1f} s)"
     )
     return 0

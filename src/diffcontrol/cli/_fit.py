@@ -14,6 +14,8 @@ from ._args import finite_float, names, nonneg_int, positive_float, positive_int
 
 DEFAULTS = {"params": (300, 0.02), "hybrid": (2000, 3e-3), "neural": (2000, 3e-3)}
 """Adam steps and learning rate by model kind."""
+DEFAULTS_ODE = {"params": (300, 0.02), "hybrid": (500, 1e-2), "neural": (500, 1e-2)}
+"""The same for continuous-time tasks (the swing-ups; ``benchmarks/fit_swingup.py``)."""
 
 MODELS = ("params", "hybrid", "neural")
 
@@ -76,7 +78,8 @@ def add_parser(sub: Any) -> None:
         default=None,
         metavar="NAMES",
         help="--model params: comma-separated parameters to fit (default g,friction; for "
-        "the trebuchet drag_coefficient,wind_factor); the others keep their nominal values",
+        "the trebuchet drag_coefficient,wind_factor; the swing-ups always fit their four "
+        "friction coefficients); the others keep their nominal values",
     )
     p.add_argument(
         "--hidden",
@@ -98,7 +101,7 @@ def add_parser(sub: Any) -> None:
         type=nonneg_int,
         default=None,
         metavar="N",
-        help="Adam steps (300 for params, 2000 for hybrid and neural)",
+        help="Adam steps (300 for params; 2000 for hybrid and neural, 500 for the swing-ups')",
     )
     p.add_argument(
         "--lm-steps",
@@ -113,7 +116,7 @@ def add_parser(sub: Any) -> None:
         default=None,
         metavar="LR",
         help="Adam's step size: for params in log-parameter units (0.02: about 2 %% a "
-        "step); for networks 0.003, cosine-decayed",
+        "step); for networks 0.003 (swing-ups 0.01), cosine-decayed",
     )
     p.add_argument(
         "--holdout",
@@ -174,13 +177,17 @@ def cmd_fit(args: argparse.Namespace) -> int:
     from ..data import read_trajectories
 
     task = tasks.make(args.task)
-    steps, lr = DEFAULTS[args.model]
+    steps, lr = (DEFAULTS_ODE if task.kind == "ode" else DEFAULTS)[args.model]
     args.steps = steps if args.steps is None else args.steps
     args.learning_rate = lr if args.learning_rate is None else args.learning_rate
     if task.kind == "aiming":  # the trebuchet: fitted to recorded throws
         from ._throws import cmd_fit_throws
 
         return cmd_fit_throws(args, task)
+    if task.kind == "ode":  # the swing-ups: fitted to recorded states
+        from ._fit_ode import cmd_fit_ode
+
+        return cmd_fit_ode(args, task)
     if task.kind != "control":
         raise ConfigError(
             f"task {task.name!r} is a {task.kind!r} task; fitting needs a discrete-time "

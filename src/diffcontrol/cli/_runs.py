@@ -134,6 +134,12 @@ def _ode_recording(run_dir: str, task):
     if Path(run_dir).is_dir() and run_file.exists():
         config = type(config).from_json(io.read_json(run_file, "run file")["config"])
     params = task_params(task, config.params)
+    metrics = Path(run_dir) / "metrics.json"
+    if Path(run_dir).is_dir() and metrics.exists():  # a --model run: its real system
+        from ._train import real_params
+
+        real = (io.read_json(metrics, "metrics").get("model") or {}).get("real_system")
+        params = real_params(task, real) if real_params(task, real) is not None else params
     return simulate_continuous(task, io.controller_from_dict(doc), params, config=config)
 
 

@@ -264,10 +264,12 @@ def _fitted(args: argparse.Namespace, task: Any) -> tuple[Any, tuple, tuple | No
     its data came from (``None`` without --model, or if the data names no environment)."""
     if not args.model:
         return task, (), None
-    from ..models import fitted_model, model_task, read_fitted
+    import numpy as np
+
+    from ..models import fitted_model, fitted_physics, model_task, read_fitted
 
     doc = read_fitted(args.model)
-    model = fitted_model(task, doc)  # refuses a model of another task
+    fitted_physics(task, doc)  # refuses a model of another task
     real = real_system(doc)
     if doc["model"] == "params":
         return task, tuple(sorted(doc["all_parameters"].items())), real
@@ -276,11 +278,18 @@ def _fitted(args: argparse.Namespace, task: Any) -> tuple[Any, tuple, tuple | No
             f"--param cannot change the physics of the {doc['model']} model in {args.model}; "
             "refit it, or train with a grey-box (--model params) fit"
         )
-    print(
-        f"training through the {doc['model']} model in {args.model} "
-        f"({doc['network'].get('parameters', '?')} network weights)"
+    if task.kind == "ode":
+        from ..tasks.fitted_swingup import FittedSwingUp, model_from_dict
+
+        fitted = FittedSwingUp(task, model_from_dict(doc, doc["_path"]))
+        fitted.name = task.name  # model.json names the task the controller runs on
+    else:
+        fitted = model_task(task, fitted_model(task, doc))
+    weights = sum(
+        np.asarray(l["weight"]).size + len(l["bias"]) for l in doc["network"].get("layers", [])
     )
-    return model_task(task, model), (), real
+    print(f"training through the {doc['model']} model in {args.model} ({weights} network weights)")
+    return fitted, (), real
 
 
 def real_system(doc: dict) -> dict | None:
@@ -312,6 +321,9 @@ def _kind_of(task: Any) -> str:
     """``params``, ``hybrid`` or ``neural``: what a --model run trains through."""
     from ..models import HybridModel, NeuralModel
 
+    fitted = getattr(task, "model", None)  # a swing-up's FittedSwingUp
+    if fitted is not None and getattr(fitted, "kind", None) in ("hybrid", "neural"):
+        return fitted.kind
     model = task.default_params()
     if isinstance(model, HybridModel):
         return "hybrid"
@@ -358,10 +370,15 @@ def _finish_ode(args, task, out: Path, result, metrics: dict, say) -> int:
     from .. import io, plots
     from ..evaluation import simulate_continuous, swingup_result
 
-    rec = simulate_continuous(task, result.controller, result.params, config=result.config)
+    base = getattr(task, "base", task)  # a fitted model's task: the system it models
+    real = real_params(base, (metrics.get("model") or {}).get("real_system"))
+    if real is not None:  # a --model run: on the real system its data came from
+        rec = simulate_continuous(base, result.controller, real, config=result.config)
+    else:
+        rec = simulate_continuous(task, result.controller, result.params, config=result.config)
     report = swingup_result(rec)
     metrics["swingup"] = report.to_json()
-    say(f"reference solve: {report.summary()}")
+    say(f"reference solve{' on the real system' if real is not None else ''}: {report.summary()}")
     io.write_json(out / "metrics.json", metrics)
     io.write_json(out / "data.json", rec.to_json())
     plots.learning_curve(metrics, out / "learning_curve.png", None)

@@ -1,0 +1,114 @@
+"""``diffcontrol fit`` for continuous-time tasks (the swing-ups): grey-box, hybrid or neural
+models of the cart-pole from recorded state data (``diffcontrol.ode_fitting``).
+
+Kept apart from ``_fit`` (the discrete-time fits); ``_fit.cmd_fit`` hands continuous-time
+tasks to ``cmd_fit_ode``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+from pathlib import Path
+from typing import Any
+
+
+def cmd_fit_ode(args: argparse.Namespace, task: Any) -> int:
+    """Fit ``args.model`` to ``args.data`` for the continuous-time ``task``; write
+    ``DIR/fitted.json`` (format ``diffcontrol-fitted-model``, version 1)."""
+    from .. import __version__
+    from .. import ode_fitting as of
+    from ..data import read_trajectories
+    from ..io import now_iso, write_json
+    from ._fit import _check_out, _make_out, _split
+
+    data = read_trajectories(args.data)
+    out = Path(args.out)
+    _check_out(out, args.force)
+    train, held_out = _split(data, args.holdout)
+    say = (lambda line: None) if args.quiet else print
+    nominal_params = task.default_params()
+    say(
+        f"fitting a {args.model} model of {task.name} to {train.num_episodes} episode(s) "
+        f"({train.num_steps} transitions) of {args.data}, windows of {args.window} steps"
+    )
+    t0 = time.perf_counter()
+    result = of.fit_swingup_model(
+        train,
+        args.model,
+        nominal_params,
+        window=args.window,
+        steps=args.steps,
+        learning_rate=args.learning_rate,
+        lm_steps=args.lm_steps,
+    )
+    seconds = time.perf_counter() - t0
+    errors = None
+    if held_out is not None:
+        errors = {
+            "nominal": of.prediction_errors(of.nominal_model(nominal_params), held_out),
+            "fitted": of.prediction_errors(result.model, held_out),
+        }
+    doc = {
+        "format": "diffcontrol-fitted-model",
+        "version": 1,
+        "task": task.name,
+        "model": args.model,
+        "parameters": {
+            n: {"value": v, "standard_error": result.standard_errors[n], "nominal": 0.0}
+            for n, v in result.values.items()
+        },
+        **{k: v for k, v in of.model_to_dict(result.model).items() if k != "kind"},
+        "fit": {
+            "window_steps": result.window,
+            "windows": result.windows,
+            "dt_s": result.dt_s,
+            "rk4_substeps": result.substeps,
+            "adam_steps": args.steps,
+            "learning_rate": args.learning_rate,
+            "lm_steps": args.lm_steps if args.model == "params" else 0,
+            "num_parameters": result.num_parameters,
+            "loss": result.loss,
+            "nominal_loss": result.nominal_loss,
+            "diverged": result.diverged,
+            "message": result.message,
+            "loss_history": result.loss_history.tolist(),
+            "seconds": seconds,
+        },
+        "data": {
+            "file": str(args.data),
+            "system": data.metadata.get("system"),
+            "metadata": data.metadata,
+            "fit_episodes": [e.id for e in train.episodes()],
+            "held_out_episodes": [e.id for e in held_out.episodes()] if held_out else [],
+            "fit_transitions": train.num_steps,
+        },
+        "prediction_error": None
+        if errors is None
+        else {
+            "what": "RMS error of the state (x m, x_dot m/s, theta rad, theta_dot rad/s) H "
+            "steps ahead, open loop from every recorded state of the held-out episodes with "
+            "the recorded forces",
+            "horizons_steps": list(of.HORIZONS),
+            **{label: {str(h): e for h, e in by_h.items()} for label, by_h in errors.items()},
+        },
+        "created": now_iso(),
+        "diffcontrol_version": __version__,
+    }
+    _make_out(out)
+    write_json(out / "fitted.json", doc)
+    for n, v in result.values.items():
+        se = result.standard_errors[n]
+        pm = f" ± {se:.3g}" if math.isfinite(se) else " (not identifiable from this data)"
+        print(f"{n} = {v:.6g}{pm} (nominal 0)")
+    if errors is not None:
+        for h in of.HORIZONS:
+            nom, fit = errors["nominal"][h]["rmse"], errors["fitted"][h]["rmse"]
+            print(
+                f"held-out RMS state error {h:>2} steps ahead: nominal {nom:.3g}, fitted {fit:.3g}"
+            )
+    if result.diverged:
+        print(f"warning: {result.message}")
+    print(f"wrote {out / 'fitted.json'} ({seconds:.1f} s fit)")
+    return 0
