@@ -184,6 +184,7 @@ def test_cli_fit_swingup_end_to_end(tmp_path, data, capsys):
     model = of.model_from_dict(doc, str(out / "fitted.json"))
     assert model.kind == "hybrid"
     assert "held-out RMS state error" in capsys.readouterr().out
+    assert (out / "prediction.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     # too little data: one line, exit status 2, says how much is needed
     short = tmp_path / "short.csv"
     write_trajectories(short, data.select([0]))

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import textwrap
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -17,22 +19,35 @@ from .data import TrajectoryData  # noqa: E402
 from .fitting import predict  # noqa: E402
 from .io import write_figure  # noqa: E402
 
+Predictor = Callable[[np.ndarray, np.ndarray], np.ndarray]
+"""``(first observation [k], actions [T, m]) -> predicted observations [T, k]``, open loop."""
 
-def _segments(task: Any, params: Any, obs: np.ndarray, actions: np.ndarray, every: int):
+
+def task_predictor(task: Any, params: Any) -> Predictor:
+    """Open loop through a discrete-time task's step with ``params`` (``fitting.predict``), in
+    float64; ``task`` may be ``models.model_task(task, model)`` with the model as ``params``."""
+
+    def run(obs0: np.ndarray, actions: np.ndarray) -> np.ndarray:
+        with jax.enable_x64(True):
+            p = jax.tree.map(lambda x: jnp.asarray(x, jnp.float64), params)
+            state = task.state_from_observation(jnp.asarray(obs0))
+            return np.asarray(predict(task, p, state, jnp.asarray(actions)))
+
+    return run
+
+
+def _segments(run: Predictor, obs: np.ndarray, actions: np.ndarray, every: int):
     """Open-loop predictions restarted from the recorded observation every ``every`` steps:
     a list of (first step, predicted observations [<= every + 1, k]) pieces."""
     out = []
-    with jax.enable_x64(True):
-        params = jax.tree.map(lambda x: jnp.asarray(x, jnp.float64), params)
-        for t in range(0, len(actions), every):
-            state = task.state_from_observation(jnp.asarray(obs[t]))
-            pred = np.asarray(predict(task, params, state, jnp.asarray(actions[t : t + every])))
-            out.append((t, np.concatenate([obs[t : t + 1], pred])))
+    for t in range(0, len(actions), every):
+        pred = run(obs[t], actions[t : t + every])
+        out.append((t, np.concatenate([obs[t : t + 1], pred])))
     return out
 
 
 def prediction_plot(
-    models: dict[str, tuple[Any, Any]],
+    models: dict[str, Predictor],
     data: TrajectoryData,
     path: str | Path,
     every: int = 50,
@@ -40,8 +55,8 @@ def prediction_plot(
     title: str = "",
 ) -> Path:
     """Plot each observation of the first ``episodes`` episodes of ``data`` (grey) against the
-    open-loop predictions of every model in ``models`` (label -> ``(task, params)``: a task
-    and its parameters, or ``models.model_task(task, model)`` and the model), restarted from
+    open-loop predictions of every model in ``models`` (label -> a ``Predictor``, e.g.
+    ``task_predictor(task, params)``), restarted from
     the recorded state every ``every`` steps with the recorded actions; write a PNG atomically.
     """
     eps = list(data.episodes())[:episodes]
@@ -53,8 +68,8 @@ def prediction_plot(
     for j, ep in enumerate(eps):
         t_axis = np.arange(len(ep.observations)) * dt
         pieces = {
-            label: _segments(task, p, ep.observations, ep.actions, every)
-            for label, (task, p) in models.items()
+            label: _segments(run, ep.observations, ep.actions, every)
+            for label, run in models.items()
         }
         for i, name in enumerate(names):
             ax = axes[i, j]
@@ -74,9 +89,7 @@ def prediction_plot(
                 ax.set_title(f"episode {ep.id}")
         axes[-1, j].set_xlabel("time (s)" if data.metadata.get("dt_s") else "step")
     axes[0, 0].legend(loc="best", fontsize=8)
-    fig.suptitle(
-        title or f"open-loop predictions, restarted from the recorded state every {every} steps",
-        fontsize=9,
-    )
+    title = title or f"open-loop predictions, restarted from the recorded state every {every} steps"
+    fig.suptitle("\n".join(textwrap.wrap(title, 60 * len(eps))), fontsize=9)
     fig.tight_layout()
     return write_figure(fig, path, dpi=100)

@@ -265,7 +265,7 @@ def _fit(args: argparse.Namespace, task: Any, train: Any) -> tuple[Any, Any, dic
 
 def _write(args, task, data, train, held_out, fit, predictor, model_doc, seconds, out) -> None:
     from .. import __version__
-    from .._fit_plot import prediction_plot
+    from .._fit_plot import prediction_plot, task_predictor
     from ..fitting import HORIZONS, prediction_errors
     from ..io import now_iso, write_json
 
@@ -321,7 +321,10 @@ def _write(args, task, data, train, held_out, fit, predictor, model_doc, seconds
     write_json(out / "fitted.json", doc)
     shown = held_out if held_out is not None else train
     prediction_plot(
-        {"fitted": predictor, "nominal": (task, task.default_params())},
+        {
+            "fitted": task_predictor(*predictor),
+            "nominal": task_predictor(task, task.default_params()),
+        },
         shown,
         out / "prediction.png",
         title=f"{task.name} ({args.model}), {'held-out' if held_out is not None else 'fit'} "

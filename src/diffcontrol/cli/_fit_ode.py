@@ -19,6 +19,7 @@ def cmd_fit_ode(args: argparse.Namespace, task: Any) -> int:
     ``DIR/fitted.json`` (format ``diffcontrol-fitted-model``, version 1)."""
     from .. import __version__
     from .. import ode_fitting as of
+    from .._fit_plot import prediction_plot
     from ..data import read_trajectories
     from ..io import now_iso, write_json
     from ._fit import _check_out, _make_out, _split
@@ -98,6 +99,17 @@ def cmd_fit_ode(args: argparse.Namespace, task: Any) -> int:
     }
     _make_out(out)
     write_json(out / "fitted.json", doc)
+    shown = held_out if held_out is not None else train
+    prediction_plot(
+        {
+            "fitted": _predictor(result.model, result.dt_s, result.substeps),
+            "nominal": _predictor(of.nominal_model(nominal_params), result.dt_s, result.substeps),
+        },
+        shown,
+        out / "prediction.png",
+        title=f"{task.name} ({args.model}), {'held-out' if held_out is not None else 'fit'} "
+        "episodes: open loop, restarted every 50 steps",
+    )
     for n, v in result.values.items():
         se = result.standard_errors[n]
         pm = f" ± {se:.3g}" if math.isfinite(se) else " (not identifiable from this data)"
@@ -110,5 +122,27 @@ def cmd_fit_ode(args: argparse.Namespace, task: Any) -> int:
             )
     if result.diverged:
         print(f"warning: {result.message}")
-    print(f"wrote {out / 'fitted.json'} ({seconds:.1f} s fit)")
+    print(f"wrote {out / 'fitted.json'} and {out / 'prediction.png'} ({seconds:.1f} s fit)")
     return 0
+
+
+def _predictor(model: Any, dt: float, substeps: int):
+    """A swing-up model as a ``_fit_plot.Predictor``: the states after each held force, open
+    loop in float64 (``ode_fitting.predict``, as the prediction errors are measured)."""
+    import equinox as eqx
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+
+    from .. import ode_fitting as of
+
+    def run(state0, actions):
+        with jax.enable_x64(True):
+            m = jax.tree.map(
+                lambda a: jnp.asarray(a, jnp.float64) if eqx.is_inexact_array(a) else a, model
+            )
+            forces = jnp.asarray(actions[:, 0], jnp.float64)
+            state = jnp.asarray(state0, jnp.float64)
+            return np.asarray(of.predict(m, state, forces, dt, substeps))
+
+    return run
