@@ -218,7 +218,7 @@ def test_loop_records_fits_trains_and_resumes(tmp_path, capsys):
 
 
 def test_the_real_system_of_a_fitted_model_comes_from_its_data():
-    from diffcontrol.cli._train import as_env, real_params, real_system
+    from diffcontrol.models import as_env, real_params, real_system
 
     env = real_system({"data": {"env_id": "diffcontrol/PendulumFriction-v0", "env_kwargs": REAL}})
     assert as_env(env) == ("diffcontrol/PendulumFriction-v0", REAL)

@@ -509,3 +509,26 @@ def fitted_model(task: Any, doc: dict[str, Any]) -> HybridModel | NeuralModel | 
     correction = correction_from_dict(doc["network"], doc.get("_path", "the fitted model"))
     cls = HybridModel if doc["model"] == "hybrid" else NeuralModel
     return cls(physics, correction)
+
+
+def real_system(doc: dict) -> dict | None:
+    """The system a fitted model's data came from: ``{"env_id", "env_kwargs"}`` for recorded
+    trajectories, ``{"params"}`` (the simulated trebuchet's) for recorded throws, or None."""
+    data = doc.get("data") or {}
+    if data.get("env_id"):
+        return {"env_id": data["env_id"], "env_kwargs": data.get("env_kwargs") or {}}
+    params = (data.get("metadata") or {}).get("params")
+    return {"params": params} if isinstance(params, dict) else None
+
+
+def as_env(real: dict | None) -> tuple[str, dict] | None:
+    """``(env_id, env_kwargs)`` of a real system that is a Gymnasium environment, else None."""
+    return (real["env_id"], real["env_kwargs"]) if real and "env_id" in real else None
+
+
+def real_params(task: Any, real: dict | None) -> Any:
+    """The task's parameters of a real system given by its parameters (the trebuchet's recorded
+    throws), else None."""
+    if not real or "params" not in real:
+        return None
+    return fitted_physics(task, {"task": task.name, "all_parameters": real["params"]})

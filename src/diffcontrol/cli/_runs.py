@@ -136,10 +136,11 @@ def _ode_recording(run_dir: str, task):
     params = task_params(task, config.params)
     metrics = Path(run_dir) / "metrics.json"
     if Path(run_dir).is_dir() and metrics.exists():  # a --model run: its real system
-        from ._train import real_params
+        from ..models import real_params
 
         real = (io.read_json(metrics, "metrics").get("model") or {}).get("real_system")
-        params = real_params(task, real) if real_params(task, real) is not None else params
+        fitted_real = real_params(task, real)
+        params = params if fitted_real is None else fitted_real
     return simulate_continuous(task, io.controller_from_dict(doc), params, config=config)
 
 
@@ -205,7 +206,7 @@ def cmd_aim(args: argparse.Namespace) -> int:
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
     from ..evaluation import evaluate
-    from ._train import as_env, real_params
+    from ..models import as_env, real_params
 
     task, policy = _load_run(args.run_dir)
     if task.kind == "aiming":

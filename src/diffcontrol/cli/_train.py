@@ -137,6 +137,7 @@ def add_parser(sub: Any) -> None:
 def cmd_train(args: argparse.Namespace) -> int:
     from .. import _jax_setup, io, tasks
     from ..evaluation import evaluate, record_episode
+    from ..models import as_env
     from ..training import resolve_config, train
 
     task = tasks.make(args.task)
@@ -260,13 +261,13 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 def _fitted(args: argparse.Namespace, task: Any) -> tuple[Any, tuple, tuple | None]:
     """``--model FIT_DIR``: the task to train (a hybrid or neural model's own), the fitted
-    physical parameters as ``--param`` overrides, and the real system ``(env_id, kwargs)``
-    its data came from (``None`` without --model, or if the data names no environment)."""
+    physical parameters as ``--param`` overrides, and the real system its data came from
+    (``models.real_system``; ``None`` without --model or where the data does not say)."""
     if not args.model:
         return task, (), None
     import numpy as np
 
-    from ..models import fitted_model, fitted_physics, model_task, read_fitted
+    from ..models import fitted_model, fitted_physics, model_task, read_fitted, real_system
 
     doc = read_fitted(args.model)
     fitted_physics(task, doc)  # refuses a model of another task
@@ -292,31 +293,6 @@ def _fitted(args: argparse.Namespace, task: Any) -> tuple[Any, tuple, tuple | No
     return fitted, (), real
 
 
-def real_system(doc: dict) -> dict | None:
-    """The system a fitted model's data came from: ``{"env_id", "env_kwargs"}`` for recorded
-    trajectories, ``{"params"}`` (the simulated trebuchet's) for recorded throws, or None."""
-    data = doc.get("data") or {}
-    if data.get("env_id"):
-        return {"env_id": data["env_id"], "env_kwargs": data.get("env_kwargs") or {}}
-    params = (data.get("metadata") or {}).get("params")
-    return {"params": params} if isinstance(params, dict) else None
-
-
-def as_env(real: dict | None) -> tuple[str, dict] | None:
-    """``(env_id, env_kwargs)`` of a real system that is a Gymnasium environment, else None."""
-    return (real["env_id"], real["env_kwargs"]) if real and "env_id" in real else None
-
-
-def real_params(task: Any, real: dict | None) -> Any:
-    """The task's parameters of a real system given by its parameters (the trebuchet's recorded
-    throws), else None."""
-    if not real or "params" not in real:
-        return None
-    from ..models import fitted_physics
-
-    return fitted_physics(task, {"task": task.name, "all_parameters": real["params"]})
-
-
 def _kind_of(task: Any) -> str:
     """``params``, ``hybrid`` or ``neural``: what a --model run trains through."""
     from ..models import HybridModel, NeuralModel
@@ -335,6 +311,7 @@ def _finish_aiming(args, task, out: Path, doc: dict, metrics: dict, say, real=No
     --model run), the throw plot and animation."""
     from .. import io, plots
     from ..evaluation import evaluate_aiming
+    from ..models import real_params
 
     policy = io.AimingPolicy(doc)
     n = 1000 if args.final_eval is None else args.final_eval
@@ -369,6 +346,7 @@ def _finish_ode(args, task, out: Path, result, metrics: dict, say) -> int:
     """The end of `train` for continuous-time tasks: a reference solve, data.json, plots, GIF."""
     from .. import io, plots
     from ..evaluation import simulate_continuous, swingup_result
+    from ..models import real_params
 
     base = getattr(task, "base", task)  # a fitted model's task: the system it models
     real = real_params(base, (metrics.get("model") or {}).get("real_system"))
