@@ -261,20 +261,9 @@ def _fit(task, data, names, window, steps, learning_rate, lm_steps, init) -> Fit
     optimiser = optax.adam(learning_rate)
     z = to_z(start)
     nominal_loss = float(loss(to_z(jnp.array([nominal[n] for n in names])), batch))
-    (z, best_z, best_loss, alive), (values_seen, was_alive) = adam_scan(
-        loss, z, optimiser, steps, batch
+    best_z, best_loss, history, diverged, message = adam_fit(
+        loss, z, optimiser, steps, batch, "parameters"
     )
-    taken = int(np.sum(np.asarray(was_alive)))  # the steps run, the diverging one included
-    history = [float(v) for v in np.asarray(values_seen)[:taken]]
-    best_loss, diverged, message = float(best_loss), not bool(alive), ""
-    if diverged:
-        message = f"Adam step {taken} gave a non-finite loss; kept the best parameters so far"
-    else:
-        final = float(loss(z, batch))
-        if math.isfinite(final) and final < best_loss:
-            best_z, best_loss = z, final
-    if not math.isfinite(best_loss):  # no step at all, or the very first diverged
-        best_loss = float(loss(best_z, batch))
     if lm_steps and not diverged:
         solution = optx.least_squares(
             lambda z, b: residuals(to_values(z), b),
@@ -313,6 +302,32 @@ def _fit(task, data, names, window, steps, learning_rate, lm_steps, init) -> Fit
         windows=int(batch[0].shape[0]),
         transitions=data.num_steps,
     )
+
+
+def adam_fit(loss: Any, z: Any, optimiser: Any, steps: int, batch: Any, what: str = "parameters"):
+    """``adam_scan``, and what every fit does with it: the best ``z`` (the last one if its loss
+    is lower still, unless the run diverged), its loss, the loss history of the steps taken,
+    whether it diverged, and a message if it did (naming ``what`` was kept).
+
+    Returns:
+        ``(best_z, best_loss, history, diverged, message)``; ``message`` is ``""`` unless the
+        run diverged.
+    """
+    (last, best, best_loss, alive), (values, was_alive) = adam_scan(
+        loss, z, optimiser, steps, batch
+    )
+    taken = int(np.sum(np.asarray(was_alive)))  # the steps run, the diverging one included
+    history = [float(v) for v in np.asarray(values)[:taken]]
+    best_loss, diverged, message = float(best_loss), not bool(alive), ""
+    if diverged:
+        message = f"Adam step {taken} gave a non-finite loss; kept the best {what} so far"
+    else:
+        final = float(jax.jit(loss)(last, batch))
+        if math.isfinite(final) and final < best_loss:
+            best, best_loss = last, final
+    if not math.isfinite(best_loss):  # no step at all, or the very first diverged
+        best_loss = float(jax.jit(loss)(best, batch))
+    return best, best_loss, history, diverged, message
 
 
 def adam_scan(loss: Any, z: Any, optimiser: Any, steps: int, batch: Any):

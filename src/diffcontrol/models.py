@@ -332,7 +332,7 @@ def fit_model(
 
 
 def _fit_model(task, data, kind, params, window, steps, learning_rate, hidden, seed):
-    from .fitting import _windows, adam_scan, predict
+    from .fitting import _windows, adam_fit, predict
 
     batch = _windows(task, data, window)
     if batch is None:
@@ -387,31 +387,18 @@ def _fit_model(task, data, kind, params, window, steps, learning_rate, hidden, s
     schedule = optax.cosine_decay_schedule(learning_rate, max(steps, 1), alpha=0.05)
     optimiser = optax.adam(schedule)
     nominal_loss = _nominal_loss(task, physics, batch, predict)
-    (w, best_w, best_loss, alive), (seen, was_alive) = adam_scan(
-        loss, weights, optimiser, steps, batch
+    best_w, best_loss, history, diverged, message = adam_fit(
+        loss, weights, optimiser, steps, batch, "weights"
     )
-    taken = int(np.sum(np.asarray(was_alive)))
-    history = np.asarray(seen, np.float64)[:taken]
-    diverged = not bool(alive)
-    best_loss = float(best_loss)
     if not diverged:
-        final = float(loss(w, batch))
-        if math.isfinite(final) and final < best_loss:
-            best_w, best_loss = w, final
-    if not math.isfinite(best_loss):
-        best_loss = float(loss(best_w, batch))
-    message = (
-        f"Adam step {taken} gave a non-finite loss; kept the best weights so far"
-        if diverged
-        else f"mean squared window error {best_loss:.3g} (nominal physics: {nominal_loss:.3g})"
-    )
+        message = f"mean squared window error {best_loss:.3g} (nominal physics: {nominal_loss:.3g})"
     fitted = jax.tree.map(_to_f32, eqx.combine(best_w, rest, static))
     return ModelFitResult(
         model=fitted,
         kind=kind,
         loss=best_loss,
         nominal_loss=nominal_loss,
-        loss_history=history,
+        loss_history=np.asarray(history, np.float64),
         diverged=diverged,
         message=message,
         window=window,

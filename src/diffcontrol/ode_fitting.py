@@ -39,7 +39,7 @@ import optimistix as optx
 
 from .data import TrajectoryData, parse_column
 from .errors import ConfigError, DataFileError, InsufficientDataError
-from .fitting import HORIZONS, MIN_TRANSITIONS_PER_PARAMETER, _standard_errors
+from .fitting import HORIZONS, MIN_TRANSITIONS_PER_PARAMETER, _standard_errors, adam_fit
 from .models import Correction
 from .systems import cartpole_swingup as cp
 from .tasks.fitted_swingup import (  # noqa: F401  (model_to_dict/from_dict: re-exported)
@@ -429,7 +429,9 @@ def _fit(
         optimiser = optax.adam(optax.cosine_decay_schedule(lr, max(steps, 1), alpha=0.05))
     nominal_loss = float(_nominal_loss(nominal, batch, dt, substeps, inv_std))
 
-    best, best_loss, history, diverged, message = _adam(loss, theta0, batch, optimiser, steps)
+    best, best_loss, history, diverged, message = adam_fit(
+        loss, theta0, optimiser, steps, batch, "model"
+    )
     if kind == "params" and lm_steps and not diverged:
         sol = optx.least_squares(
             residuals,
@@ -474,50 +476,6 @@ def _nominal_loss(nominal, batch, dt, substeps, inv_std):
     m = SwingUpModel("nominal", nominal)
     pred = jax.vmap(lambda s, f: predict(m, s, f, dt, substeps))(starts, forces)
     return jnp.mean((_state_error(pred, targets) * inv_std) ** 2)
-
-
-def _adam(loss, theta, batch, optimiser, steps):
-    """Adam steps under one ``lax.scan``; a non-finite loss or step freezes the run there,
-    and the parameters with the lowest loss before it are returned (``fitting``'s rule)."""
-
-    def body(carry, _):
-        theta, opt_state, best, best_loss, alive = carry
-        value, grad = jax.value_and_grad(loss)(theta, batch)
-        updates, new_opt = optimiser.update(grad, opt_state)
-        new_theta = optax.apply_updates(theta, updates)
-        finite = jnp.isfinite(value) & jnp.all(
-            jnp.stack([jnp.all(jnp.isfinite(x)) for x in jax.tree.leaves(new_theta)])
-        )
-        step = alive & finite
-        better = step & (value < best_loss)
-
-        def pick(cond, a, b):
-            return jax.tree.map(lambda x, y: jnp.where(cond, x, y), a, b)
-
-        carry = (
-            pick(step, new_theta, theta),
-            pick(step, new_opt, opt_state),
-            pick(better, theta, best),
-            jnp.where(better, value, best_loss),
-            step,
-        )
-        return carry, (value, alive)
-
-    init = (theta, optimiser.init(theta), theta, jnp.asarray(jnp.inf), jnp.asarray(True))
-    run = jax.jit(lambda c: jax.lax.scan(body, c, None, length=steps))
-    (last, _, best, best_loss, alive), (values, was_alive) = run(init)
-    taken = int(np.sum(np.asarray(was_alive)))
-    history = [float(v) for v in np.asarray(values)[:taken]]
-    best_loss, diverged, message = float(best_loss), not bool(alive), ""
-    if diverged:
-        message = f"Adam step {taken} gave a non-finite loss; kept the best model so far"
-    else:
-        final = float(jax.jit(loss)(last, batch))
-        if math.isfinite(final) and final < best_loss:
-            best, best_loss = last, final
-    if not math.isfinite(best_loss):
-        best_loss = float(jax.jit(loss)(best, batch))
-    return best, best_loss, history, diverged, message
 
 
 # --- evaluation ------------------------------------------------------------------------------
