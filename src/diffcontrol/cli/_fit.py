@@ -151,15 +151,17 @@ def _make_out(out: Path) -> None:
         raise RunDirectoryError(f"cannot create --out {out} ({e.strerror})") from None
 
 
-def _split(data: Any, fraction: float) -> tuple[Any, Any]:
-    n = data.num_episodes
+def _split(data: Any, fraction: float, unit: str = "episode") -> tuple[Any, Any]:
+    """``(fitted, held_out)``: the last ``fraction`` of the episodes (or throws: ``unit``)
+    held out, at least one when ``fraction > 0``; ``held_out`` is None for 0."""
+    n = data.num_throws if unit == "throw" else data.num_episodes
     if fraction == 0:
         return data, None
     held = max(1, round(fraction * n))
     if n - held < 1:
         raise ConfigError(
-            f"--holdout {fraction} of {n} episode(s) leaves none to fit; record at least 2 "
-            "episodes, or pass --holdout 0"
+            f"--holdout {fraction} of {n} {unit}(s) leaves none to fit; record at least 2 "
+            f"{unit}s, or pass --holdout 0"
         )
     return data.split(n - held)
 

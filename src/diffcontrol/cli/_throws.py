@@ -84,19 +84,6 @@ def cmd_record_throws(args: argparse.Namespace, check_out) -> int:
     return 0
 
 
-def _split(data: Any, fraction: float) -> tuple[Any, Any]:
-    n = data.num_throws
-    if fraction == 0:
-        return data, None
-    held = max(1, round(fraction * n))
-    if n - held < 1:
-        raise ConfigError(
-            f"--holdout {fraction} of {n} throw(s) leaves none to fit; record more throws, "
-            "or pass --holdout 0"
-        )
-    return data.split(n - held)
-
-
 def cmd_fit_throws(args: argparse.Namespace, task: Any) -> int:
     """``diffcontrol fit trebuchet``: the grey box from recorded throws (``fit_throws``)."""
     from .. import __version__
@@ -110,7 +97,7 @@ def cmd_fit_throws(args: argparse.Namespace, task: Any) -> int:
         params_dict,
     )
     from ..io import now_iso, write_json
-    from ._fit import _check_out, _make_out
+    from ._fit import _check_out, _make_out, _split
 
     if args.model != "params":
         raise ConfigError(
@@ -122,7 +109,7 @@ def cmd_fit_throws(args: argparse.Namespace, task: Any) -> int:
     data = read_throws(args.data)
     out = Path(args.out)
     _check_out(out, args.force)
-    train, held_out = _split(data, args.holdout)
+    train, held_out = _split(data, args.holdout, "throw")
     say = (lambda line: None) if args.quiet else print
     say(
         f"fitting {', '.join(names)} of the trebuchet to {train.num_throws} throw(s) of "

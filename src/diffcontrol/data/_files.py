@@ -100,12 +100,19 @@ def read_trajectories(path: str | os.PathLike) -> TrajectoryData:
     return _read_csv(path) if suffix == ".csv" else _read_npz(path)
 
 
-def _read_csv(path: Path) -> TrajectoryData:
+def csv_parts(path: Path, format_: str, version: int) -> tuple[Any, list[str], list]:
+    """The parts of a diffcontrol CSV file (trajectories or throws): the JSON header of its
+    first line (unchecked), the column names, and the other non-empty rows as ``(line number,
+    cells)``.
+
+    Raises:
+        DataFileError: not text, no JSON header line, or no column names (naming the line).
+    """
     try:
         lines = path.read_text(encoding="utf-8-sig").splitlines()  # -sig: a spreadsheet's BOM
     except UnicodeDecodeError:
         raise DataFileError(f"{path} is not a text file; is it an .npz named .csv?") from None
-    first = lines[0]
+    first = lines[0] if lines else ""
     try:
         header = json.loads(first[1:]) if first.startswith("#") else None
     except json.JSONDecodeError as e:
@@ -113,14 +120,18 @@ def _read_csv(path: Path) -> TrajectoryData:
     if header is None:
         raise DataFileError(
             f"{path}, line 1: no header; the first line must be "
-            f'# {{"format": "{FORMAT}", "version": {VERSION}, "metadata": {{...}}}}'
+            f'# {{"format": "{format_}", "version": {version}, "metadata": {{...}}}}'
         )
-    meta = _check_header(header, path)
     body = [(n, row) for n, row in enumerate(csv.reader(lines[1:]), start=2) if row]
     if not body:
         raise DataFileError(f"{path}: no column names after the header line; see the format")
-    columns = [c.strip() for c in body[0][1]]
-    n_cols, rows = len(columns), body[1:]
+    return header, [c.strip() for c in body[0][1]], body[1:]
+
+
+def _read_csv(path: Path) -> TrajectoryData:
+    header, columns, rows = csv_parts(path, FORMAT, VERSION)
+    meta = _check_header(header, path)
+    n_cols = len(columns)
     if not rows:
         raise DataFileError(f"{path} holds no rows; record at least one episode")
     table = np.empty((len(rows), n_cols))

@@ -44,6 +44,7 @@ import numpy as np
 
 from ..errors import ConfigError, DataFileError
 from ..io import _finite, write_bytes
+from ._files import csv_parts
 from ._format import parse_column
 
 THROWS_FORMAT = "diffcontrol-throws"
@@ -279,27 +280,9 @@ def read_throws(path: str | os.PathLike) -> ThrowData:
 
 
 def _read_csv(path: Path) -> ThrowData:
-    try:
-        lines = path.read_text(encoding="utf-8-sig").splitlines()
-    except UnicodeDecodeError:
-        raise DataFileError(f"{path} is not a text file; is it an .npz named .csv?") from None
-    first = lines[0]
-    try:
-        header = json.loads(first[1:]) if first.startswith("#") else None
-    except json.JSONDecodeError as e:
-        raise DataFileError(f"{path}, line 1: the header is not valid JSON ({e})") from None
-    if header is None:
-        raise DataFileError(
-            f"{path}, line 1: no header; the first line must be # "
-            f'{{"format": "{THROWS_FORMAT}", "version": {THROWS_VERSION}, "metadata": {{...}}}}'
-        )
+    header, columns, rows = csv_parts(path, THROWS_FORMAT, THROWS_VERSION)
     meta = _check_header(header, path)
-    body = [(n, r) for n, r in enumerate(csv.reader(lines[1:]), start=2) if r]
-    if not body:
-        raise DataFileError(f"{path}: no column names after the header line; see the format")
-    columns = [c.strip() for c in body[0][1]]
     order = _column_order(columns, path)
-    rows = body[1:]
     table = np.empty((len(rows), len(columns)))
     for i, (line, cells) in enumerate(rows):
         if len(cells) != len(columns):
