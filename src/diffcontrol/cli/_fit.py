@@ -94,7 +94,7 @@ def add_parser(sub: Any) -> None:
         type=positive_int,
         default=10,
         metavar="N",
-        help="steps per window (10; control tasks)",
+        help="steps per window (10; not for the trebuchet's throws)",
     )
     p.add_argument(
         "--steps",

@@ -43,6 +43,8 @@ def cmd_fit_ode(args: argparse.Namespace, task: Any) -> int:
         steps=args.steps,
         learning_rate=args.learning_rate,
         lm_steps=args.lm_steps,
+        hidden=args.hidden,
+        seed=args.seed,
     )
     seconds = time.perf_counter() - t0
     errors = None
@@ -70,6 +72,8 @@ def cmd_fit_ode(args: argparse.Namespace, task: Any) -> int:
             "learning_rate": args.learning_rate,
             "lm_steps": args.lm_steps if args.model == "params" else 0,
             "num_parameters": result.num_parameters,
+            "hidden": list(args.hidden) if args.model != "params" else None,
+            "seed": args.seed,
             "loss": result.loss,
             "nominal_loss": result.nominal_loss,
             "diverged": result.diverged,
