@@ -1,11 +1,20 @@
-"""Learned parts of models: the small networks of hybrid and black-box (neural) models.
+"""Learned models of a task's system, and the fitted-model file that stores them.
 
-A ``Correction`` is a multilayer perceptron with fixed input normalisation and a fixed output
-scale, ``out_scale * mlp((x - in_offset) * in_scale)``. Its last layer starts at zero, so a
-hybrid model (known physics plus a correction) starts exactly at the known physics. The
-normalisation and scale are constants (no gradient); they are set from the data before
-fitting. ``correction_to_dict`` / ``correction_from_dict`` store it as plain JSON lists in
-``fitted.json`` (no pickle), the way ``model.json`` stores a controller.
+- ``Correction``: a multilayer perceptron with fixed input normalisation and a fixed output
+  scale, ``out_scale * mlp((x - in_offset) * in_scale)``. Its last layer can start at zero, so
+  a hybrid model (known physics plus a correction) starts exactly at the known physics. The
+  scalings are constants (no gradient), set from the data before fitting.
+  ``correction_to_dict`` / ``correction_from_dict`` store it as plain JSON lists (no pickle),
+  the way ``model.json`` stores a controller.
+- Discrete-time models: ``HybridModel`` (the task's step plus a correction) and
+  ``NeuralModel`` (a network alone), fitted by ``fit_model`` with the grey box's multiple
+  shooting (``diffcontrol.fitting``); ``model_task`` makes a task that steps one, to train or
+  predict through it. (The swing-ups' continuous-time models are in ``ode_fitting`` and
+  ``tasks.fitted_swingup``; the trebuchet's grey box is ``fit_throws``.)
+- ``fitted.json`` (format ``diffcontrol-fitted-model``, written by ``diffcontrol fit``):
+  ``read_fitted``, ``fitted_physics``, ``fitted_model``, and ``real_system`` / ``as_env`` /
+  ``real_params``: the system the model's data came from, where a controller trained through
+  the model is evaluated.
 """
 
 from __future__ import annotations
