@@ -371,7 +371,8 @@ def _finish_ode(args, task, out: Path, result, metrics: dict, say) -> int:
         f"done in {metrics['train_seconds']:.1f} s (compile {metrics['compile_seconds']:.1f} s): "
         f"{metrics['simulated_episodes']} closed-loop solves ({metrics['simulated_steps']} solver "
         f"steps); final |θ| {abs(report.final_theta):.3f} rad, ẋ {report.final_x_dot:+.3f} m/s, "
-        f"peak |F| {report.peak_force:.1f} N"
+        f"peak |F| {report.peak_force:.1f} N; loss {report.loss:.4g}"
+        + (" on the real system" if real is not None else "")
     )
     print(f"wrote {', '.join(str(out / f) for f in files)}")
     return 0
