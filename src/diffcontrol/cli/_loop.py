@@ -27,7 +27,7 @@ def add_parser(sub: Any) -> None:
         help="alternate record -> fit -> train on a real system for a few rounds",
         description=(
             "Learn a controller for a system you can only run: record N episodes of the real "
-            "environment ENV (random actions at first), fit a model of TASK's system to all "
+            "environment ENV_ID (random actions at first), fit a model of TASK's system to all "
             "data so far (`diffcontrol fit`), train a controller through the fitted model "
             "(`diffcontrol train --model`), evaluate it on the real environment, record N more "
             "episodes with it, and repeat for R rounds. Writes DIR/data.csv (all recorded "
