@@ -56,26 +56,48 @@ def write_npz(path: str | os.PathLike, data: TrajectoryData) -> None:
 
 def write_trajectories(path: str | os.PathLike, data: TrajectoryData) -> None:
     """Write ``data`` as CSV or NPZ, by the extension of ``path`` (``.csv``, ``.npz``)."""
-    {".csv": write_csv, ".npz": write_npz}[_suffix(path)](path, data)
+    {".csv": write_csv, ".npz": write_npz}[file_suffix(path)](path, data)
 
 
-def _suffix(path: str | os.PathLike) -> str:
+def file_suffix(path: str | os.PathLike, what: str = "trajectory") -> str:
+    """``.csv`` or ``.npz``, from the extension of ``path`` (a ``what`` file).
+
+    Raises:
+        DataFileError: another extension.
+    """
     suffix = Path(path).suffix.lower()
     if suffix not in (".csv", ".npz"):
         raise DataFileError(
-            f"{path}: unknown trajectory file type {suffix or '(none)'!r}; use a .csv or .npz file"
+            f"{path}: unknown {what} file type {suffix or '(none)'!r}; use a .csv or .npz file"
         )
     return suffix
 
 
-def _check_header(header: Any, path: Path) -> dict:
-    line = f'{{"format": "{FORMAT}", "version": {VERSION}}}'
-    if not isinstance(header, dict) or header.get("format") != FORMAT:
-        raise DataFileError(f"{path}: not a {FORMAT} file (its header must be {line})")
-    if header.get("version") != VERSION:
+def readable_suffix(path: Path, what: str, record: str) -> str:
+    """The suffix of a data file to read, after refusing a missing or empty one (``record``:
+    the command that makes one)."""
+    suffix = file_suffix(path, what)
+    if not path.is_file():
+        raise DataFileError(f"{path} does not exist (or is not a file); check the path")
+    if path.stat().st_size == 0:
+        raise DataFileError(f"{path} is empty; record it again (`{record}`)")
+    return suffix
+
+
+def check_header(header: Any, path: Path, format_: str, version: int, hint: str = "") -> dict:
+    """The metadata of a data file's JSON header, after checking its format and version
+    (``hint``: said after "not a FORMAT file" when the format is another one).
+
+    Raises:
+        DataFileError: another format or version, or metadata that is not an object.
+    """
+    line = f'{{"format": "{format_}", "version": {version}}}'
+    if not isinstance(header, dict) or header.get("format") != format_:
+        raise DataFileError(f"{path}: not a {format_} file{hint}; its header must be {line}")
+    if header.get("version") != version:
         raise DataFileError(
-            f"{path}: format version {header.get('version')!r} is not supported (this "
-            f"diffcontrol reads version {VERSION}); write it again with this diffcontrol"
+            f"{path}: {format_} version {header.get('version')!r} is not supported (this "
+            f"diffcontrol reads version {version}); write it again with this diffcontrol"
         )
     meta = header.get("metadata", {})
     if not isinstance(meta, dict):
@@ -92,11 +114,7 @@ def read_trajectories(path: str | os.PathLike) -> TrajectoryData:
             and the fix.
     """
     path = Path(path)
-    suffix = _suffix(path)
-    if not path.is_file():
-        raise DataFileError(f"{path} does not exist (or is not a file); check the path")
-    if path.stat().st_size == 0:
-        raise DataFileError(f"{path} is empty; record it again (`diffcontrol record`)")
+    suffix = readable_suffix(path, "trajectory", "diffcontrol record")
     return _read_csv(path) if suffix == ".csv" else _read_npz(path)
 
 
@@ -130,7 +148,7 @@ def csv_parts(path: Path, format_: str, version: int) -> tuple[Any, list[str], l
 
 def _read_csv(path: Path) -> TrajectoryData:
     header, columns, rows = csv_parts(path, FORMAT, VERSION)
-    meta = _check_header(header, path)
+    meta = check_header(header, path, FORMAT, VERSION)
     n_cols = len(columns)
     if not rows:
         raise DataFileError(f"{path} holds no rows; record at least one episode")
@@ -175,7 +193,7 @@ def _read_npz(path: Path) -> TrajectoryData:
         header = json.loads(arrays.pop("header").tobytes().decode())
     except (json.JSONDecodeError, UnicodeDecodeError) as e:
         raise DataFileError(f"{path}: the header array is not JSON ({e}); write it again") from None
-    meta = _check_header(header, path)
+    meta = check_header(header, path, FORMAT, VERSION)
     columns = header.get("columns")
     if not isinstance(columns, list) or not all(isinstance(c, str) for c in columns):
         raise DataFileError(f"{path}: the header has no list of column names under 'columns'")

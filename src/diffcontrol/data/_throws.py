@@ -44,7 +44,7 @@ import numpy as np
 
 from ..errors import ConfigError, DataFileError
 from ..io import _finite, write_bytes
-from ._files import csv_parts
+from ._files import check_header, csv_parts, file_suffix, readable_suffix
 from ._format import parse_column
 
 THROWS_FORMAT = "diffcontrol-throws"
@@ -184,7 +184,7 @@ def write_throws(path: str | os.PathLike, data: ThrowData) -> None:
     Raises:
         DataFileError: an extension other than ``.csv`` or ``.npz``.
     """
-    suffix = _suffix(path)
+    suffix = file_suffix(path, "throws")
     if suffix == ".csv":
         out = _io.StringIO()
         out.write("# " + json.dumps(_header(data), allow_nan=False) + "\n")
@@ -201,35 +201,15 @@ def write_throws(path: str | os.PathLike, data: ThrowData) -> None:
         write_bytes(path, buf.getvalue())
 
 
-def _suffix(path: str | os.PathLike) -> str:
-    suffix = Path(path).suffix.lower()
-    if suffix not in (".csv", ".npz"):
-        raise DataFileError(
-            f"{path}: unknown throws file type {suffix or '(none)'!r}; use a .csv or .npz file"
-        )
-    return suffix
-
-
 def _check_header(header: object, path: Path) -> dict:
-    line = f'{{"format": "{THROWS_FORMAT}", "version": {THROWS_VERSION}}}'
-    if not isinstance(header, dict) or header.get("format") != THROWS_FORMAT:
-        what = header.get("format") if isinstance(header, dict) else None
-        hint = (
-            " (it holds trajectories: fit a control task to it, or record throws with "
-            "`diffcontrol record trebuchet --episodes N`)"
-            if what == "diffcontrol-trajectories"
-            else ""
-        )
-        raise DataFileError(f"{path}: not a {THROWS_FORMAT} file{hint}; its header must be {line}")
-    if header.get("version") != THROWS_VERSION:
-        raise DataFileError(
-            f"{path}: throws format version {header.get('version')!r} is not supported (this "
-            f"diffcontrol reads version {THROWS_VERSION}); write it again with this diffcontrol"
-        )
-    meta = header.get("metadata", {})
-    if not isinstance(meta, dict):
-        raise DataFileError(f"{path}: 'metadata' in the header must be a JSON object")
-    return meta
+    what = header.get("format") if isinstance(header, dict) else None
+    hint = (
+        " (it holds trajectories: fit a control task to it, or record throws with "
+        "`diffcontrol record trebuchet --episodes N`)"
+        if what == "diffcontrol-trajectories"
+        else ""
+    )
+    return check_header(header, path, THROWS_FORMAT, THROWS_VERSION, hint)
 
 
 def _column_order(columns: list[str], path: Path) -> list[int]:
@@ -271,11 +251,7 @@ def read_throws(path: str | os.PathLike) -> ThrowData:
             the message names the file, the line or row, the column and the fix.
     """
     path = Path(path)
-    suffix = _suffix(path)
-    if not path.is_file():
-        raise DataFileError(f"{path} does not exist (or is not a file); check the path")
-    if path.stat().st_size == 0:
-        raise DataFileError(f"{path} is empty; record it again (`diffcontrol record trebuchet`)")
+    suffix = readable_suffix(path, "throws", "diffcontrol record trebuchet")
     return _read_csv(path) if suffix == ".csv" else _read_npz(path)
 
 
