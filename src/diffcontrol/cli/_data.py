@@ -126,6 +126,16 @@ def _check_out(out: Path, force: bool) -> None:
         )
 
 
+def write_out(write: Any, out: Path, data: Any) -> None:
+    """``write(out, data)``, with a file system error as a one-line ``DataFileError``."""
+    try:
+        write(out, data)
+    except OSError as e:
+        raise DataFileError(
+            f"cannot write --out {out} ({e.strerror}); choose a writable --out"
+        ) from None
+
+
 def cmd_record(args: argparse.Namespace) -> int:
     from ..data import write_trajectories
     from ..io import NumpyPolicy, read_model
@@ -159,12 +169,7 @@ def cmd_record(args: argparse.Namespace) -> int:
         progress=say,
         source=f"controller {args.controller} (task {policy.task!r})" if policy else None,
     )
-    try:
-        write_trajectories(out, data)
-    except OSError as e:
-        raise DataFileError(
-            f"cannot write --out {out} ({e.strerror}); choose a writable --out"
-        ) from None
+    write_out(write_trajectories, out, data)
     print(
         f"wrote {out}: {data.num_episodes} episode(s), {data.num_steps} steps, "
         f"{len(data.observation_columns)} observation and {len(data.action_columns)} action "
@@ -198,12 +203,7 @@ def _record_swingup(args: argparse.Namespace) -> int:
         print(f"recording {args.episodes} episode(s) of the {task.name} cart-pole ({changed})")
     t0 = time.perf_counter()
     data = record_swingup(params, args.episodes, seed=args.seed)
-    try:
-        write_trajectories(out, data)
-    except OSError as e:
-        raise DataFileError(
-            f"cannot write --out {out} ({e.strerror}); choose a writable --out"
-        ) from None
+    write_out(write_trajectories, out, data)
     print(
         f"wrote {out}: {data.num_episodes} episode(s), {data.num_steps} steps of the state "
         f"and force ({time.perf_counter() - t0:.1f} s)"

@@ -13,7 +13,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from ..errors import ConfigError, DataFileError, InsufficientDataError
+from ..errors import ConfigError, InsufficientDataError
 
 
 def trebuchet_params(env_args: list[tuple[str, float]]) -> Any:
@@ -41,6 +41,7 @@ def cmd_record_throws(args: argparse.Namespace, check_out) -> int:
     from ..data import write_throws
     from ..fit_throws import record_throws
     from ..io import AimingPolicy, read_model
+    from ._data import write_out
 
     if args.max_steps is not None:
         raise ConfigError(
@@ -71,12 +72,7 @@ def cmd_record_throws(args: argparse.Namespace, check_out) -> int:
         policy=policy,
         source=f"controller {args.controller}" if policy else None,
     )
-    try:
-        write_throws(out, data)
-    except OSError as e:
-        raise DataFileError(
-            f"cannot write --out {out} ({e.strerror}); choose a writable --out"
-        ) from None
+    write_out(write_throws, out, data)
     print(
         f"wrote {out}: {data.num_throws} throw(s), distance noise {noise:g} m "
         f"({time.perf_counter() - t0:.1f} s)"
