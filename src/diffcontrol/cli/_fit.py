@@ -174,6 +174,61 @@ def _params_dict(params: Any) -> dict[str, float]:
     return {f.name: float(np.asarray(getattr(params, f.name))) for f in dataclasses.fields(params)}
 
 
+def parameters_doc(values: dict, standard_errors: dict, nominal: dict) -> dict:
+    """fitted.json's ``parameters``: per fitted name, its value, standard error and nominal."""
+    return {
+        n: {"value": v, "standard_error": standard_errors[n], "nominal": nominal[n]}
+        for n, v in values.items()
+    }
+
+
+def result_doc(fit: Any, seconds: float, **settings: Any) -> dict:
+    """fitted.json's ``fit``: the fit's ``settings``, then how it ended (any fit result)."""
+    return {
+        **settings,
+        "loss": fit.loss,
+        "nominal_loss": fit.nominal_loss,
+        "diverged": fit.diverged,
+        "message": fit.message,
+        "loss_history": [float(v) for v in fit.loss_history],
+        "seconds": seconds,
+    }
+
+
+def errors_doc(what: str, horizons: Any, errors: dict | None) -> dict | None:
+    """fitted.json's ``prediction_error`` for per-horizon errors by model label."""
+    if errors is None:
+        return None
+    by_label = {label: {str(h): e for h, e in by_h.items()} for label, by_h in errors.items()}
+    return {"what": what, "horizons_steps": list(horizons), **by_label}
+
+
+def write_fitted(out: Path, task: Any, model: str, body: dict) -> None:
+    """Write ``out/fitted.json``: the format's head, ``body``, and when and by what."""
+    from .. import __version__
+    from ..io import now_iso, write_json
+    from ..models import FITTED_FILE, FITTED_FORMAT
+
+    head = {"format": FITTED_FORMAT, "version": 1, "task": task.name, "model": model}
+    tail = {"created": now_iso(), "diffcontrol_version": __version__}
+    _make_out(out)
+    write_json(out / FITTED_FILE, {**head, **body, **tail})
+
+
+def report(parameters: dict, fit: Any, out: Path, seconds: float, held_out_lines: list) -> None:
+    """Print the fitted parameters with their standard errors, the held-out errors, a
+    divergence and the files written."""
+    for n, p in parameters.items():
+        se = p["standard_error"]
+        pm = f" ± {se:.3g}" if math.isfinite(se) else " (not identifiable from this data)"
+        print(f"{n} = {p['value']:.6g}{pm} (nominal {p['nominal']:.6g})")
+    for line in held_out_lines:
+        print(line)
+    if fit.diverged:
+        print(f"warning: {fit.message}")
+    print(f"wrote {out / 'fitted.json'} and {out / 'prediction.png'} ({seconds:.1f} s fit)")
+
+
 def cmd_fit(args: argparse.Namespace) -> int:
     from .. import tasks
     from ..data import read_trajectories
@@ -229,14 +284,7 @@ def _fit(args: argparse.Namespace, task: Any, train: Any) -> tuple[Any, Any, dic
             lm_steps=args.lm_steps,
         )
         doc = {
-            "parameters": {
-                n: {
-                    "value": result.values[n],
-                    "standard_error": result.standard_errors[n],
-                    "nominal": result.nominal[n],
-                }
-                for n in result.names
-            },
+            "parameters": parameters_doc(result.values, result.standard_errors, result.nominal),
             "all_parameters": _params_dict(result.params),
         }
         return result, (task, result.params), doc
@@ -266,10 +314,8 @@ def _fit(args: argparse.Namespace, task: Any, train: Any) -> tuple[Any, Any, dic
 
 
 def _write(args, task, data, train, held_out, fit, predictor, model_doc, seconds, out) -> None:
-    from .. import __version__
     from .._fit_plot import prediction_plot, task_predictor
     from ..fitting import HORIZONS, prediction_errors
-    from ..io import now_iso, write_json
 
     errors = None
     if held_out is not None:
@@ -277,29 +323,19 @@ def _write(args, task, data, train, held_out, fit, predictor, model_doc, seconds
             "nominal": prediction_errors(task, task.default_params(), held_out),
             "fitted": prediction_errors(*predictor, held_out),
         }
-    fit_doc = {
-        "window_steps": fit.window,
-        "windows": fit.windows,
-        "adam_steps": args.steps,
-        "learning_rate": args.learning_rate,
-        "loss": fit.loss,
-        "nominal_loss": fit.nominal_loss,
-        "diverged": fit.diverged,
-        "message": fit.message,
-        "loss_history": fit.loss_history.tolist(),
-        "seconds": seconds,
-    }
+    settings = dict(
+        window_steps=fit.window,
+        windows=fit.windows,
+        adam_steps=args.steps,
+        learning_rate=args.learning_rate,
+    )
     if args.model == "params":
-        fit_doc["lm_steps"] = args.lm_steps
+        settings["lm_steps"] = args.lm_steps
     else:
-        fit_doc.update(hidden=list(args.hidden), seed=args.seed)
-    doc = {
-        "format": "diffcontrol-fitted-model",
-        "version": 1,
-        "task": task.name,
-        "model": args.model,
+        settings.update(hidden=list(args.hidden), seed=args.seed)
+    body = {
         **model_doc,
-        "fit": fit_doc,
+        "fit": result_doc(fit, seconds, **settings),
         "data": {
             "file": str(args.data),
             "env_id": data.env_id,
@@ -308,19 +344,14 @@ def _write(args, task, data, train, held_out, fit, predictor, model_doc, seconds
             "held_out_episodes": [e.id for e in held_out.episodes()] if held_out else [],
             "fit_transitions": train.num_steps,
         },
-        "prediction_error": None
-        if errors is None
-        else {
-            "what": "RMS error of the observations H steps ahead, open loop from every "
-            "recorded state of the held-out episodes with the recorded actions",
-            "horizons_steps": list(HORIZONS),
-            **{label: {str(h): e for h, e in by_h.items()} for label, by_h in errors.items()},
-        },
-        "created": now_iso(),
-        "diffcontrol_version": __version__,
+        "prediction_error": errors_doc(
+            "RMS error of the observations H steps ahead, open loop from every recorded state "
+            "of the held-out episodes with the recorded actions",
+            HORIZONS,
+            errors,
+        ),
     }
-    _make_out(out)
-    write_json(out / "fitted.json", doc)
+    write_fitted(out, task, args.model, body)
     shown = held_out if held_out is not None else train
     prediction_plot(
         {
@@ -332,16 +363,15 @@ def _write(args, task, data, train, held_out, fit, predictor, model_doc, seconds
         title=f"{task.name} ({args.model}), {'held-out' if held_out is not None else 'fit'} "
         "episodes: open loop, restarted every 50 steps",
     )
-    for n, p in model_doc.get("parameters", {}).items():
-        se = p["standard_error"]
-        pm = f" ± {se:.3g}" if math.isfinite(se) else " (not identifiable from this data)"
-        print(f"{n} = {p['value']:.6g}{pm} (nominal {p['nominal']:.6g})")
+    lines = []
     if "network" in model_doc:
-        print(f"{args.model} model: {model_doc['network']['parameters']} weights, {fit.message}")
+        lines.append(
+            f"{args.model} model: {model_doc['network']['parameters']} weights, {fit.message}"
+        )
     if errors is not None:
         for h in HORIZONS:
             nom, fitted = errors["nominal"][h]["rmse"], errors["fitted"][h]["rmse"]
-            print(f"held-out RMS error {h:>2} steps ahead: nominal {nom:.3g}, fitted {fitted:.3g}")
-    if fit.diverged:
-        print(f"warning: {fit.message}")
-    print(f"wrote {out / 'fitted.json'} and {out / 'prediction.png'} ({seconds:.1f} s fit)")
+            lines.append(
+                f"held-out RMS error {h:>2} steps ahead: nominal {nom:.3g}, fitted {fitted:.3g}"
+            )
+    report(model_doc.get("parameters", {}), fit, out, seconds, lines)

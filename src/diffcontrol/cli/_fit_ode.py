@@ -8,7 +8,6 @@ tasks to ``cmd_fit_ode``.
 from __future__ import annotations
 
 import argparse
-import math
 import time
 from pathlib import Path
 from typing import Any
@@ -17,12 +16,18 @@ from typing import Any
 def cmd_fit_ode(args: argparse.Namespace, task: Any) -> int:
     """Fit ``args.model`` to ``args.data`` for the continuous-time ``task``; write
     ``DIR/fitted.json`` (format ``diffcontrol-fitted-model``, version 1)."""
-    from .. import __version__
     from .. import ode_fitting as of
     from .._fit_plot import prediction_plot
     from ..data import read_trajectories
-    from ..io import now_iso, write_json
-    from ._fit import _check_out, _make_out, _split
+    from ._fit import (
+        _check_out,
+        _split,
+        errors_doc,
+        parameters_doc,
+        report,
+        result_doc,
+        write_fitted,
+    )
 
     data = read_trajectories(args.data)
     out = Path(args.out)
@@ -53,34 +58,26 @@ def cmd_fit_ode(args: argparse.Namespace, task: Any) -> int:
             "nominal": of.prediction_errors(of.nominal_model(nominal_params), held_out),
             "fitted": of.prediction_errors(result.model, held_out),
         }
-    doc = {
-        "format": "diffcontrol-fitted-model",
-        "version": 1,
-        "task": task.name,
-        "model": args.model,
-        "parameters": {
-            n: {"value": v, "standard_error": result.standard_errors[n], "nominal": 0.0}
-            for n, v in result.values.items()
-        },
+    parameters = parameters_doc(
+        result.values, result.standard_errors, dict.fromkeys(result.values, 0.0)
+    )
+    body = {
+        "parameters": parameters,
         **{k: v for k, v in of.model_to_dict(result.model).items() if k != "kind"},
-        "fit": {
-            "window_steps": result.window,
-            "windows": result.windows,
-            "dt_s": result.dt_s,
-            "rk4_substeps": result.substeps,
-            "adam_steps": args.steps,
-            "learning_rate": args.learning_rate,
-            "lm_steps": args.lm_steps if args.model == "params" else 0,
-            "num_parameters": result.num_parameters,
-            "hidden": list(args.hidden) if args.model != "params" else None,
-            "seed": args.seed,
-            "loss": result.loss,
-            "nominal_loss": result.nominal_loss,
-            "diverged": result.diverged,
-            "message": result.message,
-            "loss_history": result.loss_history.tolist(),
-            "seconds": seconds,
-        },
+        "fit": result_doc(
+            result,
+            seconds,
+            window_steps=result.window,
+            windows=result.windows,
+            dt_s=result.dt_s,
+            rk4_substeps=result.substeps,
+            adam_steps=args.steps,
+            learning_rate=args.learning_rate,
+            lm_steps=args.lm_steps if args.model == "params" else 0,
+            num_parameters=result.num_parameters,
+            hidden=list(args.hidden) if args.model != "params" else None,
+            seed=args.seed,
+        ),
         "data": {
             "file": str(args.data),
             "system": data.metadata.get("system"),
@@ -89,20 +86,15 @@ def cmd_fit_ode(args: argparse.Namespace, task: Any) -> int:
             "held_out_episodes": [e.id for e in held_out.episodes()] if held_out else [],
             "fit_transitions": train.num_steps,
         },
-        "prediction_error": None
-        if errors is None
-        else {
-            "what": "RMS error of the state (x m, x_dot m/s, theta rad, theta_dot rad/s) H "
-            "steps ahead, open loop from every recorded state of the held-out episodes with "
-            "the recorded forces",
-            "horizons_steps": list(of.HORIZONS),
-            **{label: {str(h): e for h, e in by_h.items()} for label, by_h in errors.items()},
-        },
-        "created": now_iso(),
-        "diffcontrol_version": __version__,
+        "prediction_error": errors_doc(
+            "RMS error of the state (x m, x_dot m/s, theta rad, theta_dot rad/s) H steps "
+            "ahead, open loop from every recorded state of the held-out episodes with the "
+            "recorded forces",
+            of.HORIZONS,
+            errors,
+        ),
     }
-    _make_out(out)
-    write_json(out / "fitted.json", doc)
+    write_fitted(out, task, args.model, body)
     shown = held_out if held_out is not None else train
     prediction_plot(
         {
@@ -114,19 +106,14 @@ def cmd_fit_ode(args: argparse.Namespace, task: Any) -> int:
         title=f"{task.name} ({args.model}), {'held-out' if held_out is not None else 'fit'} "
         "episodes: open loop, restarted every 50 steps",
     )
-    for n, v in result.values.items():
-        se = result.standard_errors[n]
-        pm = f" ± {se:.3g}" if math.isfinite(se) else " (not identifiable from this data)"
-        print(f"{n} = {v:.6g}{pm} (nominal 0)")
+    lines = []
     if errors is not None:
         for h in of.HORIZONS:
             nom, fit = errors["nominal"][h]["rmse"], errors["fitted"][h]["rmse"]
-            print(
+            lines.append(
                 f"held-out RMS state error {h:>2} steps ahead: nominal {nom:.3g}, fitted {fit:.3g}"
             )
-    if result.diverged:
-        print(f"warning: {result.message}")
-    print(f"wrote {out / 'fitted.json'} and {out / 'prediction.png'} ({seconds:.1f} s fit)")
+    report(parameters, result, out, seconds, lines)
     return 0
 
 

@@ -8,7 +8,6 @@ trebuchet --data THROWS --model params`` fits its physical parameters to the dis
 from __future__ import annotations
 
 import argparse
-import math
 import time
 from pathlib import Path
 from typing import Any
@@ -82,7 +81,6 @@ def cmd_record_throws(args: argparse.Namespace, check_out) -> int:
 
 def cmd_fit_throws(args: argparse.Namespace, task: Any) -> int:
     """``diffcontrol fit trebuchet``: the grey box from recorded throws (``fit_throws``)."""
-    from .. import __version__
     from .._throws_plot import throws_plot
     from ..data import read_throws
     from ..fit_throws import (
@@ -92,8 +90,7 @@ def cmd_fit_throws(args: argparse.Namespace, task: Any) -> int:
         fit_throws,
         params_dict,
     )
-    from ..io import now_iso, write_json
-    from ._fit import _check_out, _make_out, _split
+    from ._fit import _check_out, _split, parameters_doc, report, result_doc, write_fitted
 
     if args.model != "params":
         raise ConfigError(
@@ -130,33 +127,19 @@ def cmd_fit_throws(args: argparse.Namespace, task: Any) -> int:
             "nominal": distance_errors(nominal_params, held_out),
             "fitted": distance_errors(result.params, held_out),
         }
-    doc = {
-        "format": "diffcontrol-fitted-model",
-        "version": 1,
-        "task": task.name,
-        "model": "params",
-        "parameters": {
-            n: {
-                "value": result.values[n],
-                "standard_error": result.standard_errors[n],
-                "nominal": result.nominal[n],
-            }
-            for n in result.names
-        },
+    parameters = parameters_doc(result.values, result.standard_errors, result.nominal)
+    body = {
+        "parameters": parameters,
         # the float fields of TrebuchetParams only (its step budgets are static, not fitted)
         "all_parameters": params_dict(result.params),
-        "fit": {
-            "residual": "predicted minus recorded distance (m), one per throw",
-            "adam_steps": args.steps,
-            "learning_rate": args.learning_rate,
-            "lm_steps": args.lm_steps,
-            "loss": result.loss,
-            "nominal_loss": result.nominal_loss,
-            "diverged": result.diverged,
-            "message": result.message,
-            "loss_history": result.loss_history.tolist(),
-            "seconds": seconds,
-        },
+        "fit": result_doc(
+            result,
+            seconds,
+            residual="predicted minus recorded distance (m), one per throw",
+            adam_steps=args.steps,
+            learning_rate=args.learning_rate,
+            lm_steps=args.lm_steps,
+        ),
         "data": {
             "file": str(args.data),
             "kind": "throws",
@@ -171,11 +154,8 @@ def cmd_fit_throws(args: argparse.Namespace, task: Any) -> int:
             "ones of the file), with their recorded inputs",
             **errors,
         },
-        "created": now_iso(),
-        "diffcontrol_version": __version__,
     }
-    _make_out(out)
-    write_json(out / "fitted.json", doc)
+    write_fitted(out, task, "params", body)
     shown = held_out if held_out is not None else train
     throws_plot(
         {"fitted": result.params, "nominal": nominal_params},
@@ -184,17 +164,12 @@ def cmd_fit_throws(args: argparse.Namespace, task: Any) -> int:
         title=f"trebuchet, {shown.num_throws} {'held-out' if held_out else 'fitted'} throws "
         f"of {Path(args.data).name}",
     )
-    for n in result.names:
-        se = result.standard_errors[n]
-        pm = f" ± {se:.3g}" if math.isfinite(se) else " (not identifiable from this data)"
-        print(f"{n} = {result.values[n]:.6g}{pm} (nominal {result.nominal[n]:.6g})")
+    lines = []
     if errors is not None:
         nom, fit = errors["nominal"]["rmse_m"], errors["fitted"]["rmse_m"]
-        print(
+        lines.append(
             f"held-out RMS distance error over {held_out.num_throws} throw(s): nominal "
             f"{nom:.3g} m, fitted {fit:.3g} m"
         )
-    if result.diverged:
-        print(f"warning: {result.message}")
-    print(f"wrote {out / 'fitted.json'} and {out / 'prediction.png'} ({seconds:.1f} s fit)")
+    report(parameters, result, out, seconds, lines)
     return 0
