@@ -10,6 +10,7 @@ from typing import Any
 import matplotlib
 
 matplotlib.use("Agg")
+import equinox as eqx  # noqa: E402
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
@@ -27,11 +28,14 @@ def task_predictor(task: Any, params: Any) -> Predictor:
     """Open loop through a discrete-time task's step with ``params`` (``fitting.predict``), in
     float64; ``task`` may be ``models.model_task(task, model)`` with the model as ``params``."""
 
+    @eqx.filter_jit  # one program per segment length, not one per segment
+    def open_loop(p, obs0, actions):
+        return predict(task, p, task.state_from_observation(obs0), actions)
+
     def run(obs0: np.ndarray, actions: np.ndarray) -> np.ndarray:
         with jax.enable_x64(True):
             p = jax.tree.map(lambda x: jnp.asarray(x, jnp.float64), params)
-            state = task.state_from_observation(jnp.asarray(obs0))
-            return np.asarray(predict(task, p, state, jnp.asarray(actions)))
+            return np.asarray(open_loop(p, jnp.asarray(obs0), jnp.asarray(actions)))
 
     return run
 

@@ -127,13 +127,16 @@ def _predictor(model: Any, dt: float, substeps: int):
 
     from .. import ode_fitting as of
 
+    @eqx.filter_jit  # one program per segment length, not one per segment
+    def open_loop(m, state, forces):
+        return of.predict(m, state, forces, dt, substeps)
+
     def run(state0, actions):
         with jax.enable_x64(True):
             m = jax.tree.map(
                 lambda a: jnp.asarray(a, jnp.float64) if eqx.is_inexact_array(a) else a, model
             )
             forces = jnp.asarray(actions[:, 0], jnp.float64)
-            state = jnp.asarray(state0, jnp.float64)
-            return np.asarray(of.predict(m, state, forces, dt, substeps))
+            return np.asarray(open_loop(m, jnp.asarray(state0, jnp.float64), forces))
 
     return run
