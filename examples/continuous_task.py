@@ -59,7 +59,7 @@ class Spring(diffcontrol.ContinuousTask):
         return state
 
     def trajectory(self, params, controller, ts, ys):
-        force = jax.vmap(lambda y: controller(y)[0])(ys)
+        force = jax.vmap(lambda y: controller(self.observe(y))[0])(ys)
         return SpringTrajectory(t=ts, x=ys[:, 0], v=ys[:, 1], force=force)
 
     def trajectory_loss(self, name):

@@ -15,7 +15,7 @@ from pathlib import Path as _Path
 
 __version__ = "0.1.0"
 
-from . import controllers, data, envs, rollout, systems, tasks, wrappers  # noqa: E402
+from . import controllers, data, envs, rollout, runs, systems, tasks, wrappers  # noqa: E402
 from .config import ODETrainConfig, TrainConfig  # noqa: E402
 from .controllers import MLPController, straight_through_sign  # noqa: E402, F401
 from .data import TrajectoryData, read_trajectories  # noqa: E402
@@ -34,35 +34,43 @@ from .evaluation import AimResult, EvalResult, evaluate, evaluate_aiming  # noqa
 from .io import AimingPolicy, NumpyPolicy, StatePolicy  # noqa: E402
 from .recording import record  # noqa: E402
 from .rollout import Trajectory  # noqa: E402
-from .tasks import ContinuousTask, Task, make, register  # noqa: E402
+from .runs import Run, open_run  # noqa: E402
+from .tasks import ContinuousTask, Task, make, register, resolve  # noqa: E402
 from .training import TrainResult, resolve_config, train  # noqa: E402
 
 envs.register_all()  # gymnasium.make("diffcontrol/<Name>-v0") for every registered task
 wrappers.register()  # gymnasium.make("diffcontrol/PendulumFriction-v0", g=..., friction=...)
 
 
-def load(run_dir: str | _os.PathLike) -> NumpyPolicy:
-    """Load the controller saved by ``diffcontrol train`` in ``run_dir`` (or a ``model.json``).
+def load(run_dir: str | _os.PathLike, task: Task | ContinuousTask | str | None = None):
+    """Load the controller saved in ``run_dir`` (a run directory or its ``model.json``) as a
+    NumPy policy, for any task.
 
-    Returns a ``NumpyPolicy``: ``policy(obs)`` takes one Gymnasium observation (NumPy) and
-    returns a valid Gymnasium action, so it drops into a plain ``gymnasium.make(...)`` loop.
-    For an aiming task (the trebuchet) it returns an ``AimingPolicy``:
-    ``policy(target_m, wind_mps) -> (angle_deg, weight_lb)``. For a continuous-time task (the
-    swing-ups) a ``StatePolicy``: ``policy(state) -> force`` on the physical state
-    ``(x, x_dot, theta, theta_dot)``, so any integrator can re-simulate the closed loop.
+    The policy is the task's (its ``load_policy`` hook): by default a ``NumpyPolicy``,
+    ``policy(obs)`` -> a valid Gymnasium action, which drops into a plain
+    ``gymnasium.make(...)`` loop; an ``AimingPolicy`` for the trebuchet
+    (``policy(target_m, wind_mps) -> (angle_deg, weight_lb)``); a ``StatePolicy`` for a
+    continuous-time task (``policy(state) -> action`` on the physical state).
+
+    Args:
+        run_dir: a directory written by ``diffcontrol train`` or ``result.save``.
+        task: the task (or its name or import path) when it is not registered; without it a
+            task that is not registered loads by the file's format alone (a ``NumpyPolicy``,
+            or a ``StatePolicy`` where the file gives the state's features).
 
     Raises:
         ModelFileError: the file is missing, corrupt, or of an unsupported version.
     """
-    from .io import AimingPolicy, StatePolicy, read_model
+    from .io import read_model
 
     doc = read_model(_Path(run_dir))
-    if "features" in doc["observation"]:
-        return StatePolicy(doc)
-    known = doc["task"] in tasks.names()
-    if known and tasks.make(doc["task"]).kind == "aiming":
-        return AimingPolicy(doc)
-    return NumpyPolicy(doc)
+    if isinstance(task, str):
+        task = tasks.resolve(task)
+    if task is None and doc["task"] in tasks.names():
+        task = tasks.make(doc["task"])
+    if task is not None:
+        return task.load_policy(doc)
+    return StatePolicy(doc) if "features" in doc["observation"] else NumpyPolicy(doc)
 
 
 def list_tasks() -> list[str]:
@@ -106,6 +114,10 @@ __all__ = [
     "register",
     "resolve_config",
     "rollout",
+    "runs",
+    "Run",
+    "open_run",
+    "resolve",
     "systems",
     "tasks",
     "train",

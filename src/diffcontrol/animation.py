@@ -14,47 +14,23 @@ import numpy as np  # noqa: E402
 
 from .evaluation import Recording  # noqa: E402
 from .io import write_bytes  # noqa: E402
-from .tasks import CartPole, Pendulum, Task  # noqa: E402
+from .tasks import Task  # noqa: E402
 
 
-def _frames_pendulum(rec: Recording, every: int):
-    fig, ax = plt.subplots(figsize=(3.2, 3.2), dpi=75)
-    ax.set_xlim(-1.3, 1.3)
-    ax.set_ylim(-1.3, 1.3)
+def scene(width_in: float, height_in: float, xlim: tuple, ylim: tuple, dpi: int = 75):
+    """A blank drawing for a task's ``frames``: a figure of the given size (inches) with one
+    axes of equal aspect over ``xlim`` x ``ylim`` and no ticks. Returns ``(fig, ax)``; the
+    caller closes it (``close(fig)``) when its frames are done."""
+    fig, ax = plt.subplots(figsize=(width_in, height_in), dpi=dpi)
+    ax.set_xlim(*xlim)
+    ax.set_ylim(*ylim)
     ax.set_aspect("equal")
     ax.axis("off")
-    (rod,) = ax.plot([], [], lw=6, color="#cc4d4d", solid_capstyle="round")
-    ax.plot([0], [0], "ko", ms=5)
-    text = ax.text(-1.25, 1.15, "", fontsize=8, family="monospace")
-    for i in range(0, rec.states.shape[0], every):
-        theta = rec.states[i, 0]
-        rod.set_data([0, -np.sin(theta)], [0, np.cos(theta)])
-        u = rec.actions[min(i, len(rec.actions) - 1), 0]
-        text.set_text(f"t={i * rec.dt:5.2f} s  u={u:+.2f}")
-        yield fig
-    plt.close(fig)
+    return fig, ax
 
 
-def _frames_cartpole(rec: Recording, every: int):
-    fig, ax = plt.subplots(figsize=(4.8, 2.4), dpi=75)
-    ax.set_xlim(-2.6, 2.6)
-    ax.set_ylim(-0.4, 1.3)
-    ax.set_aspect("equal")
-    ax.axis("off")
-    ax.plot([-2.4, 2.4], [0, 0], color="0.5", lw=1)
-    for x in (-2.4, 2.4):
-        ax.plot([x, x], [-0.1, 0.1], color="r", lw=1)
-    cart = plt.Rectangle((0, -0.1), 0.5, 0.2, color="k")
-    ax.add_patch(cart)
-    (pole,) = ax.plot([], [], lw=4, color="#ca9865", solid_capstyle="round")
-    text = ax.text(-2.5, 1.15, "", fontsize=8, family="monospace")
-    for i in range(0, rec.states.shape[0], every):
-        x, _, theta, _ = rec.states[i]
-        cart.set_x(x - 0.25)
-        pole.set_data([x, x + np.sin(theta)], [0.0, np.cos(theta)])
-        a = rec.actions[min(i, len(rec.actions) - 1), 0]
-        text.set_text(f"t={i * rec.dt:5.2f} s  push {'→' if a >= 0 else '←'}")
-        yield fig
+def close(fig) -> None:
+    """Release a figure made by ``scene``."""
     plt.close(fig)
 
 
@@ -68,15 +44,11 @@ def _write_gif(frames: list[np.ndarray], duration_ms: float, path: str | Path) -
 def animate(recording: Recording, task: Task, path: str | Path, max_frames: int = 250) -> Path:
     """Write an animated GIF of ``recording`` (played at real time, subsampled to at most
     ``max_frames`` frames)."""
-    if isinstance(task, CartPole):
-        drawer = _frames_cartpole
-    elif isinstance(task, Pendulum):
-        drawer = _frames_pendulum
-    else:
-        raise ValueError(f"no animation is defined for task {task.name!r}")
+    if not task.can_draw:
+        raise ValueError(f"task {task.name!r} cannot draw itself (it defines no frames())")
     every = max(1, int(np.ceil(recording.states.shape[0] / max_frames)))
     frames = []
-    for fig in drawer(recording, every):
+    for fig in task.frames(recording, every):
         fig.canvas.draw()
         frames.append(np.asarray(fig.canvas.buffer_rgba())[..., :3].copy())
     duration_ms = 1000.0 * recording.dt * every

@@ -41,8 +41,6 @@ from .tasks import ContinuousTask, Task
 
 NAMESPACE = "diffcontrol"
 VERSION = 0
-SUPPORTED_KINDS = ("control", "aiming")
-"""Task kinds that step one action at a time through ``Task.step`` (see ``Task.kind``)."""
 
 
 def env_name(task: Task) -> str:
@@ -60,8 +58,9 @@ def env_id(task: Task | str) -> str:
 
 
 def supports(task: Any) -> bool:
-    """Whether ``task`` can be stepped as a Gymnasium environment by ``TaskEnv``."""
-    return isinstance(task, Task) and task.kind in SUPPORTED_KINDS
+    """Whether ``task`` can be stepped as a Gymnasium environment by ``TaskEnv`` (every
+    discrete-time task can)."""
+    return isinstance(task, Task)
 
 
 def _entry(task: Any) -> tuple[str, int] | None:
@@ -117,7 +116,7 @@ class TaskEnv(gymnasium.Env):
 
     Raises:
         UnknownTaskError: ``task`` is not a registered name.
-        ConfigError: the task is of a kind that cannot be stepped one action at a time.
+        ConfigError: the task is not a discrete-time ``Task``.
     """
 
     metadata = {"render_modes": []}
@@ -127,39 +126,20 @@ class TaskEnv(gymnasium.Env):
             task = _tasks.make(task)
         if not supports(task):
             raise ConfigError(
-                f"task {getattr(task, 'name', task)!r} of kind {getattr(task, 'kind', '?')!r} "
-                f"cannot be a step-by-step Gymnasium environment; supported kinds: "
-                f"{', '.join(SUPPORTED_KINDS)}"
+                f"task {getattr(task, 'name', task)!r} is not a discrete-time Task; a "
+                "continuous-time task is stepped by ContinuousTaskEnv"
             )
         self.task = task
         p = task.default_params() if params is None else params
         self.params = jax.tree.map(lambda x: jnp.asarray(x, dtype=float), p)
-        self.observation_space = spaces.Box(
-            -np.inf, np.inf, (task.observation_size,), dtype=np.float32
-        )
-        self._discrete = task.action_head == "sign"
-        if self._discrete:
-            self.action_space = spaces.Discrete(2)
-            self._low = self._high = None
-        elif task.action_low is not None and task.action_high is not None:
-            self._low = np.asarray(task.action_low, np.float32)
-            self._high = np.asarray(task.action_high, np.float32)
-            self.action_space = spaces.Box(self._low, self._high, dtype=np.float32)
-        else:
-            self._low = self._high = None
-            self.action_space = spaces.Box(-np.inf, np.inf, (task.action_size,), dtype=np.float32)
-
+        self.observation_space = task.observation_space()
+        self.action_space = task.action_space()
         self._reset, self._step = _compiled(task, self.params, params is None)
         self.state: jax.Array | None = None
 
     def task_action(self, action: Any) -> np.ndarray:
-        """The task's action vector for a Gymnasium action (``Discrete`` 0/1 -> ``[-1]``/``[+1]``)."""
-        if self._discrete:
-            return np.array([1.0 if int(action) == 1 else -1.0])
-        a = np.asarray(action, np.float64).reshape(self.task.action_size)
-        if self._low is not None:
-            a = np.clip(a, self._low, self._high)
-        return a
+        """The task's action vector for a Gymnasium action (``task.action_from_gym``)."""
+        return self.task.action_from_gym(action)
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
@@ -184,8 +164,7 @@ def register_env(task: Any) -> str:
     entry = _entry(task)
     if entry is None:
         raise ConfigError(
-            f"task {task.name!r} of kind {task.kind!r} has no Gymnasium environment; "
-            f"supported kinds: {', '.join(SUPPORTED_KINDS)} and continuous-time tasks"
+            f"{task!r} is neither a Task nor a ContinuousTask, so it has no Gymnasium environment"
         )
     entry_point, steps = entry
     eid = env_id(task)
@@ -202,13 +181,21 @@ def register_env(task: Any) -> str:
 
 
 def register_all() -> list[str]:
-    """Register every registered task of a supported kind; skip the others. Returns the ids."""
+    """Register every registered task as a Gymnasium environment, and every task registered
+    from now on at once (``diffcontrol.register``). Returns the ids registered now."""
     ids = []
     for name in _tasks.names():
         task = _tasks.make(name)
         if _entry(task) is not None:
             ids.append(register_env(task))
+    if _register_new not in _tasks._ON_REGISTER:
+        _tasks._ON_REGISTER.append(_register_new)
     return ids
+
+
+def _register_new(task: Any) -> None:
+    if _entry(task) is not None:
+        register_env(task)
 
 
 # ---------------------------------------------------------------------------------------------

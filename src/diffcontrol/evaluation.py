@@ -20,6 +20,8 @@ class EvalResult:
     returns: np.ndarray
     lengths: np.ndarray
 
+    key = "gym_eval"  # its entry in metrics.json
+
     @property
     def mean(self) -> float:
         return float(np.mean(self.returns))
@@ -40,6 +42,19 @@ class EvalResult:
             "mean_length": float(np.mean(self.lengths)),
             "returns": self.returns.tolist(),
         }
+
+    def summary(self) -> str:
+        """One line: the mean and spread of the return and the seeds it was measured on."""
+        n = int(self.returns.size)
+        return (
+            f"{self.env_id}: return {self.mean:.2f} ± {self.std:.2f} over {n} episodes "
+            f"(seeds {self.seed}-{self.seed + n - 1}; min {self.returns.min():.1f}, "
+            f"max {self.returns.max():.1f})"
+        )
+
+    def headline(self) -> str:
+        """A few words for the end of ``diffcontrol train``'s last line."""
+        return f"return {self.mean:.1f} ± {self.std:.1f} in {self.env_id}"
 
 
 @dataclasses.dataclass
@@ -155,6 +170,8 @@ class AimResult:
     distances: np.ndarray
     reachable: np.ndarray
 
+    key = "aim_eval"  # its entry in metrics.json
+
     @property
     def misses(self) -> np.ndarray:
         return self.distances - self.targets
@@ -170,13 +187,19 @@ class AimResult:
 
     def summary(self) -> str:
         s = self.stats
+        head = f"{self.task}, {s['targets']} random targets (seed {self.seed}): "
         if not s["reachable"]:
-            return f"none of the {s['targets']} targets was reachable"
-        return (
+            return head + f"none of the {s['targets']} targets was reachable"
+        return head + (
             f"|miss| over {s['reachable']} reachable targets: mean {s['mean_miss_m']:.3f} m, "
             f"median {s['median_miss_m']:.3f} m, 95th percentile {s['p95_miss_m']:.3f} m, "
             f"worst {s['worst_miss_m']:.3f} m ({s['unreachable']} of {s['targets']} unreachable)"
         )
+
+    def headline(self) -> str:
+        """A few words for the end of ``diffcontrol train``'s last line."""
+        s = self.stats
+        return f"mean |miss| {s['mean_miss_m']:.3f} m" if s["reachable"] else "no reachable target"
 
 
 def evaluate_aiming(
@@ -278,6 +301,15 @@ class SwingUpResult:
     upright_time: float | None
     loss: float
 
+    key = "swingup"  # its entry in metrics.json
+
+    def headline(self) -> str:
+        """A few words for the end of ``diffcontrol train``'s last line."""
+        return (
+            f"final |θ| {abs(self.final_theta):.3f} rad, ẋ {self.final_x_dot:+.3f} m/s, "
+            f"peak |F| {self.peak_force:.1f} N; loss {self.loss:.4g}"
+        )
+
     def to_json(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
 
@@ -287,7 +319,7 @@ class SwingUpResult:
             if self.upright_time is not None
             else "never upright for good"
         )
-        return (
+        return f"{self.task} (reference solve, dopri8 at 1e-9): " + (
             f"at t = {self.horizon_s:g} s: |θ| {abs(self.final_theta):.4f} rad, θ̇ "
             f"{self.final_theta_dot:+.3f} rad/s, ẋ {self.final_x_dot:+.3f} m/s, x "
             f"{self.final_x:+.2f} m; peak |F| {self.peak_force:.1f} N; {self.swings} swings; "

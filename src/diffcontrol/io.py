@@ -132,6 +132,23 @@ def now_iso() -> str:
     return _dt.datetime.now(_dt.UTC).replace(microsecond=0).isoformat()
 
 
+def check_new_file(path: str | os.PathLike, suffix: str) -> Path:
+    """Check that ``path`` can take a new file ending in ``suffix``: its folder exists and
+    nothing is there yet (nothing is overwritten).
+
+    Raises:
+        RunDirectoryError: it exists, ends otherwise, or its folder does not exist.
+    """
+    path = Path(path)
+    if path.suffix.lower() != suffix:
+        raise RunDirectoryError(f"{path} does not end in {suffix}; choose a {suffix} file name")
+    if path.exists() or path.is_symlink():
+        raise RunDirectoryError(f"{path} already exists; choose a new file name")
+    if not path.parent.is_dir():
+        raise RunDirectoryError(f"the folder {path.parent} does not exist; create it first")
+    return path
+
+
 # ---------------------------------------------------------------------------------------------
 # model.json
 
@@ -168,6 +185,26 @@ def controller_to_dict(controller: MLPController, task: Any, metadata: dict | No
         },
         "metadata": dict(metadata or {}),
     }
+
+
+def model_document(task: Any, controller: MLPController, config: Any, metrics: dict) -> dict:
+    """The ``model.json`` document of a controller trained for ``task`` with ``config``; its
+    metadata records the version, the seed, the training time and the settings."""
+    from . import __version__
+
+    source = getattr(task, "source", None)  # the import path of a user's task
+    return controller_to_dict(
+        controller,
+        task,
+        {
+            "diffcontrol_version": __version__,
+            "created": metrics.get("created") or now_iso(),
+            "seed": config.seed,
+            "train_seconds": metrics.get("train_seconds"),
+            "config": config.to_json(),
+            **({"task_source": source} if isinstance(source, str) else {}),
+        },
+    )
 
 
 def _check_model(doc: Any, path: Path) -> None:

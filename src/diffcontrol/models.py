@@ -224,6 +224,8 @@ def model_task(task: Any, model: HybridModel | NeuralModel) -> Any:
     cls = type(task)
 
     class _ModelTask(cls):
+        base = task  # the system the model stands for
+
         def default_params(self):
             return model
 

@@ -44,11 +44,8 @@ def _time_step(env: gymnasium.Env) -> float | None:
     for name in ("dt", "tau"):
         if isinstance(getattr(u, name, None), int | float):
             return float(getattr(u, name))
-    if isinstance(u, TaskEnv) and u.task.kind == "control":
-        for name in ("dt", "tau"):
-            if hasattr(u.params, name):
-                # a float32 parameter: its shortest decimal (0.05, not 0.05000000074505806)
-                return float(str(np.asarray(getattr(u.params, name))[()]))
+    if isinstance(u, TaskEnv):
+        return u.task.step_seconds(u.params)
     return None
 
 

@@ -101,7 +101,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
     from .. import _jax_setup, tasks
     from ..compare import run_comparison
 
-    task = tasks.make(args.task)
+    task = tasks.resolve(args.task)
     out = Path(args.out or f"runs/compare-{task.name}")
     if not (args.no_compile_cache or os.environ.get("DIFFCONTROL_NO_COMPILE_CACHE")):
         _jax_setup.enable_compile_cache()

@@ -60,7 +60,11 @@ def add_parser(sub: Any) -> None:
             "against recorded distances."
         ),
     )
-    p.add_argument("task", metavar="TASK", help="a registered task (`diffcontrol list`)")
+    p.add_argument(
+        "task",
+        metavar="TASK",
+        help="a task name (`diffcontrol list`), or your own task as module:Class (from the current directory) or an entry point of the diffcontrol.tasks group",
+    )
     p.add_argument(
         "--data", required=True, metavar="FILE", help="recorded trajectories (or throws)"
     )
@@ -233,7 +237,7 @@ def cmd_fit(args: argparse.Namespace) -> int:
     from .. import tasks
     from ..data import read_trajectories
 
-    task = tasks.make(args.task)
+    task = tasks.resolve(args.task)
     steps, lr = (DEFAULTS_ODE if task.kind == "ode" else DEFAULTS)[args.model]
     args.steps = steps if args.steps is None else args.steps
     args.learning_rate = lr if args.learning_rate is None else args.learning_rate

@@ -36,7 +36,11 @@ def add_parser(sub: Any) -> None:
             "The last round's controller is DIR/round_R/run/model.json."
         ),
     )
-    p.add_argument("task", metavar="TASK", help="the task whose model is fitted (e.g. pendulum)")
+    p.add_argument(
+        "task",
+        metavar="TASK",
+        help="a task name (`diffcontrol list`), or your own task as module:Class (from the current directory) or an entry point of the diffcontrol.tasks group",
+    )
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
     p.add_argument(
         "--env",
@@ -95,7 +99,7 @@ def cmd_loop(args: argparse.Namespace) -> int:
     from ..recording import record
     from . import main
 
-    task = tasks.make(args.task)
+    task = tasks.resolve(args.task)
     if task.kind != "control" or not task.gym_id:
         raise DiffcontrolError(
             f"loop needs a discrete-time control task with a Gymnasium environment, not "

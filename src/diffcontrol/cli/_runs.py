@@ -4,12 +4,21 @@ from __future__ import annotations
 
 import argparse
 import json
-import time
 from pathlib import Path
 from typing import Any
 
 from ..errors import DiffcontrolError
 from ._args import finite_float, param, positive_int
+
+
+def _add_task_option(p: Any) -> None:
+    p.add_argument(
+        "--task",
+        metavar="TASK",
+        default=None,
+        help="the run's task when it is not a built-in one: its import path (module:Class) "
+        "or entry-point name; diffcontrol never imports code because a file names it",
+    )
 
 
 def add_parsers(sub: Any) -> None:
@@ -59,6 +68,7 @@ def add_parsers(sub: Any) -> None:
         help="first reset seed, or the seed of the random targets (default 0)",
     )
     p.add_argument("--json", action="store_true", help="print the result as JSON")
+    _add_task_option(p)
 
     p = sub.add_parser(
         "animate",
@@ -79,6 +89,7 @@ def add_parsers(sub: Any) -> None:
     p.add_argument(
         "--wind", type=finite_float, default=-3.0, metavar="MPS", help="aiming tasks: wind (m/s)"
     )
+    _add_task_option(p)
 
     p = sub.add_parser(
         "aim",
@@ -112,90 +123,20 @@ def cmd_list(args: argparse.Namespace) -> int:
     return 0
 
 
-def example_throw(policy: Any, target: float, wind: float) -> Any:
-    import jax
+def _open(args: argparse.Namespace, real: Any = True) -> Any:
+    from ..runs import open_run
 
-    from ..systems import trebuchet as tb
-
-    angle, weight = policy(target, wind)
-    return jax.jit(tb.simulate)(wind, angle, weight)
-
-
-def _ode_recording(run_dir: str, task):
-    """Re-solve a saved continuous-time controller (the reference solve) with the run's own
-    settings (horizon, saves, loss, --param overrides) where its run.json is there."""
-    from .. import io
-    from ..evaluation import simulate_continuous
-    from ..training import task_params
-
-    doc = io.read_model(Path(run_dir))
-    config = task.default_config()
-    run_file = Path(run_dir) / io.RUN_FILE
-    if Path(run_dir).is_dir() and run_file.exists():
-        config = type(config).from_json(io.read_json(run_file, "run file")["config"])
-    params = task_params(task, config.params)
-    metrics = Path(run_dir) / "metrics.json"
-    if Path(run_dir).is_dir() and metrics.exists():  # a --model run: its real system
-        from ..models import real_params
-
-        real = (io.read_json(metrics, "metrics").get("model") or {}).get("real_system")
-        fitted_real = real_params(task, real)
-        params = params if fitted_real is None else fitted_real
-    return simulate_continuous(task, io.controller_from_dict(doc), params, config=config)
-
-
-def _load_run(run_dir: str):
-    from .. import load, tasks
-
-    policy = load(run_dir)  # chooses the policy class by the task's kind
-    return tasks.make(policy.task), policy
+    return open_run(args.run_dir, task=getattr(args, "task", None), real=real)
 
 
 def cmd_aim(args: argparse.Namespace) -> int:
-    import jax
-
-    from ..systems import trebuchet as tb
-    from ..tasks.trebuchet import aim_directly, check_target
-
-    task, policy = _load_run(args.run_dir)
-    if task.kind != "aiming":
+    run = _open(args)
+    if not callable(getattr(run.task, "aim", None)):
         raise DiffcontrolError(
-            f"{args.run_dir} holds a {task.name!r} controller; `aim` needs a trebuchet run"
+            f"{args.run_dir} holds a {run.task.name!r} controller; `aim` needs an aiming task "
+            "(the trebuchet)"
         )
-    check_target(args.target, args.wind)
-    t0 = time.perf_counter()
-    angle, weight = policy(args.target, args.wind)
-    net_seconds = time.perf_counter() - t0
-    distance = float(jax.jit(tb.shoot)(args.wind, angle, weight))
-    result = {
-        "target_m": args.target,
-        "wind_mps": args.wind,
-        "angle_deg": angle,
-        "weight_lb": weight,
-        "distance_m": distance,
-        "miss_m": distance - args.target,
-        "network_seconds": net_seconds,
-    }
-    lines = [
-        f"network: angle {angle:.2f} deg, weight {weight:.1f} lb -> {distance:.2f} m "
-        f"(miss {distance - args.target:+.3f} m; {net_seconds * 1e6:.0f} us)"
-    ]
-    if args.direct:
-        direct = jax.jit(aim_directly)
-        jax.block_until_ready(direct(args.target, args.wind))  # compile first
-        t0 = time.perf_counter()
-        a, w, miss = jax.block_until_ready(direct(args.target, args.wind))
-        seconds = time.perf_counter() - t0
-        result["direct"] = {
-            "angle_deg": float(a),
-            "weight_lb": float(w),
-            "miss_m": float(miss),
-            "seconds": seconds,
-        }
-        lines.append(
-            f"direct:  angle {float(a):.2f} deg, weight {float(w):.1f} lb -> "
-            f"{args.target + float(miss):.2f} m (miss {float(miss):+.3f} m; {seconds * 1e3:.1f} ms)"
-        )
+    result, lines = run.task.aim(run, args.target, args.wind, direct=args.direct)
     if args.json:
         print(json.dumps(result))
     else:
@@ -205,86 +146,32 @@ def cmd_aim(args: argparse.Namespace) -> int:
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
-    from ..evaluation import evaluate
-    from ..models import as_env, real_params
-
-    task, policy = _load_run(args.run_dir)
-    if task.kind == "aiming":
-        from ..evaluation import evaluate_aiming
-
-        n = args.episodes or 1000
-        params = real_params(task, _real(args))
-        result = evaluate_aiming(policy, task, targets=n, seed=args.seed, params=params)
-        if args.json:
-            print(json.dumps({"run_dir": str(args.run_dir), **result.to_json()}))
-        else:
-            where = (
-                " on the real trebuchet of its fitted model's data" if params is not None else ""
-            )
-            print(f"{task.name}, {n} random targets (seed {args.seed}){where}: {result.summary()}")
-        return 0
-    if task.kind == "ode":
-        from ..evaluation import swingup_result
-
-        report = swingup_result(_ode_recording(args.run_dir, task))
-        if args.json:
-            print(json.dumps({"run_dir": str(args.run_dir), **report.to_json()}))
-        else:
-            print(f"{task.name} (reference solve, dopri8 at 1e-9): {report.summary()}")
-        return 0
-    if not task.gym_id:
-        raise DiffcontrolError(f"task {task.name!r} has no Gymnasium environment to evaluate in")
-    args.episodes = args.episodes or 100
-    ev = evaluate(policy, task, episodes=args.episodes, seed=args.seed, real=as_env(_real(args)))
-    if args.json:
-        print(json.dumps({"run_dir": str(args.run_dir), "task": task.name, **ev.to_json()}))
-    else:
-        print(
-            f"{ev.env_id}: return {ev.mean:.2f} ± {ev.std:.2f} over {args.episodes} episodes "
-            f"(seeds {args.seed}-{args.seed + args.episodes - 1}; min {ev.returns.min():.1f}, "
-            f"max {ev.returns.max():.1f})"
+    real: Any = True  # the real system of a run trained through a fitted model
+    if args.env:
+        real = {"env_id": args.env, "env_kwargs": dict(args.env_arg)}
+    elif args.env_arg:
+        raise DiffcontrolError("--env-arg needs --env (the environment it applies to)")
+    run = _open(args, real)
+    ev = run.task.evaluate_run(run, episodes=args.episodes, seed=args.seed)
+    if ev is None:
+        raise DiffcontrolError(
+            f"task {run.task.name!r} has no environment to evaluate in; name one with --env"
         )
+    if args.json:
+        print(json.dumps({"run_dir": str(args.run_dir), "task": run.task.name, **ev.to_json()}))
+    else:
+        where = " (on the real system of its fitted model)" if run.real and not args.env else ""
+        print(f"{ev.summary()}{where}")
     return 0
 
 
-def _real(args: argparse.Namespace) -> dict | None:
-    """The system to evaluate on: --env, else the real system of a run trained with --model
-    (from its metrics.json), else None (the task's own)."""
-    if args.env:
-        return {"env_id": args.env, "env_kwargs": dict(args.env_arg)}
-    if args.env_arg:
-        raise DiffcontrolError("--env-arg needs --env (the environment it applies to)")
-    metrics = Path(args.run_dir) / "metrics.json"
-    if metrics.exists():
-        from ..io import read_json
-
-        return (read_json(metrics, "metrics").get("model") or {}).get("real_system")
-    return None
-
-
 def cmd_animate(args: argparse.Namespace) -> int:
-    from ..animation import animate
-    from ..evaluation import record_episode
+    from ..io import check_new_file
 
-    task, policy = _load_run(args.run_dir)
+    run = _open(args)
     path = Path(args.out) if args.out else Path(args.run_dir) / "rollout.gif"
-    if task.kind == "aiming":
-        from ..animation import animate_throw
-        from ..tasks.trebuchet import check_target
-
-        check_target(args.target, args.wind)
-        throw = example_throw(policy, args.target, args.wind)
-        animate_throw(throw, args.target, args.wind, path)
-        print(f"wrote {path} (distance {float(throw.distance):.2f} m, target {args.target:g} m)")
-        return 0
-    if task.kind == "ode":
-        from ..animation import animate_swingup
-
-        rec = _ode_recording(args.run_dir, task)
-        animate_swingup(rec, path)
-        print(f"wrote {path} ({rec.t[-1]:g} s, peak |F| {abs(rec.force).max():.1f} N)")
-        return 0
-    rec = record_episode(policy, task, seed=args.seed)
-    animate(rec, task, path)
-    print(f"wrote {path} (return {rec.total_return:.1f}, {len(rec.rewards)} steps)")
+    if args.out:
+        check_new_file(path, ".gif")
+    what = run.task.animate_run(run, path, seed=args.seed, target=args.target, wind=args.wind)
+    print(f"wrote {path} ({what})")
     return 0

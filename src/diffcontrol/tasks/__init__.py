@@ -1,10 +1,17 @@
 """Tasks: a system plus its losses, initial-state distribution and horizon, in a registry.
 
 ``make("pendulum")`` and the CLI share the registry, so a task registered from user code with
-``register`` is trainable from Python exactly like the built-in ones.
+``register`` is trainable from Python exactly like the built-in ones. ``resolve`` also finds a
+user's task by import path (``"my_tasks:Acrobot"``) or by the name an installed package gives
+it in the ``diffcontrol.tasks`` entry-point group.
 """
 
 from __future__ import annotations
+
+import importlib
+import importlib.metadata
+import os
+import sys
 
 from ..errors import UnknownTaskError
 from ._base import ContinuousTask, StepLoss, Task, TrajectoryLoss
@@ -22,11 +29,22 @@ AnyTask = Task | ContinuousTask
 _REGISTRY: dict[str, AnyTask] = {}
 
 
+_ON_REGISTER: list = []
+"""Called with every task registered (``diffcontrol.envs`` adds its Gymnasium registration)."""
+
+
 def register(task: AnyTask) -> AnyTask:
-    """Add a task instance to the registry under ``task.name``; returns it."""
+    """Add a task instance to the registry under ``task.name`` and make it a Gymnasium
+    environment (``diffcontrol/<Name>-v0``) at once; returns it.
+
+    Raises:
+        ValueError: a task of another class is registered under the same name.
+    """
     if task.name in _REGISTRY and type(_REGISTRY[task.name]) is not type(task):
         raise ValueError(f"a different task is already registered as {task.name!r}")
     _REGISTRY[task.name] = task
+    for hook in _ON_REGISTER:
+        hook(task)
     return task
 
 
@@ -43,6 +61,75 @@ def make(name: str) -> AnyTask:
             f"unknown task {name!r}; choose one of: {', '.join(sorted(_REGISTRY))} "
             "(`diffcontrol list` describes them)"
         ) from None
+
+
+ENTRY_POINT_GROUP = "diffcontrol.tasks"
+"""Packages make their tasks known by name with an entry point in this group, e.g. in
+``pyproject.toml``: ``[project.entry-points."diffcontrol.tasks"] acrobot = "my_pkg:Acrobot"``."""
+
+
+def resolve(spec: str) -> AnyTask:
+    """The task ``spec`` names, registered on the way: a registered name, the name of an
+    entry point in ``ENTRY_POINT_GROUP``, or an import path ``module:attribute`` (a ``Task``
+    or ``ContinuousTask`` subclass, which is instantiated, or an instance). The current
+    directory is searched for the module, as ``python -m`` would.
+
+    Only call this with what a user named (a command-line argument, code): diffcontrol never
+    imports a module because a file names it.
+
+    Raises:
+        UnknownTaskError: nothing of that name, or the module does not import, or the
+            attribute is not a task.
+    """
+    if spec in _REGISTRY:
+        return _REGISTRY[spec]
+    target = spec
+    if ":" not in spec:
+        found = [
+            ep for ep in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP) if ep.name == spec
+        ]
+        if not found:
+            make(spec)  # raises, listing the registered names
+        target = found[0].value
+    module_name, _, attribute = target.partition(":")
+    if not module_name or not attribute:
+        raise UnknownTaskError(f"task {spec!r}: expected module:Class, e.g. my_tasks:Acrobot")
+    if os.getcwd() not in sys.path and "" not in sys.path:
+        sys.path.insert(0, os.getcwd())
+    try:
+        module = importlib.import_module(module_name)
+    except Exception as e:  # noqa: BLE001 - any failure of the user's module is reported
+        raise UnknownTaskError(
+            f"task {spec!r}: cannot import {module_name!r} ({type(e).__name__}: {e}); check "
+            "the module path (run from the directory that holds it, or install its package)"
+        ) from None
+    obj = module
+    for part in attribute.split("."):
+        if not hasattr(obj, part):
+            raise UnknownTaskError(f"task {spec!r}: module {module_name!r} has no {attribute!r}")
+        obj = getattr(obj, part)
+    if isinstance(obj, type) and issubclass(obj, Task | ContinuousTask):
+        try:
+            obj = obj()
+        except TypeError as e:
+            raise UnknownTaskError(
+                f"task {spec!r}: {attribute} cannot be created ({e}); implement its abstract "
+                "methods or give its __init__ defaults"
+            ) from None
+    if not isinstance(obj, Task | ContinuousTask):
+        raise UnknownTaskError(
+            f"task {spec!r}: {attribute} is a {type(obj).__name__}, not a diffcontrol Task or "
+            "ContinuousTask (subclass or instance)"
+        )
+    obj.source = target
+    if obj.name in _REGISTRY and _REGISTRY[obj.name] is not obj:
+        if type(_REGISTRY[obj.name]) is type(obj):
+            return _REGISTRY[obj.name]
+        raise UnknownTaskError(
+            f"task {spec!r} is named {obj.name!r}, which a different registered task already "
+            "uses; give it another name"
+        )
+    return register(obj)
 
 
 def names() -> list[str]:
@@ -74,6 +161,8 @@ __all__ = [
     "make",
     "names",
     "register",
+    "resolve",
+    "ENTRY_POINT_GROUP",
     "Pendulum",
     "PendulumUnclipped",
     "CartPole",

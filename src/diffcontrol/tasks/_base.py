@@ -20,6 +20,9 @@ class _TaskBase(abc.ABC):
     name: ClassVar[str]
     summary: ClassVar[str]
     kind: ClassVar[str] = "control"
+    """Which model-learning route ``diffcontrol fit`` takes: ``"control"`` (trajectories of
+    a discrete-time task), ``"aiming"`` (recorded throws) or ``"ode"`` (recorded states).
+    Nothing else looks at it; the route goes when model learning has one ``fit``."""
     gym_id: ClassVar[str | None] = None
     observation_size: ClassVar[int]
     action_size: ClassVar[int]
@@ -47,8 +50,94 @@ class _TaskBase(abc.ABC):
 
     @property
     def gym_label(self) -> str:
-        """How evaluation results name the environment (``gym_id`` plus any changes)."""
-        return self.gym_id or self.name
+        """How evaluation results name the environment: ``gym_id`` (plus any changes), or the
+        task's own ``diffcontrol/<Name>-v0``."""
+        from ..envs import env_id
+
+        return self.gym_id or env_id(self)
+
+    # --- hooks of a run: how a trained controller is loaded, judged and drawn ---------------
+    # The generic layers (``diffcontrol.runs``, ``load``, the CLI) call these and never ask
+    # which system a task is; a task overrides the ones whose defaults do not suit it.
+
+    default_eval_episodes: ClassVar[int] = 100
+    """How many episodes (or situations) the final evaluation of ``diffcontrol train`` runs."""
+
+    final_eval_skippable: ClassVar[bool] = True
+    """Whether ``--final-eval 0`` skips the final evaluation; ``False`` where it is part of
+    what a run reports and its pictures are drawn from it anyway (a reference solve)."""
+
+    def load_policy(self, doc: dict) -> Any:
+        """The NumPy policy of a ``model.json`` document (what ``diffcontrol.load`` returns).
+
+        Default: a ``NumpyPolicy``, ``policy(obs) -> Gymnasium action``.
+        """
+        from ..io import NumpyPolicy
+
+        return NumpyPolicy(doc)
+
+    def evaluate_run(self, run: Any, episodes: int | None = None, seed: int = 0) -> Any:
+        """Judge a trained controller (a ``diffcontrol.runs.Run``): the final evaluation of
+        ``diffcontrol train`` and what ``diffcontrol evaluate`` prints.
+
+        Returns an object with ``key`` (its name in ``metrics.json``), ``to_json()`` and
+        ``summary()`` (one line), or ``None`` where there is nothing to evaluate in. Default:
+        Gymnasium episodes with reset seeds ``seed ... seed+episodes-1`` in ``gym_id`` (the
+        task's own ``diffcontrol/<Name>-v0`` where it has no twin), or in the run's real
+        system (e.g. the environment a fitted model's data came from).
+        """
+        from ..evaluation import evaluate
+
+        env = run.real_env
+        n = episodes or self.default_eval_episodes
+        return evaluate(run.policy, self, episodes=n, seed=seed, real=env)
+
+    def write_figures(self, run: Any, out: Any, animation: bool = True) -> list[str]:
+        """Write the run's pictures into the directory ``out``; returns the file names.
+
+        Default: one Gymnasium episode (reset seed 0, in the run's real system where it has
+        one) as ``rollout.png`` (states, actions, rewards) and, where the task can draw itself
+        (``frames``) and ``animation``, ``rollout.gif``.
+        """
+        from .. import plots
+        from ..evaluation import record_episode
+
+        rec = record_episode(run.policy, self, seed=0, real=run.real_env)
+        plots.rollout(rec, self, out / "rollout.png")
+        files = ["rollout.png"]
+        if animation and self.can_draw:
+            from ..animation import animate
+
+            animate(rec, self, out / "rollout.gif")
+            files.append("rollout.gif")
+        return files
+
+    def animate_run(self, run: Any, path: Any, seed: int = 0, **options: Any) -> str:
+        """Write an animation of the run to ``path``; returns a one-line description.
+
+        Default: one Gymnasium episode with reset seed ``seed``, drawn by ``frames``.
+        """
+        from ..animation import animate
+        from ..errors import ConfigError
+        from ..evaluation import record_episode
+
+        if not self.can_draw:
+            raise ConfigError(f"task {self.name!r} cannot draw itself (it defines no frames())")
+        rec = record_episode(run.policy, self, seed=seed, real=run.real_env)
+        animate(rec, self, path)
+        return f"return {rec.total_return:.1f}, {len(rec.rewards)} steps"
+
+    def frames(self, recording: Any, every: int) -> Any:
+        """Draw a recorded episode: yield one matplotlib figure per frame (every ``every``-th
+        state of ``recording``, a ``diffcontrol.evaluation.Recording``), the same figure
+        redrawn each time. Tasks that define it get ``rollout.gif``; the default draws
+        nothing."""
+        raise NotImplementedError
+
+    @property
+    def can_draw(self) -> bool:
+        """Whether the task defines ``frames`` (an animation of its episodes)."""
+        return type(self).frames is not _TaskBase.frames
 
     def controller_kwargs(self) -> dict[str, Any]:
         """Keyword arguments that make an ``MLPController`` fit this task."""
@@ -76,8 +165,6 @@ class Task(_TaskBase):
     Class attributes:
         name: the registry name (``diffcontrol list``).
         summary: one line for ``diffcontrol list``.
-        kind: ``"control"`` (a sequential task evaluated in Gymnasium) or ``"aiming"`` (one
-            action per situation, evaluated by its miss statistics, like the trebuchet).
         gym_id: the Gymnasium environment the task is evaluated in, or ``None``.
         episode_length: the standard episode length (Gymnasium's ``max_episode_steps``);
             ``simulated_episodes`` in ``metrics.json`` is counted in these.
@@ -137,13 +224,64 @@ class Task(_TaskBase):
         """Convert a controller output to a valid action of ``gym_id``."""
         return np.asarray(action, dtype=np.float32)
 
+    def observation_space(self) -> Any:
+        """The Gymnasium observation space of the task's environment (default: an unbounded
+        ``Box`` of ``observation_size``)."""
+        from gymnasium import spaces
+
+        return spaces.Box(-np.inf, np.inf, (self.observation_size,), dtype=np.float32)
+
+    def action_space(self) -> Any:
+        """The Gymnasium action space: ``Discrete(2)`` for a ``sign`` head (0 pushes
+        towards -1), ``Discrete(action_size)`` for an ``argmax`` head, else a ``Box`` in the
+        head's bounds."""
+        from gymnasium import spaces
+
+        if self.action_head == "sign":
+            return spaces.Discrete(2)
+        if self.action_head == "argmax":
+            return spaces.Discrete(self.action_size)
+        if self.action_low is not None and self.action_high is not None:
+            low, high = (np.asarray(b, np.float32) for b in (self.action_low, self.action_high))
+            return spaces.Box(low, high, dtype=np.float32)
+        return spaces.Box(-np.inf, np.inf, (self.action_size,), dtype=np.float32)
+
+    def action_from_gym(self, action: Any) -> np.ndarray:
+        """The task's action vector for an action of ``action_space()``: ``Discrete(2)``
+        0/1 -> ``[-1]``/``[+1]``, ``Discrete(n)`` i -> one-hot, a ``Box`` action clipped."""
+        if self.action_head == "sign":
+            return np.array([1.0 if int(action) == 1 else -1.0])
+        if self.action_head == "argmax":
+            return np.eye(self.action_size)[int(action)]
+        a = np.asarray(action, np.float64).reshape(self.action_size)
+        if self.action_low is not None and self.action_high is not None:
+            a = np.clip(a, self.action_low, self.action_high)
+        return a
+
+    def fitted_task(self, doc: dict) -> Any:
+        """This task with its simulator replaced by the hybrid or neural model of a
+        ``fitted.json`` document (``diffcontrol train --model``)."""
+        from ..models import fitted_model, model_task
+
+        return model_task(self, fitted_model(self, doc))
+
+    def step_seconds(self, params: PyTree) -> float | None:
+        """Simulated seconds per step, for time axes and recorded data: the parameter ``dt``
+        or ``tau`` where the parameters have one, else ``None`` (time is then in steps)."""
+        for name in ("dt", "tau"):
+            if hasattr(params, name):
+                # a float32 parameter: its shortest decimal (0.05, not 0.05000000074505806)
+                return float(str(np.asarray(getattr(params, name))[()]))
+        return None
+
     def make_gym_env(self, **kwargs: Any):
-        """``gymnasium.make(gym_id, **kwargs)``; raises if the task has no Gymnasium twin."""
+        """``gymnasium.make(gym_id, **kwargs)``, or of the task's own environment
+        ``diffcontrol/<Name>-v0`` where it has no Gymnasium twin."""
         import gymnasium
 
-        if self.gym_id is None:
-            raise ValueError(f"task {self.name!r} has no Gymnasium environment")
-        return gymnasium.make(self.gym_id, **kwargs)
+        from ..envs import env_id
+
+        return gymnasium.make(self.gym_id or env_id(self), **kwargs)
 
 
 TrajectoryLoss = Callable[[Any], Array]
@@ -171,7 +309,6 @@ class ContinuousTask(_TaskBase):
     that trajectory through the solve (``diffcontrol.rollout.solve_closed_loop``).
 
     Class attributes (besides those of every task):
-        kind: ``"ode"``.
         state_names: names of the mechanical state (the controller's input in ``model.json``).
         feature_names: how the observation is computed from the state, in the small language
             of ``model.json`` (a state name, ``cos(name)`` or ``sin(name)``).
@@ -201,6 +338,21 @@ class ContinuousTask(_TaskBase):
     @abc.abstractmethod
     def trajectory_loss(self, name: str) -> TrajectoryLoss:
         """The built-in loss ``name`` (one of ``losses``) of a saved trajectory."""
+
+    def load_policy(self, doc: dict) -> Any:
+        """A ``StatePolicy``: ``policy(state) -> action`` on the physical state."""
+        from ..io import StatePolicy
+
+        return StatePolicy(doc)
+
+    def evaluate_run(self, run: Any, episodes: int | None = None, seed: int = 0) -> Any:
+        """No evaluation by default (a continuous-time task defines its own, e.g. a
+        reference solve)."""
+        return None
+
+    def write_figures(self, run: Any, out: Any, animation: bool = True) -> list[str]:
+        """No pictures by default."""
+        return []
 
     def force_fn(self, controller: Any) -> StateFeedback:
         """The controller as the ODE's input ``(t, state) -> action``: state feedback through

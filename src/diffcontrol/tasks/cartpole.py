@@ -44,6 +44,29 @@ class CartPole(Task):
     action_labels = ("push (±1 × 10 N)",)
     env_name = "CartPole"
 
+    def frames(self, recording, every):
+        """The cart on its track (limits in red) with the pole, time and push direction."""
+        from ..animation import close, scene
+
+        fig, ax = scene(4.8, 2.4, (-2.6, 2.6), (-0.4, 1.3))
+        ax.plot([-2.4, 2.4], [0, 0], color="0.5", lw=1)
+        for x in (-2.4, 2.4):
+            ax.plot([x, x], [-0.1, 0.1], color="r", lw=1)
+        from matplotlib.patches import Rectangle
+
+        cart = Rectangle((0, -0.1), 0.5, 0.2, color="k")
+        ax.add_patch(cart)
+        (pole,) = ax.plot([], [], lw=4, color="#ca9865", solid_capstyle="round")
+        text = ax.text(-2.5, 1.15, "", fontsize=8, family="monospace")
+        for i in range(0, recording.states.shape[0], every):
+            x, _, theta, _ = recording.states[i]
+            cart.set_x(x - 0.25)
+            pole.set_data([x, x + np.sin(theta)], [0.0, np.cos(theta)])
+            a = recording.actions[min(i, len(recording.actions) - 1), 0]
+            text.set_text(f"t={i * recording.dt:5.2f} s  push {'→' if a >= 0 else '←'}")
+            yield fig
+        close(fig)
+
     def default_params(self) -> cp.CartPoleParams:
         return cp.CartPoleParams()
 

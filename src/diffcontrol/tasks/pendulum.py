@@ -51,6 +51,22 @@ class Pendulum(Task):
     def observe(self, state):
         return pend.observe(state)
 
+    def frames(self, recording, every):
+        """The pendulum from the front: the rod, the pivot, time and torque."""
+        from ..animation import close, scene
+
+        fig, ax = scene(3.2, 3.2, (-1.3, 1.3), (-1.3, 1.3))
+        (rod,) = ax.plot([], [], lw=6, color="#cc4d4d", solid_capstyle="round")
+        ax.plot([0], [0], "ko", ms=5)
+        text = ax.text(-1.25, 1.15, "", fontsize=8, family="monospace")
+        for i in range(0, recording.states.shape[0], every):
+            theta = recording.states[i, 0]
+            rod.set_data([0, -np.sin(theta)], [0, np.cos(theta)])
+            u = recording.actions[min(i, len(recording.actions) - 1), 0]
+            text.set_text(f"t={i * recording.dt:5.2f} s  u={u:+.2f}")
+            yield fig
+        close(fig)
+
     def state_from_observation(self, observation):
         # theta = atan2(sin, cos) in [-pi, pi]: the observation cannot tell theta from
         # theta + 2 pi, and nothing downstream (dynamics, observation) can either.

@@ -153,6 +153,61 @@ class CartPoleSwingUp(ContinuousTask):
         # 1500). Measured in benchmarks/swingup.py.
         return ODETrainConfig(horizon_s=1.0, saves=50, updates=1000, learning_rate=0.05)
 
+    # --- hooks of a run: judged by a reference solve, drawn as a cart-pole ---------------------
+
+    default_eval_episodes = 1  # one reference solve
+    final_eval_skippable = False  # the reference solve is what a run reports and draws
+
+    def reference_solve(self, run):
+        """The float64 reference solve of the run's closed loop (``simulate_continuous``),
+        solved once per run."""
+        from ..evaluation import simulate_continuous
+
+        if "reference_solve" not in run.memo:
+            run.memo["reference_solve"] = simulate_continuous(
+                self, run.controller, run.params, config=run.config
+            )
+        return run.memo["reference_solve"]
+
+    def evaluate_run(self, run, episodes=None, seed=0):
+        """The end state, peak force, swings and loss of the reference solve (dopri8 at
+        1e-9), on the real system where the run has one (``evaluation.swingup_result``)."""
+        from ..evaluation import swingup_result
+
+        return swingup_result(self.reference_solve(run))
+
+    def write_figures(self, run, out, animation=True):
+        """``data.json`` (the reference solve's time series), ``swingup.png`` (angle,
+        position, force) and ``rollout.gif``."""
+        from .. import io, plots
+
+        rec = self.reference_solve(run)
+        io.write_json(out / "data.json", rec.to_json())
+        plots.swingup(rec, out / "swingup.png")
+        if not animation:
+            return ["data.json", "swingup.png"]
+        from ..animation import animate_swingup
+
+        animate_swingup(rec, out / "rollout.gif")
+        return ["data.json", "swingup.png", "rollout.gif"]
+
+    def fitted_task(self, doc):
+        """The swing-up through a fitted ``SwingUpModel`` (``FittedSwingUp``), under this
+        task's name (``model.json`` names the task the controller runs on)."""
+        from .fitted_swingup import FittedSwingUp, model_from_dict
+
+        fitted = FittedSwingUp(self, model_from_dict(doc, doc["_path"]))
+        fitted.name = self.name
+        return fitted
+
+    def animate_run(self, run, path, seed=0, **options):
+        """A GIF of the reference solve."""
+        from ..animation import animate_swingup
+
+        rec = self.reference_solve(run)
+        animate_swingup(rec, path)
+        return f"{rec.t[-1]:g} s, peak |F| {abs(rec.force).max():.1f} N"
+
     def recipes(self) -> dict[str, dict[str, Any]]:
         # The repository's sciml_train(loss, p0, ADAM(0.05), maxiters = 1500); last weights kept.
         return {"original": dict(updates=1500, population=1, keep_best=False)}

@@ -57,6 +57,7 @@ class TrebuchetAiming(Task):
     summary = "aim the 2019 post's differentiable trebuchet: (target, wind) -> (angle, weight)"
     kind = "aiming"
     gym_id = None
+    default_eval_episodes = 1000  # random targets
     episode_length = 1
     observation_size = 2
     action_size = 2
@@ -125,6 +126,105 @@ class TrebuchetAiming(Task):
             eval_every=100,
             eval_episodes=512,
         )
+
+    # --- hooks of a run: aimed, judged and drawn as throws ------------------------------------
+
+    EXAMPLE_THROW = (80.0, -3.0)
+    """The target (m) and wind (m/s) of the throw drawn in ``rollout.png``/``rollout.gif``."""
+
+    def step_seconds(self, params) -> None:
+        return None  # one step is one throw
+
+    def load_policy(self, doc: dict):
+        """An ``AimingPolicy``: ``policy(target_m, wind_mps) -> (angle_deg, weight_lb)``."""
+        from ..io import AimingPolicy
+
+        return AimingPolicy(doc)
+
+    def evaluate_run(self, run, episodes=None, seed=0):
+        """Miss statistics over ``episodes`` random targets (default 1,000) drawn with
+        ``seed``, thrown by the run's real trebuchet where it has one
+        (``evaluation.evaluate_aiming``)."""
+        from ..evaluation import evaluate_aiming
+
+        params = run.params if run.real else None
+        n = episodes or self.default_eval_episodes
+        return evaluate_aiming(run.policy, self, targets=n, seed=seed, params=params)
+
+    def throw(self, run, target_m: float, wind_mps: float):
+        """Simulate the throw that the run's controller aims at one target."""
+        check_target(target_m, wind_mps)
+        angle, weight = run.policy(target_m, wind_mps)
+        params = run.params if run.real else None
+        return jax.jit(tb.simulate)(wind_mps, angle, weight, params)
+
+    def write_figures(self, run, out, animation=True):
+        """``rollout.png`` (and ``rollout.gif``): the throw at ``EXAMPLE_THROW``."""
+        from .. import plots
+
+        target, wind = self.EXAMPLE_THROW
+        throw = self.throw(run, target, wind)
+        plots.throw(throw, target, wind, out / "rollout.png")
+        if not animation:
+            return ["rollout.png"]
+        from ..animation import animate_throw
+
+        animate_throw(throw, target, wind, out / "rollout.gif")
+        return ["rollout.png", "rollout.gif"]
+
+    def animate_run(self, run, path, seed=0, target=None, wind=None, **options):
+        """A GIF of the throw the controller aims at ``target`` m in ``wind`` m/s."""
+        from ..animation import animate_throw
+
+        target = self.EXAMPLE_THROW[0] if target is None else target
+        wind = self.EXAMPLE_THROW[1] if wind is None else wind
+        throw = self.throw(run, target, wind)
+        animate_throw(throw, target, wind, path)
+        return f"distance {float(throw.distance):.2f} m, target {target:g} m"
+
+    def aim(self, run, target_m: float, wind_mps: float, direct: bool = False):
+        """Aim the run's controller at one target (``diffcontrol aim``): the network's angle
+        and weight, the throw's distance and miss, and with ``direct`` the same found by
+        gradient steps on the simulator alone (``aim_directly``). Returns ``(result dict,
+        printable lines)``."""
+        import time
+
+        check_target(target_m, wind_mps)
+        t0 = time.perf_counter()
+        angle, weight = run.policy(target_m, wind_mps)
+        net_seconds = time.perf_counter() - t0
+        distance = float(jax.jit(tb.shoot)(wind_mps, angle, weight))
+        result = {
+            "target_m": target_m,
+            "wind_mps": wind_mps,
+            "angle_deg": angle,
+            "weight_lb": weight,
+            "distance_m": distance,
+            "miss_m": distance - target_m,
+            "network_seconds": net_seconds,
+        }
+        lines = [
+            f"network: angle {angle:.2f} deg, weight {weight:.1f} lb -> {distance:.2f} m "
+            f"(miss {distance - target_m:+.3f} m; {net_seconds * 1e6:.0f} us)"
+        ]
+        if direct:
+            solve = jax.jit(aim_directly)
+            jax.block_until_ready(solve(target_m, wind_mps))  # compile first
+            t0 = time.perf_counter()
+            a, w, miss = jax.block_until_ready(solve(target_m, wind_mps))
+            seconds = time.perf_counter() - t0
+            result["direct"] = {
+                "angle_deg": float(a),
+                "weight_lb": float(w),
+                "miss_m": float(miss),
+                "seconds": seconds,
+            }
+            lines.append(
+                f"direct:  angle {float(a):.2f} deg, weight {float(w):.1f} lb -> "
+                f"{target_m + float(miss):.2f} m (miss {float(miss):+.3f} m; "
+                f"{seconds * 1e3:.1f} ms)"
+            )
+        return result, lines
 
     def recipes(self) -> dict[str, dict[str, Any]]:
         return {

@@ -42,6 +42,16 @@ class TrainResult:
         """The learning curve: one dict per evaluation point."""
         return self.metrics["curve"]
 
+    def save(self, out_dir: str | Path, **options: Any) -> list[str]:
+        """Write the run's files into ``out_dir``: ``model.json`` (read back by
+        ``diffcontrol.load``), the task's final evaluation in ``metrics.json``, the learning
+        curve and the task's pictures; returns the names written. ``options`` are those of
+        ``diffcontrol.runs.save_run`` (``final_eval``, ``animation``, ``real``, ``progress``).
+        """
+        from ..runs import save_run
+
+        return save_run(self, out_dir, **options)[1]
+
 
 def task_params(task: AnyTask, overrides: tuple[tuple[str, float], ...] = ()) -> PyTree:
     """The task's nominal parameters with ``overrides`` applied, as JAX arrays."""
@@ -106,7 +116,8 @@ def train(
         task: a task from ``diffcontrol.make``.
         config: the settings; ``task.default_config()`` when omitted.
         out_dir: if given, ``run.json`` and a checkpoint after every chunk are written there,
-            so an interrupted run can continue with ``resume=True``.
+            so an interrupted run can continue with ``resume=True``, and ``model.json`` at the
+            end (``result.save(out_dir)`` adds the evaluation and the pictures).
         resume: continue the run in ``out_dir`` from its last checkpoint.
         step_loss: discrete-time tasks: a training loss ``f(params, state, action,
             next_state, reward) -> scalar`` that replaces the task's built-in one.
@@ -300,6 +311,8 @@ def train(
         "jax_version": jax.__version__,
         "device": str(jax.devices()[0].platform),
     }
+    if out is not None:  # the controller, loadable at once (result.save adds the rest)
+        io.write_json(out / "model.json", io.model_document(task, controller, config, metrics))
     return TrainResult(
         task=task, config=config, params=params, controller=controller, metrics=metrics
     )

@@ -1,0 +1,248 @@
+"""Run directories: a trained controller saved with its settings, its evaluation and its
+pictures, and read back, for any task (built-in, or the user's own).
+
+A run directory holds ``run.json`` (the task and the settings, written when training starts),
+``checkpoint.npz`` (for resuming), ``model.json`` (the controller, runnable with NumPy alone),
+``metrics.json`` (what was measured) and whatever pictures the task draws (its
+``write_figures`` hook). ``save_run`` writes the last three from a ``TrainResult``;
+``open_run`` reads a directory back into a ``Run``, which the task's hooks judge and draw.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from . import io
+from .errors import ModelFileError, UnknownTaskError
+from .tasks import AnyTask, resolve
+
+MODEL_FILE = "model.json"
+METRICS_FILE = "metrics.json"
+
+
+@dataclasses.dataclass
+class Run:
+    """A trained controller with what it needs to be judged and drawn.
+
+    Attributes:
+        task: the task whose hooks judge and draw it (for a run trained through a fitted
+            model: the modelled system's task, when the real system is given by parameters).
+        controller: the JAX ``MLPController``.
+        config: the training configuration (from ``run.json``, else the task's default).
+        params: the physical parameters to simulate with (the real system's where known).
+        model: the ``model.json`` document.
+        metrics: ``metrics.json`` (empty before it is written).
+        real: the system it is judged on instead of the task's own: ``{"env_id",
+            "env_kwargs"}`` (a Gymnasium environment) or ``{"params"}``; ``None``: the task's.
+    """
+
+    task: AnyTask
+    controller: Any
+    config: Any
+    params: Any
+    model: dict
+    metrics: dict = dataclasses.field(default_factory=dict)
+    real: dict | None = None
+    memo: dict = dataclasses.field(default_factory=dict, repr=False)
+    """Results the task's hooks share (e.g. one reference solve for evaluation and plots)."""
+
+    @functools.cached_property
+    def policy(self) -> Any:
+        """The NumPy policy of ``model`` (the task's ``load_policy``)."""
+        return self.task.load_policy(self.model)
+
+    @property
+    def real_env(self) -> tuple[str, dict] | None:
+        """``(env_id, env_kwargs)`` where the run is judged in another Gymnasium environment."""
+        if self.real and "env_id" in self.real:
+            return self.real["env_id"], dict(self.real.get("env_kwargs") or {})
+        return None
+
+
+def _judged(task: AnyTask, params: Any, real: dict | None) -> tuple[AnyTask, Any]:
+    """The task and parameters a run is judged with: a run trained through a fitted model is
+    judged on the system the model stands for (``task.base``) with the real parameters where
+    its data gives them, else on what it was trained on."""
+    if real and "params" in real:
+        from .models import real_params
+
+        base = getattr(task, "base", task)
+        return base, real_params(base, real)
+    return task, params
+
+
+def save_run(
+    result: Any,
+    out_dir: str | Path,
+    *,
+    final_eval: int | None = None,
+    animation: bool = True,
+    real: dict | None = None,
+    progress: Callable[[str], None] | None = None,
+) -> tuple[Run, list[str]]:
+    """Write a trained controller's run files into ``out_dir``: ``model.json``, the final
+    evaluation in ``metrics.json`` and the task's pictures.
+
+    Args:
+        result: a ``TrainResult``.
+        final_eval: episodes (or situations) of the final evaluation; ``None``: the task's
+            ``default_eval_episodes``; ``0`` skips it.
+        animation: write the task's animation (``rollout.gif``) where it has one.
+        real: the system to judge it on instead of the task's own (see ``Run.real``).
+        progress: called with a line when the evaluation is done.
+
+    Returns:
+        The ``Run`` and the names of the files written.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    say = progress or (lambda line: None)
+    metrics = dict(result.metrics)
+    metrics.setdefault("created", io.now_iso())
+    doc = io.model_document(result.task, result.controller, result.config, metrics)
+    io.write_json(out / MODEL_FILE, doc)
+    task, params = _judged(result.task, result.params, real)
+    run = Run(task, result.controller, result.config, params, doc, metrics, real)
+    if final_eval != 0 or not task.final_eval_skippable:
+        t0 = time.perf_counter()
+        ev = task.evaluate_run(run, episodes=final_eval, seed=0)
+        if ev is not None:
+            metrics[ev.key] = {**ev.to_json(), "seconds": time.perf_counter() - t0}
+            metrics["final_evaluation"] = ev.key
+            where = " on the real system" if real else ""
+            say(f"final evaluation{where}: {ev.summary()}")
+            run.metrics["headline"] = ev.headline()
+    io.write_json(out / METRICS_FILE, {k: v for k, v in metrics.items() if k != "headline"})
+    from . import plots
+
+    plots.learning_curve(
+        metrics, out / "learning_curve.png", getattr(task, "reward_threshold", None)
+    )
+    files = [MODEL_FILE, METRICS_FILE, "learning_curve.png"]
+    files += task.write_figures(run, out, animation=animation)
+    return run, files
+
+
+def open_run(
+    run_dir: str | Path, task: AnyTask | str | None = None, real: dict | None | bool = True
+) -> Run:
+    """Read a run directory (or a ``model.json``) back into a ``Run``.
+
+    Args:
+        run_dir: a directory written by ``diffcontrol train`` (or its ``model.json``).
+        task: the task (or a name, or an import path ``module:Class``); default: the
+            registered task that ``model.json`` names. A user's task is never imported
+            because a file names it: pass it here (``--task`` on the command line).
+        real: ``True``: the real system recorded in ``metrics.json`` (a run trained through a
+            fitted model); a dict: that system instead; ``None``: the task's own.
+
+    Raises:
+        ModelFileError: the files are missing or corrupt.
+        UnknownTaskError: the task is not registered and not given.
+    """
+    path = Path(run_dir)
+    directory = path if path.is_dir() else path.parent
+    doc = io.read_model(path)
+    if task is None:
+        task = _task_of(doc)
+    elif isinstance(task, str):
+        task = resolve(task)
+    config = task.default_config()
+    if (directory / io.RUN_FILE).exists():
+        stored = io.read_json(directory / io.RUN_FILE, "run file").get("config")
+        try:
+            config = type(config).from_json(stored)
+        except (TypeError, ValueError, KeyError, AttributeError) as e:
+            raise ModelFileError(
+                f"{directory / io.RUN_FILE} holds settings this task cannot read ({e}); "
+                "re-create the run with `diffcontrol train`"
+            ) from None
+    metrics = {}
+    if (directory / METRICS_FILE).exists():
+        metrics = io.read_json(directory / METRICS_FILE, "metrics")
+        if not isinstance(metrics, dict):
+            raise ModelFileError(f"{directory / METRICS_FILE} is not a JSON object")
+    if real is True:
+        model = metrics.get("model")
+        real = model.get("real_system") if isinstance(model, dict) else None
+    from .training import task_params
+
+    task, params = _judged(task, task_params(task, config.params), real or None)
+    return Run(task, io.controller_from_dict(doc), config, params, doc, metrics, real or None)
+
+
+def _task_of(doc: dict) -> AnyTask:
+    """The registered task a ``model.json`` names (never imported because a file says so)."""
+    from . import tasks
+
+    name = doc["task"]
+    if name in tasks.names():
+        return tasks.make(name)
+    source = (doc.get("metadata") or {}).get("task_source")
+    hint = f" (it was trained from {source!r})" if isinstance(source, str) else ""
+    raise UnknownTaskError(
+        f"the controller's task {name!r}{hint} is not registered here; name its import path "
+        "with --task module:Class (in Python: open_run(dir, task=...)) — diffcontrol never "
+        "imports code because a file names it"
+    )
+
+
+def describe(task: AnyTask, config: Any, out: Path | str) -> str:
+    """The line ``diffcontrol train`` starts with: what will be trained, how, and where."""
+    if hasattr(config, "horizon_s"):  # an ODETrainConfig
+        return (
+            f"training {task.name}: {config.updates} updates of {config.population} closed-loop "
+            f"solve(s) over {config.horizon_s:g} s ({config.solver}, rtol {config.rtol:g}, atol "
+            f"{config.atol:g}, gradient {config.gradient}; seed {config.seed}) -> {out}"
+        )
+    return (
+        f"training {task.name}: {config.updates} updates x window {config.window} x batch "
+        f"{config.batch} (seed {config.seed}) -> {out}"
+    )
+
+
+def fitted_training(
+    task: AnyTask, fit_dir: str | Path, params: Any = None
+) -> tuple[AnyTask, tuple, dict | None, dict]:
+    """What training through the model that ``diffcontrol fit`` wrote in ``fit_dir`` needs.
+
+    Returns:
+        The task to train (a hybrid or neural model's own; ``task`` for a grey box), the
+        fitted physical parameters as ``(name, value)`` overrides (grey box), the real system
+        the data came from (``models.real_system``; ``None`` where the data does not say) and
+        ``metrics["model"]`` with a printable ``"note"``.
+
+    Raises:
+        ConfigError: ``params`` would change the physics of a hybrid or neural model.
+        ModelFileError: the fitted file is missing, corrupt or of another task.
+    """
+    import numpy as np
+
+    from .errors import ConfigError
+    from .models import fitted_physics, read_fitted, real_system
+
+    doc = read_fitted(fit_dir)
+    fitted_physics(task, doc)  # refuses a model of another task
+    real = real_system(doc)
+    info = {"dir": str(fit_dir), "kind": doc["model"], "real_system": real}
+    if doc["model"] == "params":
+        info["note"] = f"training through the fitted parameters in {fit_dir}"
+        return task, tuple(sorted(doc["all_parameters"].items())), real, info
+    if params:
+        raise ConfigError(
+            f"--param cannot change the physics of the {doc['model']} model in {fit_dir}; "
+            "refit it, or train with a grey-box (--model params) fit"
+        )
+    fitted = task.fitted_task(doc)
+    weights = sum(
+        np.asarray(l["weight"]).size + len(l["bias"]) for l in doc["network"].get("layers", [])
+    )
+    info["note"] = (
+        f"training through the {doc['model']} model in {fit_dir} ({weights} network weights)"
+    )
+    return fitted, (), real, info
