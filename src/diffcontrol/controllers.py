@@ -97,12 +97,15 @@ class MLPController(eqx.Module):
 
         Args:
             key: PRNG key for the weights.
-            obs_size, action_size: input and output sizes.
+            obs_size: the input size (observation).
+            action_size: the output size (action).
             hidden: widths of the hidden layers.
             activation: one of ``"tanh"``, ``"relu"``, ``"sigmoid"``, ``"elu"``.
             head: one of ``"linear"``, ``"tanh"``, ``"sigmoid"``, ``"sign"``.
-            obs_offset, obs_scale: the network sees ``(obs - obs_offset) * obs_scale``.
-            action_low, action_high: bounds of the ``"tanh"``/``"sigmoid"`` heads.
+            obs_offset: the network sees ``(obs - obs_offset) * obs_scale``.
+            obs_scale: see ``obs_offset``.
+            action_low: lower bounds of the ``"tanh"``/``"sigmoid"`` heads.
+            action_high: upper bounds of the ``"tanh"``/``"sigmoid"`` heads.
             final_scale: the last layer's initial weights are multiplied by this, so the
                 untrained controller starts near the middle of its action range.
             init: ``"equinox"`` (Equinox's default: weights and biases uniform in

@@ -309,9 +309,8 @@ def adam_fit(loss: Any, z: Any, optimiser: Any, steps: int, batch: Any, what: st
     is lower still, unless the run diverged), its loss, the loss history of the steps taken,
     whether it diverged, and a message if it did (naming ``what`` was kept).
 
-    Returns:
-        ``(best_z, best_loss, history, diverged, message)``; ``message`` is ``""`` unless the
-        run diverged.
+    It returns ``(best_z, best_loss, history, diverged, message)``; ``message`` is ``""``
+    unless the run diverged.
     """
     (last, best, best_loss, alive), (values, was_alive) = adam_scan(
         loss, z, optimiser, steps, batch
@@ -337,10 +336,9 @@ def adam_scan(loss: Any, z: Any, optimiser: Any, steps: int, batch: Any):
     step whose loss or new ``z`` is non-finite freezes the run there (``alive`` turns false);
     the best ``z`` is the one with the lowest loss seen before it.
 
-    Returns:
-        ``(z, best_z, best_loss, alive), (losses, was_alive)``: the last and best ``z``, the
-        best loss (``inf`` if no step ran), whether no step diverged, and per step the loss
-        before it and whether the run was still alive then.
+    It returns ``(z, best_z, best_loss, alive), (losses, was_alive)``: the last and best ``z``,
+    the best loss (``inf`` if no step ran), whether no step diverged, and per step the loss
+    before it and whether the run was still alive then.
     """
 
     def finite(tree):

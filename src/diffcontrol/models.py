@@ -308,7 +308,9 @@ def fit_model(
         kind: ``"hybrid"`` (physics plus correction) or ``"neural"`` (network only).
         params: the physics of a hybrid (default: the task's nominal parameters; e.g. a grey-box
             fit's ``FitResult.params``).
-        window, steps, learning_rate: the windows' length and the Adam steps.
+        window: the windows' length (steps predicted from every recorded state).
+        steps: the number of Adam steps.
+        learning_rate: Adam's initial step size (cosine-decayed).
         hidden: the network's hidden layer widths.
         seed: the seed of the network's initial weights.
 

@@ -181,7 +181,8 @@ def solve_closed_loop(
         save_ts: increasing save times (s); the solve spans ``[save_ts[0], save_ts[-1]]``.
         args: the PyTree passed to ``vector_field`` (physical parameters, the controller).
         solver: a name from ``SOLVERS``.
-        rtol, atol: the step-size controller's relative and absolute tolerances.
+        rtol: the step-size controller's relative tolerance.
+        atol: the step-size controller's absolute tolerance.
         max_steps: the step budget; reaching it fails the solve.
         gradient: a name from ``GRADIENT_METHODS`` (how reverse or forward mode goes through).
     """

@@ -340,8 +340,7 @@ def aim_directly(
     random targets within 1 cm after 20 steps; the rest are near the longest throw of their
     wind, where the angle's derivative vanishes and the iteration stalls (check ``miss_m``).
 
-    Returns:
-        ``(angle_deg, weight_lb, miss_m)`` after ``iterations`` steps.
+    It returns ``(angle_deg, weight_lb, miss_m)`` after ``iterations`` steps.
     """
     p = params or tb.TrebuchetParams()
     dtype = jnp.result_type(float)
