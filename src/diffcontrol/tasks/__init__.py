@@ -9,6 +9,7 @@ from __future__ import annotations
 from ..errors import UnknownTaskError
 from ._base import ContinuousTask, StepLoss, Task, TrajectoryLoss
 from .cartpole import CartPole
+from .mountain_car import MountainCarContinuous
 from .pendulum import Pendulum, PendulumUnclipped
 from .swingup import (
     CartPoleSwingUp,
@@ -58,6 +59,7 @@ for _task in (
     CartPoleSwingUp(),
     CartPoleSwingUpLimited(),
     CartPoleSwingUpFriction(),
+    MountainCarContinuous(),
 ):
     register(_task)
 
@@ -77,5 +79,6 @@ __all__ = [
     "Pendulum",
     "PendulumUnclipped",
     "CartPole",
+    "MountainCarContinuous",
     "TrebuchetAiming",
 ]
