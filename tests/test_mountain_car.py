@@ -320,6 +320,17 @@ def test_energy_loss():
     g = jax.grad(lambda s: at(s))(bottom)
     assert np.all(np.isfinite(np.asarray(g)))
     assert task.losses[0] == "energy" and "cost" in task.losses
+    # The cancellation-free form is the energy above the floor, -gravity / 3.
+    with jax.enable_x64(True):
+        p64 = jax.tree.map(lambda x: jnp.asarray(x, jnp.float64), params)
+        rng = np.random.default_rng(SEED + 2)
+        for x, v in zip(rng.uniform(-1.2, 0.6, 16), rng.uniform(-0.07, 0.07, 16)):
+            s = jnp.array([x, v])
+            floor = float(mc.energy(p64, s)) + p64.gravity / 3
+            assert float(mc.energy_above_floor(p64, s)) == pytest.approx(floor, rel=1e-9, abs=1e-15)
+        flag = jnp.array([0.45, 0.0])
+        goal = float(mc.goal_energy_above_floor(p64))
+        assert goal == pytest.approx(float(mc.energy_above_floor(p64, flag)), rel=1e-12)
     with pytest.raises(KeyError):
         task.step_loss("nope")
 
