@@ -16,6 +16,7 @@ import sys
 from ..errors import UnknownTaskError
 from ._base import ContinuousTask, StepLoss, Task, TrajectoryLoss
 from .cartpole import CartPole
+from .mountain_car import MountainCarContinuous
 from .pendulum import Pendulum, PendulumUnclipped
 from .swingup import (
     CartPoleSwingUp,
@@ -145,6 +146,7 @@ for _task in (
     CartPoleSwingUp(),
     CartPoleSwingUpLimited(),
     CartPoleSwingUpFriction(),
+    MountainCarContinuous(),
 ):
     register(_task)
 
@@ -166,5 +168,6 @@ __all__ = [
     "Pendulum",
     "PendulumUnclipped",
     "CartPole",
+    "MountainCarContinuous",
     "TrebuchetAiming",
 ]
