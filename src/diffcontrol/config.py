@@ -83,6 +83,18 @@ class _Config:
         return cls(**data)
 
 
+def _check_curriculum(config: Any) -> None:
+    if not (0 < config.curriculum_start <= 1):
+        raise ConfigError(
+            f"curriculum_start must be a fraction in (0, 1] (1 turns the curriculum off), "
+            f"got {config.curriculum_start!r}"
+        )
+    if not (0 < config.curriculum_fraction <= 1):
+        raise ConfigError(
+            f"curriculum_fraction must be a fraction in (0, 1], got {config.curriculum_fraction!r}"
+        )
+
+
 @dataclass(frozen=True)
 class TrainConfig(_Config):
     """Settings of one training run by backpropagation through time (BPTT).
@@ -139,9 +151,25 @@ class TrainConfig(_Config):
         "Overrides of the simulator's physical parameters, as (name, value) pairs.",
         default=(),
     )
+    population: int = _opt(
+        "Controllers trained side by side from different random initialisations (restarts "
+        "against local optima, one compiled program); the best at each evaluation point is "
+        "kept.",
+        default=1,
+    )
+    curriculum_start: float = _opt(
+        "Growing-horizon curriculum: training episodes first restart after this fraction of "
+        "horizon, growing linearly to all of it over curriculum_fraction of the updates; 1 "
+        "turns it off.",
+        default=1.0,
+    )
+    curriculum_fraction: float = _opt(
+        "Share of the updates over which the curriculum's horizon grows to the full one.",
+        default=0.5,
+    )
 
     def __post_init__(self) -> None:
-        for name in ("batch", "window", "eval_episodes"):
+        for name in ("batch", "window", "eval_episodes", "population"):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value <= 0:
                 raise ConfigError(f"{name} must be a positive integer, got {value!r}")
@@ -149,6 +177,7 @@ class TrainConfig(_Config):
             raise ConfigError(
                 f"horizon must be 0 (the task's) or a positive integer, got {self.horizon!r}"
             )
+        _check_curriculum(self)
         self._check_common()
 
 
@@ -261,15 +290,7 @@ class ODETrainConfig(_Config):
             raise ConfigError(
                 f"gradient must be one of {', '.join(GRADIENT_METHODS)}, got {self.gradient!r}"
             )
-        if not (0 < self.curriculum_start <= 1):
-            raise ConfigError(
-                f"curriculum_start must be a fraction in (0, 1] (1 turns the curriculum off), "
-                f"got {self.curriculum_start!r}"
-            )
-        if not (0 < self.curriculum_fraction <= 1):
-            raise ConfigError(
-                f"curriculum_fraction must be a fraction in (0, 1], got {self.curriculum_fraction!r}"
-            )
+        _check_curriculum(self)
         self._check_common()
 
     @property

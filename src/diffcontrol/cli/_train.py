@@ -22,51 +22,53 @@ from ._args import (
     yes_no,
 )
 
-_CONFIG_OPTIONS: dict[str, tuple[Any, str]] = {
-    "seed": (int, "N"),
-    "updates": (positive_int, "N"),
-    "batch": (positive_int, "N"),
-    "window": (positive_int, "STEPS"),
-    "horizon": (nonneg_int, "STEPS"),
-    "learning_rate": (finite_float, "LR"),
-    "lr_schedule": (str, "NAME"),
-    "lr_final_fraction": (finite_float, "F"),
-    "grad_clip": (finite_float, "NORM"),
-    "hidden": (widths, "W,W"),
-    "activation": (str, "NAME"),
-    "head": (str, "NAME"),
-    "loss": (str, "NAME"),
-    "eval_every": (positive_int, "N"),
-    "eval_episodes": (positive_int, "N"),
-    "target_return": (float, "R"),
-    "keep_best": (yes_no, "yes|no"),
+# How the command line reads a config field, by its type; the exceptions by name. The fields
+# themselves (and their help) come from the config dataclasses, so a new field is a new flag.
+_BY_TYPE: dict[str, tuple[Any, str]] = {
+    "int": (positive_int, "N"),
+    "float": (finite_float, "X"),
+    "str": (str, "NAME"),
+    "bool": (yes_no, "yes|no"),
+    "tuple[int, ...]": (widths, "W,W"),
 }
-
-_ODE_OPTIONS: dict[str, tuple[Any, str]] = {
+_BY_NAME: dict[str, tuple[Any, str]] = {
+    "seed": (int, "N"),
+    "horizon": (nonneg_int, "STEPS"),
+    "window": (positive_int, "STEPS"),
+    "learning_rate": (finite_float, "LR"),
+    "grad_clip": (finite_float, "NORM"),
+    "target_return": (float, "R"),
     "horizon_s": (positive_float, "S"),
-    "saves": (positive_int, "N"),
-    "solver": (str, "NAME"),
     "rtol": (positive_float, "TOL"),
     "atol": (positive_float, "TOL"),
-    "max_steps": (positive_int, "N"),
     "gradient": (str, "METHOD"),
-    "population": (positive_int, "N"),
-    "curriculum_start": (finite_float, "F"),
-    "curriculum_fraction": (finite_float, "F"),
 }
 
 
-def _add_options(group: Any, options: dict[str, tuple[Any, str]], config_cls: type) -> None:
+def _fields(config_cls: type) -> list[Any]:
+    """The fields of a config that are command-line flags (``params`` is ``--param``)."""
+    return [f for f in dataclasses.fields(config_cls) if f.name != "params"]
+
+
+def _add_options(group: Any, config_cls: type, skip: set[str] = frozenset()) -> None:
     """One ``--name`` option per config field, its help the field's documentation."""
-    for name, (typ, metavar) in options.items():
+    for f in _fields(config_cls):
+        if f.name in skip:
+            continue
+        typ, metavar = _BY_NAME.get(f.name) or _BY_TYPE[str(f.type)]
         group.add_argument(
-            "--" + name.replace("_", "-"),
-            dest=name,
+            "--" + f.name.replace("_", "-"),
+            dest=f.name,
             type=typ,
             metavar=metavar,
             default=None,
-            help=help_of(name, config_cls).replace("%", "%%"),
+            help=help_of(f.name, config_cls).replace("%", "%%"),
         )
+
+
+_SETTINGS = [f.name for f in _fields(TrainConfig)] + [
+    f.name for f in _fields(ODETrainConfig) if f.name not in {g.name for g in _fields(TrainConfig)}
+]
 
 
 def add_parser(sub: Any) -> None:
@@ -121,11 +123,11 @@ def add_parser(sub: Any) -> None:
     group = p.add_argument_group(
         "training settings (defaults depend on the task; see `diffcontrol list`)"
     )
-    _add_options(group, _CONFIG_OPTIONS, TrainConfig)
+    _add_options(group, TrainConfig)
     ode = p.add_argument_group(
         "continuous-time tasks only (cartpole-swingup*): the ODE solve and its gradient"
     )
-    _add_options(ode, _ODE_OPTIONS, ODETrainConfig)
+    _add_options(ode, ODETrainConfig, skip={f.name for f in _fields(TrainConfig)})
     group.add_argument(
         "--param",
         dest="params",
@@ -145,7 +147,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     task = resolve(args.task)
     config_cls = type(task.default_config())
     fields = {f.name for f in dataclasses.fields(config_cls)}
-    overrides = {name: getattr(args, name) for name in {**_CONFIG_OPTIONS, **_ODE_OPTIONS}}
+    overrides = {name: getattr(args, name) for name in _SETTINGS}
     foreign = sorted(n for n, v in overrides.items() if v is not None and n not in fields)
     if foreign:
         flags = ", ".join("--" + n.replace("_", "-") for n in foreign)

@@ -98,9 +98,22 @@ class Trainer(eqx.Module):
             finished_return_sum=jnp.zeros((), env_state.dtype),
         )
 
-    def window_loss(self, controller, params, env_state, env_time, episode_return, keys):
+    def horizon_at(self, update: Array) -> Array | int:
+        """The training episodes' length (steps) at ``update``: the curriculum's, growing
+        linearly from ``curriculum_start`` of the horizon, or the horizon itself."""
+        cfg = self.config
+        if cfg.curriculum_start >= 1:
+            return self.horizon
+        growth = max(1.0, cfg.curriculum_fraction * cfg.updates)
+        frac = cfg.curriculum_start + (1 - cfg.curriculum_start) * update / growth
+        return jnp.maximum(1, jnp.ceil(self.horizon * jnp.minimum(1.0, frac))).astype(jnp.int32)
+
+    def window_loss(
+        self, controller, params, env_state, env_time, episode_return, keys, horizon=None
+    ):
         """Mean step loss over one window and the batch, and the carried-out states."""
-        task, horizon, step_loss = self.task, self.horizon, self.step_loss
+        task, step_loss = self.task, self.step_loss
+        horizon = self.horizon if horizon is None else horizon
 
         def one_env(state, time, ret, env_keys):
             def body(carry, key):
@@ -131,7 +144,13 @@ class Trainer(eqx.Module):
 
         grad_fn = eqx.filter_value_and_grad(self.window_loss, has_aux=True)
         (loss, (carry, n_done, ret_sum)), grads = grad_fn(
-            ts.controller, params, ts.env_state, ts.env_time, ts.episode_return, keys
+            ts.controller,
+            params,
+            ts.env_state,
+            ts.env_time,
+            ts.episode_return,
+            keys,
+            self.horizon_at(ts.update),
         )
         updates, opt_state = self.optimizer.update(
             grads, ts.opt_state, eqx.filter(ts.controller, eqx.is_inexact_array)
@@ -214,7 +233,108 @@ class Trainer(eqx.Module):
         return controller.num_parameters
 
 
-def make_trainer(task: Task, config: TrainConfig, step_loss: StepLoss | None = None) -> Trainer:
+class PopulationState(eqx.Module):
+    """The training states of ``population`` controllers (a leading axis on every array of
+    ``members``), with the shared update count."""
+
+    members: TrainState
+    update: Int[Array, ""]
+
+    @property
+    def controller(self) -> MLPController:
+        """The members' controllers, stacked."""
+        return self.members.controller
+
+
+class PopulationTrainer(eqx.Module):
+    """``population`` independent BPTT runs side by side under ``vmap`` (restarts against
+    local optima in one compiled program). Each member has its own initialisation, batch of
+    simulations and optimiser; at every evaluation point the member with the best
+    in-simulator return is the run's controller."""
+
+    base: Trainer
+    population: int = eqx.field(static=True)
+
+    @property
+    def config(self) -> TrainConfig:
+        return self.base.config
+
+    @property
+    def episode_length(self) -> int:
+        return self.base.episode_length
+
+    def init(self, key: PRNGKeyArray, params: PyTree) -> PopulationState:
+        keys = jax.random.split(key, self.population)
+        members = eqx.filter_vmap(self.base.init, in_axes=(0, None))(keys, params)
+        return PopulationState(members=members, update=jnp.zeros((), jnp.int32))
+
+    def chunk(self, ts: PopulationState, params: PyTree, total_updates: Array):
+        members, stats = eqx.filter_vmap(self.base.chunk, in_axes=(0, None, None))(
+            ts.members, params, total_updates
+        )
+        # every member takes the same number of updates
+        update = jnp.max(members.update)
+        stats = UpdateStats(
+            loss=jnp.nanmean(stats.loss, axis=0), grad_norm=jnp.nanmean(stats.grad_norm, axis=0)
+        )
+        return PopulationState(members=members, update=update), stats
+
+    def evaluate(self, controllers: MLPController, params: PyTree, key: PRNGKeyArray) -> Array:
+        """Each member's evaluation returns on the same starts: ``[population, episodes]``."""
+        return eqx.filter_vmap(self.base.evaluate, in_axes=(0, None, None))(
+            controllers, params, key
+        )
+
+    def _best(self, returns: np.ndarray) -> int:
+        means = returns if returns.ndim == 1 else np.mean(returns, axis=-1)
+        means = np.where(np.isfinite(means), means, -np.inf)
+        return int(np.argmax(means))
+
+    def summarize(self, returns: np.ndarray) -> tuple[float, float]:
+        """Mean and spread of the best member's returns."""
+        return self.base.summarize(returns[self._best(returns)])
+
+    def pick(self, controllers: MLPController, returns: np.ndarray) -> MLPController:
+        """The best member's controller."""
+        i = self._best(np.asarray(returns))
+        return jax.tree.map(lambda x: x[i] if eqx.is_array(x) else x, controllers)
+
+    def counts(self, ts: PopulationState) -> dict[str, Any]:
+        one = self.base.counts(ts)  # reads ts.update only
+        steps = one["simulated_steps"] * self.population
+        return {"simulated_steps": steps, "simulated_episodes": steps / self.episode_length}
+
+    def point_extras(self, ts: PopulationState, returns: np.ndarray) -> dict[str, Any]:
+        n_fin = int(np.sum(ts.members.finished_episodes))
+        total = float(np.sum(ts.members.finished_return_sum))
+        return {
+            "train_episodes_finished": n_fin,
+            "train_return_mean": total / n_fin if n_fin else math.nan,
+            "best_member": self._best(np.asarray(returns)),
+        }
+
+    def check(self, old: PopulationState, new: PopulationState, losses: np.ndarray) -> list[str]:
+        """Raise ``TrainingDiverged`` when every member diverged; a note for each that did."""
+        weights = eqx.filter(new.controller, eqx.is_inexact_array)
+        finite = np.ones(self.population, bool)
+        for leaf in jax.tree.leaves(weights):
+            finite &= np.asarray(jnp.all(jnp.isfinite(leaf.reshape(self.population, -1)), axis=1))
+        if not finite.any():
+            return self.base.check(old, new, np.full_like(losses, np.nan))
+        was = eqx.filter(old.controller, eqx.is_inexact_array)
+        before = np.ones(self.population, bool)
+        for leaf in jax.tree.leaves(was):
+            before &= np.asarray(jnp.all(jnp.isfinite(leaf.reshape(self.population, -1)), axis=1))
+        lost = np.flatnonzero(before & ~finite)
+        return [f"population member {i} diverged; the others train on" for i in lost]
+
+    def num_parameters(self, controller: MLPController) -> int:
+        return controller.num_parameters
+
+
+def make_trainer(
+    task: Task, config: TrainConfig, step_loss: StepLoss | None = None
+) -> Trainer | PopulationTrainer:
     """Build the ``Trainer`` for ``task`` and ``config`` (validating the loss name)."""
     from ..errors import ConfigError
 
@@ -225,10 +345,13 @@ def make_trainer(task: Task, config: TrainConfig, step_loss: StepLoss | None = N
                 f"unknown loss {name!r} for task {task.name!r}; choose one of {', '.join(task.losses)}"
             )
         step_loss = task.step_loss(name)
-    return Trainer(
+    trainer = Trainer(
         task=task,
         config=config,
         step_loss=step_loss,
         optimizer=make_optimizer(config),
         horizon=config.horizon or task.episode_length,
     )
+    if config.population > 1:
+        return PopulationTrainer(trainer, config.population)
+    return trainer
