@@ -221,6 +221,12 @@ class ODETrainConfig(_Config):
         "mode, one tangent per weight; cheapest for a few dozen weights).",
         default="checkpoint",
     )
+    starts: int = _opt(
+        "Initial states per update, drawn from the task's reset distribution "
+        "(ContinuousTask.reset; by default the one initial state); the loss is their mean and "
+        "the evaluation uses as many fixed starts.",
+        default=1,
+    )
     population: int = _opt(
         "Controllers from different initial weights trained side by side under vmap; the best "
         "is returned. Helps against the local minima of swing-ups (the cart that never moves).",
@@ -264,7 +270,7 @@ class ODETrainConfig(_Config):
     )
 
     def __post_init__(self) -> None:
-        for name in ("saves", "max_steps", "population"):
+        for name in ("saves", "max_steps", "population", "starts"):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value <= 0:
                 raise ConfigError(f"{name} must be a positive integer, got {value!r}")

@@ -271,8 +271,10 @@ class ContinuousTaskEnv(gymnasium.Env):
         return self.task.trajectory_loss(self.task.losses[0])(traj)
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
-        super().reset(seed=seed)  # the start is deterministic; the seed only seeds np_random
-        y = self.task.initial_state(self.params)
+        super().reset(seed=seed)
+        # the task's reset distribution (by default its one initial state), keyed by the seed
+        key = jax.random.PRNGKey(int(self.np_random.integers(0, 2**31 - 1)))
+        y = self.task.reset(key, self.params)
         self._ys, self._forces = [np.asarray(y)], []
         return self._obs(y), {"state": np.asarray(y[:4])}
 

@@ -104,6 +104,29 @@ def write_json(path: str | os.PathLike, obj: Any) -> None:
     write_bytes(path, (text + "\n").encode())
 
 
+def write_json_new(path: str | os.PathLike, obj: Any) -> None:
+    """Write ``obj`` as JSON to ``path`` only if nothing is there: the whole file appears at
+    once (a hard link of a finished temporary file), and of two processes racing for the same
+    path exactly one succeeds.
+
+    Raises:
+        FileExistsError: ``path`` exists (or another process created it first).
+    """
+    path = Path(path)
+    text = json.dumps(_finite(obj), indent=1, allow_nan=False)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        os.chmod(tmp, 0o666 & ~_UMASK)
+        with os.fdopen(fd, "w") as f:
+            f.write(text + "\n")
+            f.flush()
+            os.fsync(f.fileno())
+        os.link(tmp, path)
+    finally:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+
+
 def _finite(obj: Any) -> Any:
     if isinstance(obj, float):
         return obj if math.isfinite(obj) else None
@@ -509,6 +532,8 @@ def prepare_run_dir(out_dir: str | os.PathLike, run: dict, resume: bool) -> Path
                 f"{old.get('config', {}).get('seed')!r}); pass --resume to continue it or "
                 "choose a new --out"
             )
+        if old.get("complete"):
+            raise RunDirectoryError(f"{out} holds a finished run; there is nothing to resume")
         if old.get("task") != run["task"] or old.get("config") != run["config"]:
             changed = sorted(
                 k
@@ -529,7 +554,11 @@ def prepare_run_dir(out_dir: str | os.PathLike, run: dict, resume: bool) -> Path
         )
     try:
         out.mkdir(parents=True, exist_ok=True)
-        write_json(existing, run)
+        write_json_new(existing, run)  # the claim: of two processes, one gets the directory
+    except FileExistsError:
+        raise RunDirectoryError(
+            f"another process has just claimed {out}; choose a new --out"
+        ) from None
     except OSError as e:
         raise RunDirectoryError(
             f"cannot write to {out} ({e.strerror}); choose a writable --out"

@@ -246,3 +246,35 @@ def fitted_training(
         f"training through the {doc['model']} model in {fit_dir} ({weights} network weights)"
     )
     return fitted, (), real, info
+
+
+def read_run_file(run_dir: str | Path) -> dict | None:
+    """``run.json`` of ``run_dir`` (what the run is and how it was started), or ``None``."""
+    path = Path(run_dir) / io.RUN_FILE
+    if not path.is_file():
+        return None
+    doc = io.read_json(path, "run file")
+    if not isinstance(doc, dict) or not isinstance(doc.get("config"), dict):
+        raise ModelFileError(f"{path} is not a diffcontrol run file; choose another --out")
+    return doc
+
+
+def mark_complete(run_dir: str | Path) -> None:
+    """Record in ``run.json`` that the run and its files are finished (a resume then has
+    nothing to do and changes nothing)."""
+    doc = read_run_file(run_dir) or {}
+    io.write_json(Path(run_dir) / io.RUN_FILE, {**doc, "complete": True})
+
+
+def release_claim(run_dir: str | Path) -> bool:
+    """After a run failed before its first checkpoint, give its directory back: remove the
+    ``run.json`` it claimed the directory with (and the directory, if that leaves it empty),
+    so that the corrected command can use it. Returns whether it did."""
+    out = Path(run_dir)
+    doc = read_run_file(out)
+    if doc is None or doc.get("complete") or (out / "checkpoint.npz").exists():
+        return False
+    (out / io.RUN_FILE).unlink()
+    if not any(out.iterdir()):
+        out.rmdir()
+    return True

@@ -89,7 +89,9 @@ def add_parser(sub: Any) -> None:
     p.add_argument(
         "task",
         metavar="TASK",
-        help="a task name (`diffcontrol list`), or your own task as module:Class (from the current directory) or an entry point of the diffcontrol.tasks group",
+        nargs="?",
+        default=None,
+        help="(optional with --resume: the run's own) a task name (`diffcontrol list`), or your own task as module:Class (from the current directory) or an entry point of the diffcontrol.tasks group",
     )
     p.add_argument("--out", required=True, metavar="DIR", help="output directory (new or empty)")
     p.add_argument(
@@ -100,7 +102,8 @@ def add_parser(sub: Any) -> None:
     p.add_argument(
         "--resume",
         action="store_true",
-        help="continue the interrupted run in DIR from its last checkpoint",
+        help="continue the interrupted run in DIR from its last checkpoint, with the settings "
+        "of its run.json (a finished run is left as it is)",
     )
     p.add_argument(
         "--final-eval",
@@ -138,12 +141,45 @@ def add_parser(sub: Any) -> None:
     )
 
 
+def _resume_settings(args: argparse.Namespace) -> bool:
+    """With --resume, take what the command line leaves out from the run's own run.json (the
+    task, the fitted model, the final evaluation, the animation). Returns False when the run
+    is finished (nothing to do)."""
+    from .. import tasks
+    from ..runs import read_run_file
+
+    stored = read_run_file(args.out) if args.resume else None
+    if stored is None:
+        if args.task is None:
+            raise DiffcontrolError("name the TASK to train (or --resume the run in --out)")
+        return True
+    if stored.get("complete"):
+        return False
+    invocation = stored.get("invocation") or {}
+    if args.task is None:
+        spec = invocation.get("task") or stored.get("task")
+        if spec not in tasks.names():  # never import a module because a file names it
+            raise DiffcontrolError(
+                f"{args.out} was trained on the task {spec!r}, which is not registered; name "
+                f"it: diffcontrol train {spec} --out {args.out} --resume"
+            )
+        args.task = spec
+    args.model = args.model or invocation.get("model")
+    if args.final_eval is None:
+        args.final_eval = invocation.get("final_eval")
+    args.no_animation = args.no_animation or invocation.get("animation") is False
+    return True
+
+
 def cmd_train(args: argparse.Namespace) -> int:
     from .. import _jax_setup, io
-    from ..runs import describe, fitted_training, save_run
+    from ..runs import describe, fitted_training, mark_complete, release_claim, save_run
     from ..tasks import resolve
     from ..training import resolve_config, train
 
+    if not _resume_settings(args):
+        print(f"{args.out} holds a finished run; nothing to resume (its files are unchanged)")
+        return 0
     task = resolve(args.task)
     config_cls = type(task.default_config())
     fields = {f.name for f in dataclasses.fields(config_cls)}
@@ -182,15 +218,29 @@ def cmd_train(args: argparse.Namespace) -> int:
             "checkpoint is exact for the computed solve",
             file=sys.stderr,
         )
-    source = f" --task {args.task}" if ":" in args.task else ""
+    invocation = {
+        "task": args.task,
+        "model": args.model,
+        "final_eval": args.final_eval,
+        "animation": not args.no_animation,
+    }
+    named = "" if args.task in _builtin_names() else f" {args.task}"
     try:
-        result = train(task, config, out_dir=out, resume=args.resume, progress=say)
-    except KeyboardInterrupt:
-        print(
-            f"\ninterrupted; the last checkpoint is in {out}. Continue with: "
-            f"diffcontrol train {args.task} --out {out} --resume{source}",
-            file=sys.stderr,
+        result = train(
+            task, config, out_dir=out, resume=args.resume, progress=say, invocation=invocation
         )
+    except BaseException as e:
+        kept = args.resume or not release_claim(out)  # nothing to resume: give the dir back
+        if not isinstance(e, KeyboardInterrupt):
+            raise
+        if kept:
+            print(
+                f"\ninterrupted; the last checkpoint is in {out}. Continue with: "
+                f"diffcontrol train{named} --out {out} --resume",
+                file=sys.stderr,
+            )
+        else:
+            print("\ninterrupted before the first checkpoint; nothing was kept", file=sys.stderr)
         return 130
     metrics = result.metrics
     metrics["compile_cache"] = {
@@ -201,14 +251,23 @@ def cmd_train(args: argparse.Namespace) -> int:
     metrics["created"] = io.now_iso()
     if model_info:
         metrics["model"] = model_info
-    run, files = save_run(
-        result,
-        out,
-        final_eval=args.final_eval,
-        animation=not args.no_animation,
-        real=real,
-        progress=say,
-    )
+    try:
+        run, files = save_run(
+            result,
+            out,
+            final_eval=args.final_eval,
+            animation=not args.no_animation,
+            real=real,
+            progress=say,
+        )
+    except KeyboardInterrupt:
+        print(
+            f"\ninterrupted while writing the run's files; finish them with: "
+            f"diffcontrol train{named} --out {out} --resume",
+            file=sys.stderr,
+        )
+        return 130
+    mark_complete(out)
     headline = run.metrics.get("headline")
     print(
         f"done in {metrics['train_seconds']:.1f} s (compile {metrics['compile_seconds']:.1f} s): "
@@ -217,3 +276,9 @@ def cmd_train(args: argparse.Namespace) -> int:
     )
     print(f"wrote {', '.join(str(out / f) for f in files)}")
     return 0
+
+
+def _builtin_names() -> set[str]:
+    from .. import tasks
+
+    return {n for n in tasks.names() if not getattr(tasks.make(n), "source", None)}

@@ -323,6 +323,14 @@ class ContinuousTask(_TaskBase):
     def initial_state(self, params: PyTree) -> Array:
         """The closed loop's initial state ``y0``."""
 
+    def reset(self, key: PRNGKeyArray, params: PyTree) -> Array:
+        """Sample an initial state from the task's reset distribution; training with
+        ``ODETrainConfig(starts=N)`` draws ``N`` of them per update. Default: the one
+        ``initial_state`` (override it to train a controller that copes with perturbed
+        starts)."""
+        del key
+        return self.initial_state(params)
+
     @abc.abstractmethod
     def vector_field(self, t: Array, y: Array, args: tuple[PyTree, Any]) -> Array:
         """``dy/dt`` with ``args = (params, force_fn)``; ``force_fn(t, state)`` is the action."""

@@ -104,6 +104,7 @@ def train(
     trajectory_loss: TrajectoryLoss | None = None,
     progress: Callable[[str], None] | None = None,
     on_point: Callable[[dict[str, Any], MLPController], None] | None = None,
+    invocation: dict[str, Any] | None = None,
 ) -> TrainResult:
     """Train a controller for ``task`` by differentiating through its simulator.
 
@@ -129,6 +130,8 @@ def train(
             left out of every ``seconds`` and of ``train_seconds`` (and reported as
             ``callback_seconds``); it is not saved in checkpoints, so a resumed run calls it
             only for the points after the resume.
+        invocation: what else ``run.json`` records so that a resume needs nothing but the
+            directory (the command line's task, fitted model, final evaluation, animation).
 
     Returns:
         A ``TrainResult`` whose controller is the one of the best evaluation point when
@@ -181,6 +184,8 @@ def train(
     }
     if out_dir is not None:
         run = {"format": "diffcontrol-run", "task": task.name, "config": config.to_json()}
+        if invocation:
+            run["invocation"] = invocation
         out = io.prepare_run_dir(out_dir, run, resume)
         ckpt = out / CHECKPOINT_FILE
         if resume and ckpt.exists():

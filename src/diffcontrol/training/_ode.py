@@ -47,6 +47,7 @@ class ODETrainState(eqx.Module):
     solves: Int[Array, ""]
     solver_steps: Int[Array, ""]
     simulated_seconds: Float[Array, ""]
+    key: PRNGKeyArray  # draws the starts of each update (``starts > 1``)
 
 
 class ODEUpdateStats(eqx.Module):
@@ -92,14 +93,17 @@ class ODETrainer(eqx.Module):
         frac = cfg.curriculum_start + (1 - cfg.curriculum_start) * update / growth
         return cfg.horizon_s * jnp.minimum(1.0, frac)
 
-    def solve(self, controller: MLPController, params: PyTree, horizon: Array, gradient: str):
-        """One member's closed-loop solve, saved at ``saves`` points of ``[0, horizon]``."""
+    def solve(
+        self, controller: MLPController, params: PyTree, horizon: Array, gradient: str, y0=None
+    ):
+        """One member's closed-loop solve from ``y0`` (default: the task's initial state),
+        saved at ``saves`` points of ``[0, horizon]``."""
         cfg = self.config
         ts = jnp.linspace(0.0, 1.0, cfg.saves) * horizon
         args = (params, self.task.force_fn(controller))
         return solve_closed_loop(
             self.task.vector_field,
-            self.task.initial_state(params),
+            self.task.initial_state(params) if y0 is None else y0,
             ts,
             args,
             solver=cfg.solver,
@@ -109,12 +113,30 @@ class ODETrainer(eqx.Module):
             gradient=gradient,
         )
 
-    def member_loss(self, controller: MLPController, params: PyTree, horizon: Array):
-        """``(loss, (solution flags))`` of one member: the loss of its saved trajectory."""
-        sol = self.solve(controller, params, horizon, self.config.gradient)
-        traj = self.task.trajectory(params, controller, sol.ts, sol.ys)
-        loss = jnp.reshape(self.loss_fn(traj), ())
-        return loss, (sol.ok, sol.max_steps_reached, sol.num_steps)
+    def member_loss(self, controller: MLPController, params: PyTree, horizon: Array, y0s=None):
+        """``(loss, (solution flags))`` of one member: the loss of its saved trajectory, or
+        the mean loss of the trajectories from the initial states ``y0s`` (``[starts, state]``:
+        every solve must succeed)."""
+
+        def one(y0):
+            sol = self.solve(controller, params, horizon, self.config.gradient, y0)
+            traj = self.task.trajectory(params, controller, sol.ts, sol.ys)
+            loss = jnp.reshape(self.loss_fn(traj), ())
+            return loss, (sol.ok, sol.max_steps_reached, sol.num_steps)
+
+        if y0s is None:
+            return one(None)
+        loss, (ok, hit_max, steps) = jax.vmap(one)(y0s)
+        return jnp.mean(loss), (jnp.all(ok), jnp.any(hit_max), jnp.sum(steps))
+
+    def starts_of(self, key: PRNGKeyArray, params: PyTree):
+        """``starts`` initial states from the task's reset distribution, or ``None`` (the one
+        initial state) when ``starts`` is 1."""
+        if self.config.starts == 1:
+            return None
+        return jax.vmap(lambda k: self.task.reset(k, params))(
+            jax.random.split(key, self.config.starts)
+        )
 
     def init(self, key: PRNGKeyArray, params: PyTree) -> ODETrainState:
         """``population`` random controllers (one key each) and their optimiser states."""
@@ -132,14 +154,15 @@ class ODETrainer(eqx.Module):
             solves=zero,
             solver_steps=zero,
             simulated_seconds=jnp.zeros((), float),
+            key=jax.random.fold_in(key, 1),
         )
 
-    def _member_update(self, controller, opt_state, fail_code, params, horizon):
+    def _member_update(self, controller, opt_state, fail_code, params, horizon, y0s):
         spec = _trainable(controller)
         diff, static = eqx.partition(controller, spec)
 
         def loss_of(diff):
-            return self.member_loss(eqx.combine(diff, static), params, horizon)
+            return self.member_loss(eqx.combine(diff, static), params, horizon, y0s)
 
         grad_fn = value_and_grad(loss_of, self.config.gradient)
         (loss, (ok, hit_max, num_steps)), grads = grad_fn(diff)
@@ -170,9 +193,11 @@ class ODETrainer(eqx.Module):
     def update(self, ts: ODETrainState, params: PyTree) -> tuple[ODETrainState, ODEUpdateStats]:
         """One update of every member still training."""
         horizon = self.horizon_at(ts.update)
+        key, k_starts = jax.random.split(ts.key)
+        y0s = self.starts_of(k_starts, params)  # the same starts for every member
         ctrl, opt, code, loss, gnorm, steps, live = eqx.filter_vmap(
-            self._member_update, in_axes=(0, 0, 0, None, None)
-        )(ts.controller, ts.opt_state, ts.fail_code, params, horizon)
+            self._member_update, in_axes=(0, 0, 0, None, None, None)
+        )(ts.controller, ts.opt_state, ts.fail_code, params, horizon, y0s)
         newly = (code != FAIL_NONE) & (ts.fail_code == FAIL_NONE)
         n_live = jnp.sum(live)
         new = ODETrainState(
@@ -181,9 +206,10 @@ class ODETrainer(eqx.Module):
             fail_code=code,
             fail_update=jnp.where(newly, ts.update + 1, ts.fail_update),
             update=ts.update + 1,
-            solves=ts.solves + n_live.astype(jnp.int32),
+            solves=ts.solves + (n_live * self.config.starts).astype(jnp.int32),
             solver_steps=ts.solver_steps + jnp.sum(steps).astype(jnp.int32),
-            simulated_seconds=ts.simulated_seconds + n_live * horizon,
+            simulated_seconds=ts.simulated_seconds + n_live * self.config.starts * horizon,
+            key=key,
         )
         stats = ODEUpdateStats(loss=jnp.nanmean(loss), grad_norm=jnp.nanmean(gnorm))
         return new, stats
@@ -201,11 +227,13 @@ class ODETrainer(eqx.Module):
         return jax.lax.scan(body, ts, None, length=self.config.eval_every)
 
     def evaluate(self, controller: MLPController, params: PyTree, key: PRNGKeyArray) -> Array:
-        """Each member's return, minus its loss over the full horizon (``-inf`` if it failed)."""
-        del key  # the initial state is deterministic
+        """Each member's return, minus its loss over the full horizon (``-inf`` if it failed):
+        from the initial state, or its mean over ``starts`` fixed starts drawn with ``key``."""
+        y0s = self.starts_of(key, params)
 
         def one(ctrl):
-            loss, (ok, _, _) = self.member_loss(ctrl, params, jnp.asarray(self.config.horizon_s))
+            horizon = jnp.asarray(self.config.horizon_s)
+            loss, (ok, _, _) = self.member_loss(ctrl, params, horizon, y0s)
             return jnp.where(ok & jnp.isfinite(loss), -loss, -jnp.inf)
 
         return eqx.filter_vmap(one)(controller)

@@ -1,0 +1,97 @@
+"""The run directory's life: claimed once, resumed from its own run.json, finished for good,
+given back when nothing could be kept."""
+
+from __future__ import annotations
+
+import json
+import threading
+
+import pytest
+
+from diffcontrol import io, runs
+from diffcontrol.cli import main
+from diffcontrol.errors import RunDirectoryError
+
+from .conftest import TINY_CARTPOLE
+
+
+def _files(d):
+    return {p.name: p.read_bytes() for p in d.iterdir()}
+
+
+def test_resume_needs_only_the_directory(tmp_path, monkeypatch, capsys):
+    out = tmp_path / "run"
+    real_save = runs.save_run
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(runs, "save_run", interrupted)
+    argv = ["train", "cartpole", "--out", str(out), "--quiet", *TINY_CARTPOLE]
+    assert main([*argv, "--final-eval", "3", "--no-animation"]) == 130
+    err = capsys.readouterr().err
+    assert f"diffcontrol train --out {out} --resume" in err
+    assert not (out / "metrics.json").exists()
+    monkeypatch.setattr(runs, "save_run", real_save)
+    # the settings come from run.json: 3 evaluation episodes, no animation
+    assert main(["train", "--out", str(out), "--resume", "--quiet"]) == 0
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["gym_eval"]["episodes"] == 3
+    assert not (out / "rollout.gif").exists()
+    assert json.loads((out / "run.json").read_text())["complete"] is True
+
+
+def test_resuming_a_finished_run_changes_nothing(cartpole_run, capsys):
+    before = _files(cartpole_run)
+    assert main(["train", "--out", str(cartpole_run), "--resume"]) == 0
+    assert "finished run" in capsys.readouterr().out
+    assert _files(cartpole_run) == before
+
+
+def test_a_run_that_fails_before_its_first_checkpoint_gives_the_directory_back(tmp_path, capsys):
+    out = tmp_path / "run"
+    argv = ["train", "pendulum", "--out", str(out), "--quiet", "--updates", "4"]
+    argv += ["--eval-every", "2", "--batch", "2", "--window", "4", "--hidden", "4"]
+    assert main([*argv, "--param", "l=0"]) == 2  # diverges at once
+    assert "diverged" in capsys.readouterr().err
+    assert not out.exists()
+    assert main([*argv, "--final-eval", "1", "--no-animation"]) == 0  # the fixed command runs
+
+
+def test_a_resume_of_a_users_task_never_imports_what_run_json_names(tmp_path, capsys):
+    out = tmp_path / "run"
+    out.mkdir()
+    run = {"format": "diffcontrol-run", "task": "x", "config": {}}
+    run["invocation"] = {"task": "evil_module_that_must_not_load:Task"}
+    (out / "run.json").write_text(json.dumps(run))
+    assert main(["train", "--out", str(out), "--resume"]) == 2
+    err = capsys.readouterr().err
+    assert "not registered; name it" in err and len(err.strip().splitlines()) == 1
+
+
+def test_of_two_processes_claiming_a_directory_one_wins(tmp_path):
+    for trial in range(20):
+        out = tmp_path / f"race{trial}"
+        barrier = threading.Barrier(2)
+        outcomes = []
+
+        def claim(out=out, barrier=barrier, outcomes=outcomes):
+            barrier.wait()
+            try:
+                io.prepare_run_dir(out, {"task": "t", "config": {"seed": 0}}, resume=False)
+                outcomes.append("won")
+            except RunDirectoryError:
+                outcomes.append("refused")
+
+        threads = [threading.Thread(target=claim) for _ in range(2)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+        assert sorted(outcomes) == ["refused", "won"], outcomes
+
+
+def test_a_finished_run_refuses_the_library_resume(cartpole_run):
+    doc = json.loads((cartpole_run / "run.json").read_text())
+    with pytest.raises(RunDirectoryError, match="finished run"):
+        io.prepare_run_dir(cartpole_run, doc, resume=True)

@@ -1,0 +1,61 @@
+"""A reset distribution for continuous-time tasks: several starts per update."""
+
+from __future__ import annotations
+
+import gymnasium
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import diffcontrol
+from diffcontrol.training import make_ode_trainer, task_params
+from examples.continuous_task import Spring
+
+
+class RandomSpring(Spring):
+    name = "random-spring"
+    env_name = "RandomSpring"
+
+    def reset(self, key, params):
+        return jax.random.uniform(key, (2,), minval=-1.0, maxval=1.0)
+
+
+TASK = diffcontrol.register(RandomSpring())
+
+
+def _one(controller):
+    return jax.tree.map(lambda x: x[None] if isinstance(x, jax.Array) else x, controller)
+
+
+def test_the_default_reset_is_the_initial_state():
+    spring = Spring()
+    params = task_params(spring)
+    np.testing.assert_array_equal(
+        spring.reset(jax.random.PRNGKey(3), params), spring.initial_state(params)
+    )
+    assert (
+        make_ode_trainer(spring, spring.default_config()).starts_of(jax.random.PRNGKey(0), params)
+        is None
+    )
+
+
+def test_several_starts_train_and_evaluate_on_the_reset_distribution():
+    config = TASK.default_config().replace(updates=4, eval_every=2, starts=3)
+    result = diffcontrol.train(TASK, config)
+    assert result.metrics["simulated_episodes"] == 4 * 3  # solves: updates x starts
+    trainer = make_ode_trainer(TASK, config)
+    params = task_params(TASK)
+    y0s = trainer.starts_of(jax.random.PRNGKey(0), params)
+    assert y0s.shape == (3, 2) and not np.allclose(y0s[0], y0s[1])
+    a = trainer.evaluate(_one(result.controller), params, jax.random.PRNGKey(0))
+    b = trainer.evaluate(_one(result.controller), params, jax.random.PRNGKey(1))
+    assert np.isfinite(a).all() and not np.allclose(a, b)  # the starts come from the key
+    loss, _ = trainer.member_loss(result.controller, params, jnp.asarray(4.0), y0s)
+    assert float(-a[0]) == pytest.approx(float(loss), rel=1e-5)
+
+
+def test_the_gymnasium_environment_resets_from_the_distribution():
+    env = gymnasium.make("diffcontrol/RandomSpring-v0")
+    starts = {tuple(np.round(env.reset(seed=s)[0], 6)) for s in range(3)}
+    assert len(starts) == 3
