@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from ..errors import UnknownTaskError
 from ._base import ContinuousTask, StepLoss, Task, TrajectoryLoss
+from .acrobot import Acrobot
 from .cartpole import CartPole
 from .pendulum import Pendulum, PendulumUnclipped
 from .swingup import (
@@ -54,6 +55,7 @@ for _task in (
     Pendulum(),
     PendulumUnclipped(),
     CartPole(),
+    Acrobot(),
     TrebuchetAiming(),
     CartPoleSwingUp(),
     CartPoleSwingUpLimited(),
@@ -77,5 +79,6 @@ __all__ = [
     "Pendulum",
     "PendulumUnclipped",
     "CartPole",
+    "Acrobot",
     "TrebuchetAiming",
 ]
