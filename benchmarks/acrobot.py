@@ -89,7 +89,11 @@ def main() -> None:
         f"{DQN_RL_ZOO}); slowest training {summary['max_train_seconds']:.1f} s"
     )
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    doc = {"machine": machine(), "task": "acrobot", "runs": rows, "summary": summary}
+    note = (
+        "run pinned with `taskset -c 0`; the machine's cores are shared with other processes, "
+        "so seconds (compilation most) vary with their load"
+    )
+    doc = {"machine": machine(), "note": note, "task": "acrobot", "runs": rows, "summary": summary}
     args.out.write_text(json.dumps(doc, indent=1) + "\n")
     print(f"wrote {args.out}")
 

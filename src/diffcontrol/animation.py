@@ -68,7 +68,9 @@ def _write_gif(frames: list[np.ndarray], duration_ms: float, path: str | Path) -
 def animate(recording: Recording, task: Task, path: str | Path, max_frames: int = 250) -> Path:
     """Write an animated GIF of ``recording`` (played at real time, subsampled to at most
     ``max_frames`` frames)."""
-    if isinstance(task, CartPole):
+    if hasattr(task, "frames"):  # the task draws itself (its own hook)
+        drawer = task.frames
+    elif isinstance(task, CartPole):
         drawer = _frames_cartpole
     elif isinstance(task, Pendulum):
         drawer = _frames_pendulum
