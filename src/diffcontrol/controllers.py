@@ -13,10 +13,17 @@ Action heads (the last, parameter-free stage):
 - ``"sign"``: the straight-through sign of the seed post applied to ``tanh(z)``: forward
   ``+1`` if ``tanh(z) >= 0`` else ``-1``, backward the derivative of ``tanh`` (the sign's own
   derivative is replaced by 1). This is how a discrete push is trained by backpropagation.
+- ``"argmax"``: an N-way choice. The network outputs ``n`` logits ``z``; forward
+  ``one_hot(argmax z)`` (a valid one-hot action vector of size ``n``, ties going to the first
+  index), backward the Jacobian of ``softmax(z / T)`` with ``T = ARGMAX_TEMPERATURE``
+  (straight-through softmax; see ``straight_through_argmax``). A task turns the one-hot vector
+  into its physical action with a dot product (the acrobot's torque is
+  ``one_hot . (-1, 0, +1)``), so the gradient reaches the logits of every choice.
 """
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 
 import equinox as eqx
@@ -26,7 +33,9 @@ import numpy as np
 from jaxtyping import Array, Float, PRNGKeyArray
 
 ACTIVATIONS = {"tanh": jnp.tanh, "relu": jax.nn.relu, "sigmoid": jax.nn.sigmoid, "elu": jax.nn.elu}
-HEADS = ("linear", "tanh", "sigmoid", "sign")
+HEADS = ("linear", "tanh", "sigmoid", "sign", "argmax")
+ARGMAX_TEMPERATURE = 1.0
+"""Temperature ``T`` of the softmax whose Jacobian is the ``"argmax"`` head's backward pass."""
 INITS = ("equinox", "glorot")
 
 
@@ -49,6 +58,37 @@ def _straight_through_sign_jvp(primals, tangents):
     return straight_through_sign(x), dx
 
 
+@functools.partial(jax.custom_jvp, nondiff_argnums=(1,))
+def straight_through_argmax(z: Array, temperature: float = ARGMAX_TEMPERATURE) -> Array:
+    """``one_hot(argmax z)`` over the last axis, with the derivative of ``softmax(z / T)``.
+
+    Forward: the one-hot vector of the largest logit (the first one on a tie, as
+    ``argmax``), exactly 0 and 1 whatever the logits' magnitude. Backward: the Jacobian of
+    ``p = softmax(z / T)``, ``dp = (p * dz - p * sum(p * dz)) / T``, instead of argmax's zero
+    derivative (straight-through softmax: Bengio et al. 2013, "Estimating or propagating
+    gradients through stochastic neurons"; the Gumbel-softmax straight-through estimator of
+    Jang et al. 2017 without the noise). ``T`` (static, > 0) sets how far from a tie the
+    gradient still sees the other choices: small ``T`` gives a sharper, more local signal.
+
+    Args:
+        z: logits, shape ``[..., n]``.
+        temperature: the softmax temperature ``T`` of the backward pass.
+
+    Returns:
+        The one-hot choice, shape ``[..., n]``, in ``z``'s float dtype.
+    """
+    dtype = jnp.result_type(z, float)
+    return jax.nn.one_hot(jnp.argmax(z, axis=-1), z.shape[-1], dtype=dtype)
+
+
+@straight_through_argmax.defjvp
+def _straight_through_argmax_jvp(temperature, primals, tangents):
+    (z,), (dz,) = primals, tangents
+    p = jax.nn.softmax(z / temperature, axis=-1)
+    dp = (p * dz - p * jnp.sum(p * dz, axis=-1, keepdims=True)) / temperature
+    return straight_through_argmax(z, temperature), dp
+
+
 def apply_head(head: str, z: Array, low: Array, high: Array) -> Array:
     """Map the network's raw output ``z`` through an action head (see the module docstring)."""
     if head == "linear":
@@ -59,6 +99,8 @@ def apply_head(head: str, z: Array, low: Array, high: Array) -> Array:
         return low + (high - low) * jax.nn.sigmoid(z)
     if head == "sign":
         return straight_through_sign(jnp.tanh(z))
+    if head == "argmax":
+        return straight_through_argmax(z)
     raise ValueError(f"unknown action head {head!r}; choose one of {HEADS}")
 
 
@@ -101,7 +143,7 @@ class MLPController(eqx.Module):
             action_size: the output size (action).
             hidden: widths of the hidden layers.
             activation: one of ``"tanh"``, ``"relu"``, ``"sigmoid"``, ``"elu"``.
-            head: one of ``"linear"``, ``"tanh"``, ``"sigmoid"``, ``"sign"``.
+            head: one of ``"linear"``, ``"tanh"``, ``"sigmoid"``, ``"sign"``, ``"argmax"``.
             obs_offset: the network sees ``(obs - obs_offset) * obs_scale``.
             obs_scale: see ``obs_offset``.
             action_low: lower bounds of the ``"tanh"``/``"sigmoid"`` heads.
@@ -120,6 +162,10 @@ class MLPController(eqx.Module):
             raise ValueError(f"unknown action head {head!r}; choose one of {HEADS}")
         if init not in INITS:
             raise ValueError(f"unknown init {init!r}; choose one of {INITS}")
+        if head == "argmax" and action_size < 2:
+            raise ValueError(
+                f"the argmax head chooses among action_size options; got {action_size}, use >= 2"
+            )
         sizes = [obs_size, *hidden, action_size]
         keys = jax.random.split(key, len(sizes) - 1)
         layers = [eqx.nn.Linear(a, b, key=k) for a, b, k in zip(sizes[:-1], sizes[1:], keys)]

@@ -14,16 +14,20 @@ either the old file or the new one, never half of one.
       "network": {"activation": "tanh",
                   "layers": [{"weight": [[...], ...], "bias": [...]}, ...]},
       "action": {"size": 1, "head": "tanh", "low": [-2.0], "high": [2.0],
-                 "gym": "box"},
+                 "gym": "box"},     # or {"size": 3, "head": "argmax", "low": null,
+                                    #     "high": null, "gym": "discrete"}
       "metadata": {...}
     }
 
 Forward pass: ``h = (obs - offset) * scale``; for every layer but the last
 ``h = activation(W h + b)`` (``W`` has shape ``[out, in]``); ``z = W_last h + b_last``;
 ``action = head(z)`` with ``linear: z``, ``tanh: low + (high - low) (tanh z + 1) / 2``,
-``sigmoid: low + (high - low) / (1 + exp(-z))``, ``sign: +1 if tanh(z) >= 0 else -1``.
-The Gymnasium action is the action vector for ``"gym": "box"`` and
-``1 if action[0] >= 0 else 0`` for ``"gym": "discrete_sign"`` (CartPole: 1 pushes right).
+``sigmoid: low + (high - low) / (1 + exp(-z))``, ``sign: +1 if tanh(z) >= 0 else -1``,
+``argmax: one_hot(argmax z)`` (the ``size`` logits pick one of ``size`` choices, the first on a
+tie). The Gymnasium action is the action vector for ``"gym": "box"``,
+``1 if action[0] >= 0 else 0`` for ``"gym": "discrete_sign"`` (CartPole: 1 pushes right), and
+the index ``argmax z`` for ``"gym": "discrete"`` (a ``Discrete(size)`` space; only with the
+``argmax`` head, and the ``argmax`` head only with it).
 
 A continuous-time task's controller acts on the physical state: its ``observation`` also
 holds ``"state"`` (the state's names, e.g. ``["x", "x_dot", "theta", "theta_dot"]``) and
@@ -52,6 +56,8 @@ from .controllers import ACTIVATIONS, HEADS, MLPController
 from .errors import ModelFileError, RunDirectoryError
 
 MODEL_FORMAT = "diffcontrol-model"
+GYM_KINDS = {"sign": "discrete_sign", "argmax": "discrete"}
+"""The Gymnasium action kind (``action.gym``) of a head; every other head's is ``"box"``."""
 MODEL_VERSION = 1
 CHECKPOINT_FORMAT = "diffcontrol-checkpoint"
 CHECKPOINT_VERSION = 1
@@ -178,7 +184,7 @@ def check_new_file(path: str | os.PathLike, suffix: str) -> Path:
 
 def controller_to_dict(controller: MLPController, task: Any, metadata: dict | None = None) -> dict:
     """The ``model.json`` document of a trained ``MLPController`` for ``task``."""
-    gym_kind = "discrete_sign" if controller.head == "sign" else "box"
+    gym_kind = GYM_KINDS.get(controller.head, "box")
     layers = [
         {"weight": np.asarray(l.weight).tolist(), "bias": np.asarray(l.bias).tolist()}
         for l in controller.layers
@@ -246,6 +252,13 @@ def _check_model(doc: Any, path: Path) -> None:
             raise bad(f"unknown activation {net['activation']!r}")
         if act["head"] not in HEADS:
             raise bad(f"unknown action head {act['head']!r}")
+        gym_kind = act.get("gym", "box")
+        if gym_kind not in ("box", *GYM_KINDS.values()):
+            raise bad(f"unknown Gymnasium action kind {gym_kind!r}")
+        if (act["head"] == "argmax") != (gym_kind == "discrete"):
+            raise bad(f"action head {act['head']!r} does not go with 'gym': {gym_kind!r}")
+        if act["head"] == "argmax" and act["size"] < 2:
+            raise bad(f"the argmax head needs at least 2 choices, not {act['size']}")
         size = obs["size"]
         if len(obs["offset"]) != size or len(obs["scale"]) != size:
             raise bad("observation offset/scale do not match its size")
@@ -291,8 +304,10 @@ class NumpyPolicy:
     """A ``model.json`` controller run with NumPy alone.
 
     ``policy(obs)`` takes one Gymnasium observation and returns a valid Gymnasium action, so
-    it drops into a plain ``gymnasium.make(...)`` loop. ``policy.action(obs)`` returns the
-    controller's continuous action vector (the push multiplier ``+-1`` for CartPole).
+    it drops into a plain ``gymnasium.make(...)`` loop: for a ``Discrete`` space (the
+    ``argmax`` head) the index as a Python ``int``, or an int array for a batch of
+    observations. ``policy.action(obs)`` returns the controller's action vector (the push
+    multiplier ``+-1`` for CartPole, the one-hot choice for the ``argmax`` head).
     """
 
     def __init__(self, doc: dict):
@@ -325,12 +340,17 @@ class NumpyPolicy:
             return self._low + (self._high - self._low) * (np.tanh(z) + 1) / 2
         if self._head == "sigmoid":
             return self._low + (self._high - self._low) / (1 + np.exp(-z))
+        if self._head == "argmax":
+            return np.eye(z.shape[-1])[np.argmax(z, axis=-1)]
         return np.where(np.tanh(z) >= 0, 1.0, -1.0)
 
     def __call__(self, obs: np.ndarray) -> Any:
         a = self.action(obs)
         if self._gym == "discrete_sign":
             return int(a.reshape(-1)[0] >= 0)
+        if self._gym == "discrete":
+            index = np.argmax(a, axis=-1)
+            return int(index) if index.ndim == 0 else index.astype(np.int64)
         if self._low is not None:
             a = np.clip(a, self._low, self._high)
         return a.astype(np.float32)

@@ -15,6 +15,7 @@ import sys
 
 from ..errors import UnknownTaskError
 from ._base import ContinuousTask, StepLoss, Task, TrajectoryLoss
+from .acrobot import Acrobot
 from .cartpole import CartPole
 from .mountain_car import MountainCarContinuous
 from .pendulum import Pendulum, PendulumUnclipped
@@ -142,6 +143,7 @@ for _task in (
     Pendulum(),
     PendulumUnclipped(),
     CartPole(),
+    Acrobot(),
     TrebuchetAiming(),
     CartPoleSwingUp(),
     CartPoleSwingUpLimited(),
@@ -169,5 +171,6 @@ __all__ = [
     "PendulumUnclipped",
     "CartPole",
     "MountainCarContinuous",
+    "Acrobot",
     "TrebuchetAiming",
 ]
