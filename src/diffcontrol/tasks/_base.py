@@ -145,6 +145,21 @@ class Task(_TaskBase):
             raise ValueError(f"task {self.name!r} has no Gymnasium environment")
         return gymnasium.make(self.gym_id, **kwargs)
 
+    def set_gym_state(self, env: Any, state: np.ndarray) -> None:
+        """Put the Gymnasium twin ``env`` (from ``make_gym_env``) into the task's ``state``.
+
+        ``diffcontrol.check_task`` compares ``step`` with the twin's ``env.step`` from the same
+        state. The default suits Gymnasium's classic-control environments, whose state is the
+        float64 array ``env.unwrapped.state``, laid out as the task's; a task whose twin keeps
+        its state elsewhere, or in another layout (MuJoCo's ``set_state(qpos, qvel)``), says
+        how here.
+
+        Args:
+            env: the Gymnasium environment, after ``env.reset()``.
+            state: one state of the task (NumPy, shape as ``reset`` returns).
+        """
+        env.unwrapped.state = np.asarray(state, np.float64)
+
 
 TrajectoryLoss = Callable[[Any], Array]
 """``loss(trajectory) -> scalar``: the training loss of a continuous-time task, a function of
