@@ -1,5 +1,6 @@
 """``check_task``: the built-in tasks pass, with parity against their Gymnasium twins; a broken
-task fails with one line that names the method and what is wrong."""
+task fails with one line that names the method and what is wrong; ``train`` checks shapes
+before it compiles anything, and trains a task without built-in losses on a loss passed in."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ import pytest
 
 import diffcontrol
 from diffcontrol import ConfigError, TaskCheckError, check_task
-from diffcontrol.checks import RTOL
+from diffcontrol.checks import RTOL, validate_task
 from diffcontrol.tasks import CartPole, Pendulum
 
 GYM_TASKS = [name for name in diffcontrol.tasks.names() if diffcontrol.make(name).gym_id]
@@ -260,3 +261,42 @@ def test_a_continuous_task_is_checked_without_parity():
 def test_bad_arguments():
     with pytest.raises(ConfigError, match="states must be a positive integer"):
         check_task(Rail(), states=0)
+
+
+# --- train checks the task first (part of the trainer's entry point) ---------------------
+
+
+def test_train_names_a_wrong_state_shape_before_compiling():
+    task = LongStateRail()
+    with pytest.raises(TaskCheckError) as info:
+        diffcontrol.train(task)
+    assert str(info.value) == (
+        "LongStateRail.step returned a state of shape (3,) for a state of shape (2,)"
+    )
+
+
+def test_validate_task_only_traces():
+    state = validate_task(Rail())
+    assert state.shape == (2,) and state.dtype == jnp.float32
+    with pytest.raises(TaskCheckError, match=r"^WideObservationRail\.observe returned"):
+        validate_task(WideObservationRail())
+
+
+class LosslessRail(Rail):
+    """A task without built-in losses: every run passes its own."""
+
+    losses = ()
+    step_loss = diffcontrol.Task.step_loss
+
+
+def test_a_task_without_builtin_losses_trains_on_a_loss_passed_in():
+    task = LosslessRail()
+    assert LosslessRail.losses == () and "step_loss" not in diffcontrol.Task.__abstractmethods__
+
+    def cost(params, state, action, next_state, reward):
+        return -reward
+
+    result = diffcontrol.train(task, step_loss=cost)
+    assert result.metrics["updates"] == 4
+    with pytest.raises(ConfigError, match=r"has no built-in losses; pass one to .*step_loss="):
+        diffcontrol.train(task)

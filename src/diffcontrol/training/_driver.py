@@ -16,6 +16,7 @@ import numpy as np
 from jaxtyping import PyTree
 
 from .. import io
+from ..checks import validate_task
 from ..controllers import MLPController
 from ..errors import ConfigError, TrainingDiverged
 from ..tasks import AnyTask, ContinuousTask, StepLoss, TrajectoryLoss
@@ -130,6 +131,8 @@ def train(
     Raises:
         ConfigError, RunDirectoryError, ModelFileError: bad settings or directories, or a
             loss that does not return a scalar.
+        TaskCheckError: a method of the task returns the wrong shape or dtype
+            (``diffcontrol.checks.validate_task``, before anything is compiled).
         TrainingDiverged: the loss became non-finite (lower the learning rate or clip).
         SolverFailed: every ODE solve of a continuous-time run failed (say why and what to
             change, e.g. raise max_steps).
@@ -144,6 +147,7 @@ def train(
         )
     say = progress or (lambda line: None)
     params = task_params(task, config.params)
+    validate_task(task, params)  # a wrong shape named here, not as a lax.scan type error
     if isinstance(task, ContinuousTask):
         if step_loss is not None:
             raise ConfigError(f"task {task.name!r} is continuous-time: pass trajectory_loss")
