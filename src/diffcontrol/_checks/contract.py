@@ -92,7 +92,8 @@ def _discrete_contract(task: Task, params: PyTree, state: Any, n: int, seed: int
         )
     for i in _nonfinite_rows(obs)[:1]:
         fail(
-            f"{name}.observe returned a non-finite observation {fmt(obs[i])} for the state {fmt(s[i])}"
+            f"{name}.observe returned a non-finite observation {fmt(obs[i])} for the state "
+            f"{fmt(s[i])}"
         )
     for i in _nonfinite_rows(next_s)[:1]:
         fail(f"{name}.step returned a non-finite state {fmt(next_s[i])} {at(i)}")

@@ -1,4 +1,4 @@
-"""Shapes and dtypes of a task's methods, by ``jax.eval_shape`` (``diffcontrol.checks.validate_task``)."""
+"""Shapes and dtypes of a task's methods by ``jax.eval_shape``: ``checks.validate_task``."""
 
 from __future__ import annotations
 
@@ -66,13 +66,15 @@ def _discrete_shapes(task: Task, params: PyTree) -> jax.ShapeDtypeStruct:
     out = trace(f"{name}.step", inputs, task.step, params, state, action)
     if not (isinstance(out, tuple | list) and len(out) == 3):
         fail(
-            f"{name}.step returned {_describe(out)}; it must return (next_state, reward, terminated)"
+            f"{name}.step returned {_describe(out)}; it must return "
+            "(next_state, reward, terminated)"
         )
     next_state, reward, terminated = out
     next_state = _array(f"{name}.step", "the next state", next_state)
     if next_state.shape != state.shape:
         fail(
-            f"{name}.step returned a state of shape {next_state.shape} for a state of shape {state.shape}"
+            f"{name}.step returned a state of shape {next_state.shape} for a state of shape "
+            f"{state.shape}"
         )
     if next_state.dtype != state.dtype:
         fail(
@@ -107,7 +109,8 @@ def _continuous_shapes(task: ContinuousTask, params: PyTree) -> jax.ShapeDtypeSt
     y0 = _array(f"{name}.initial_state", "the initial state", y0)
     if y0.ndim != 1:
         fail(
-            f"{name}.initial_state returned shape {y0.shape}; the ODE state must be a vector (shape (n,))"
+            f"{name}.initial_state returned shape {y0.shape}; the ODE state must be a vector "
+            "(shape (n,))"
         )
     _observation_shape(task, y0)
 
@@ -121,7 +124,8 @@ def _continuous_shapes(task: ContinuousTask, params: PyTree) -> jax.ShapeDtypeSt
     dy = _array(f"{name}.vector_field", "dy/dt", dy)
     if dy.shape != y0.shape:
         fail(
-            f"{name}.vector_field returned dy/dt of shape {dy.shape} for a state of shape {y0.shape}"
+            f"{name}.vector_field returned dy/dt of shape {dy.shape} for a state of shape "
+            f"{y0.shape}"
         )
     if dy.dtype != y0.dtype:
         fail(
