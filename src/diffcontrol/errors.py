@@ -52,3 +52,9 @@ class DataFileError(DiffcontrolError):
 
 class InsufficientDataError(DiffcontrolError):
     """Too little recorded data for the model asked for (the message says how much is needed)."""
+
+
+class TrainingWarning(UserWarning):
+    """A training run that finished but likely did not do what was meant: a loss that does
+    not depend on the controller, a loss that never moves, or ``keep_best`` returning the
+    untrained controller. Also listed in ``TrainResult.metrics["warnings"]``."""
