@@ -149,7 +149,7 @@ def _discrete_contract(task: Task, params: PyTree, state: Any, n: int, seed: int
 def _blame(task: Task, params: PyTree, state: Any, n: int, error: Exception) -> TaskCheckError:
     """The compiled probe failed: trace its parts one by one to say which method, and how."""
     name = type(task).__name__
-    keys = jax.ShapeDtypeStruct((n, *jax.random.PRNGKey(0).shape), jax.random.PRNGKey(0).dtype)
+    keys = jax.eval_shape(lambda: jax.random.split(jax.random.PRNGKey(0), n))
     state = jax.ShapeDtypeStruct((n, *state.shape), state.dtype)
     action = jax.ShapeDtypeStruct((n, task.action_size), state.dtype)
     parts = [

@@ -57,7 +57,7 @@ def _observation_shape(task: AnyTask, state: jax.ShapeDtypeStruct) -> None:
 
 def _discrete_shapes(task: Task, params: PyTree) -> jax.ShapeDtypeStruct:
     name = type(task).__name__
-    key = jax.random.PRNGKey(0)
+    key = jax.eval_shape(lambda: jax.random.PRNGKey(0))  # abstract: nothing runs
     state = trace(f"{name}.reset", "a PRNG key and the parameters", task.reset, key, params)
     state = _array(f"{name}.reset", "the state", state)
     _observation_shape(task, state)
