@@ -17,8 +17,9 @@ ACTION_SCALE = 2.0
 spread over a bounded head's range, ``+-1`` for ``sign``, a few units for ``linear``."""
 
 SAME_RTOL, SAME_ATOL = 1e-4, 1e-5
-"""How far a compiled, batched result may be from an eager one of the same inputs: rounding
-(XLA fuses and reorders operations). A function that is not pure is off by far more."""
+"""How far a batched (``vmap``) result may be from the same example computed alone: rounding
+(XLA fuses and reorders operations differently). A function that is not pure is off by far
+more."""
 
 
 def fail(message: str) -> NoReturn:
