@@ -110,7 +110,8 @@ def test_chunks_are_compiled_once():
     cfg = resolve_config(task, updates=12, batch=2, window=3, eval_every=3, eval_episodes=2)
     monitoring.register_event_duration_secs_listener(listener)
     try:
-        train(task, cfg.replace(hidden=(7,)), progress=lambda line: at_point.append(len(compiles)))
+        # on_point: one call per evaluation point (progress also carries warnings).
+        train(task, cfg.replace(hidden=(7,)), on_point=lambda p, c: at_point.append(len(compiles)))
     finally:
         monitoring.unregister_event_duration_listener(listener)
     assert len(at_point) == 5  # updates 0, 3, 6, 9, 12

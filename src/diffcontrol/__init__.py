@@ -16,6 +16,7 @@ from pathlib import Path as _Path
 __version__ = "0.1.0"
 
 from . import controllers, data, envs, rollout, runs, systems, tasks, wrappers  # noqa: E402
+from .checks import CheckReport, check_task  # noqa: E402
 from .config import ODETrainConfig, TrainConfig  # noqa: E402
 from .controllers import MLPController, straight_through_sign  # noqa: E402, F401
 from .data import TrajectoryData, read_trajectories  # noqa: E402
@@ -27,6 +28,7 @@ from .errors import (  # noqa: E402
     ModelFileError,
     RunDirectoryError,
     SolverFailed,
+    TaskCheckError,
     TrainingDiverged,
     UnknownTaskError,
 )
@@ -81,6 +83,7 @@ def list_tasks() -> list[str]:
 __all__ = [
     "AimResult",
     "AimingPolicy",
+    "CheckReport",
     "ConfigError",
     "ContinuousTask",
     "DataFileError",
@@ -95,12 +98,14 @@ __all__ = [
     "SolverFailed",
     "StatePolicy",
     "Task",
+    "TaskCheckError",
     "TrainConfig",
     "TrainResult",
     "Trajectory",
     "TrainingDiverged",
     "TrajectoryData",
     "UnknownTaskError",
+    "check_task",
     "controllers",
     "data",
     "envs",

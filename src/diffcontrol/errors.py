@@ -16,6 +16,13 @@ class ConfigError(DiffcontrolError):
     """A training or evaluation setting is out of range (for example ``window <= 0``)."""
 
 
+class TaskCheckError(ConfigError):
+    """A task that breaks the contract the trainers rely on (``diffcontrol.check_task``):
+    a method that returns the wrong shape or dtype, a non-finite or non-deterministic output,
+    or a step that disagrees with the task's Gymnasium twin. The message is one line that
+    names the method and what it returned."""
+
+
 class UnknownTaskError(DiffcontrolError, KeyError):
     """A task name that is not registered."""
 
@@ -45,3 +52,9 @@ class DataFileError(DiffcontrolError):
 
 class InsufficientDataError(DiffcontrolError):
     """Too little recorded data for the model asked for (the message says how much is needed)."""
+
+
+class TrainingWarning(UserWarning):
+    """A training run that finished but likely did not do what was meant: a loss that does
+    not depend on the controller, a loss that never moves, or ``keep_best`` returning the
+    untrained controller. Also listed in ``TrainResult.metrics["warnings"]``."""

@@ -210,6 +210,12 @@ def cmd_train(args: argparse.Namespace) -> int:
     if not (args.no_compile_cache or os.environ.get("DIFFCONTROL_NO_COMPILE_CACHE")):
         cache_dir = _jax_setup.enable_compile_cache()
     say = (lambda line: None) if args.quiet else (lambda line: print(line, flush=True))
+    if not args.quiet:  # training warnings come as progress lines; not twice
+        import warnings
+
+        from ..errors import TrainingWarning
+
+        warnings.simplefilter("ignore", TrainingWarning)
     say(describe(task, config, out))
     if getattr(config, "gradient", None) == "backsolve":
         print(

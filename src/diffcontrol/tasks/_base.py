@@ -10,6 +10,8 @@ import equinox as eqx
 import numpy as np
 from jaxtyping import Array, PRNGKeyArray, PyTree
 
+from ..errors import ConfigError
+
 StepLoss = Callable[[PyTree, Array, Array, Array, Array], Array]
 """``loss(params, state, action, next_state, reward) -> scalar``: the training loss of one step."""
 
@@ -31,7 +33,7 @@ class _TaskBase(abc.ABC):
     action_high: ClassVar[tuple[float, ...] | None] = None
     obs_offset: ClassVar[tuple[float, ...] | None] = None
     obs_scale: ClassVar[tuple[float, ...] | None] = None
-    losses: ClassVar[tuple[str, ...]]
+    losses: ClassVar[tuple[str, ...]] = ()
     state_labels: ClassVar[tuple[str, ...]] = ()
     action_labels: ClassVar[tuple[str, ...]] = ()
     env_name: ClassVar[str | None] = None
@@ -173,7 +175,9 @@ class Task(_TaskBase):
         action_low, action_high: bounds for bounded heads.
         obs_offset, obs_scale: the fixed observation normalisation of controllers.
         reward_threshold: the return at which the task counts as solved.
-        losses: the names of the built-in training losses; the first is the default.
+        losses: the names of the built-in training losses; the first is the default. A task
+            without built-in losses leaves it empty and does not define ``step_loss``: every
+            run then passes its loss, ``diffcontrol.train(task, step_loss=...)``.
         state_labels, action_labels: names with units, for plots.
         env_name: the ``Name`` of the Gymnasium environment ``diffcontrol/<Name>-v0`` that
             steps this task (``diffcontrol.envs``); ``None`` derives it from ``name``
@@ -201,9 +205,14 @@ class Task(_TaskBase):
     def observe(self, state: Array) -> Array:
         """The observation the controller sees (Gymnasium's observation)."""
 
-    @abc.abstractmethod
     def step_loss(self, name: str) -> StepLoss:
-        """The built-in training loss ``name`` (one of ``losses``) of one step."""
+        """The built-in training loss ``name`` (one of ``losses``) of one step.
+
+        Raises:
+            ConfigError: the task has no built-in losses (the default); pass the loss to
+                ``diffcontrol.train(task, step_loss=...)``.
+        """
+        raise ConfigError(_no_builtin_loss(self, name, "step_loss"))
 
     def state_from_observation(self, observation: Array) -> Array:
         """The state that ``observe`` maps to ``observation`` (the inverse of ``observe``), so
@@ -283,6 +292,21 @@ class Task(_TaskBase):
 
         return gymnasium.make(self.gym_id or env_id(self), **kwargs)
 
+    def set_gym_state(self, env: Any, state: np.ndarray) -> None:
+        """Put the Gymnasium twin ``env`` (from ``make_gym_env``) into the task's ``state``.
+
+        ``diffcontrol.check_task`` compares ``step`` with the twin's ``env.step`` from the same
+        state. The default suits Gymnasium's classic-control environments, whose state is the
+        float64 array ``env.unwrapped.state``, laid out as the task's; a task whose twin keeps
+        its state elsewhere, or in another layout (MuJoCo's ``set_state(qpos, qvel)``), says
+        how here.
+
+        Args:
+            env: the Gymnasium environment, after ``env.reset()``.
+            state: one state of the task (NumPy, shape as ``reset`` returns).
+        """
+        env.unwrapped.state = np.asarray(state, np.float64)
+
 
 TrajectoryLoss = Callable[[Any], Array]
 """``loss(trajectory) -> scalar``: the training loss of a continuous-time task, a function of
@@ -343,9 +367,14 @@ class ContinuousTask(_TaskBase):
     def trajectory(self, params: PyTree, controller: Any, ts: Array, ys: Array) -> Any:
         """The trajectory object that losses see, from the saved times and states."""
 
-    @abc.abstractmethod
     def trajectory_loss(self, name: str) -> TrajectoryLoss:
-        """The built-in loss ``name`` (one of ``losses``) of a saved trajectory."""
+        """The built-in loss ``name`` (one of ``losses``) of a saved trajectory.
+
+        Raises:
+            ConfigError: the task has no built-in losses (the default); pass the loss to
+                ``diffcontrol.train(task, trajectory_loss=...)``.
+        """
+        raise ConfigError(_no_builtin_loss(self, name, "trajectory_loss"))
 
     def load_policy(self, doc: dict) -> Any:
         """A ``StatePolicy``: ``policy(state) -> action`` on the physical state."""
@@ -370,3 +399,10 @@ class ContinuousTask(_TaskBase):
     def controller_kwargs(self) -> dict[str, Any]:
         """As for every task, with the Glorot-uniform weights and zero biases of the post."""
         return {**super().controller_kwargs(), "init": "glorot", "final_scale": 1.0}
+
+
+def _no_builtin_loss(task: _TaskBase, name: str, argument: str) -> str:
+    return (
+        f"task {task.name!r} has no built-in loss {name!r}; pass your loss to "
+        f"diffcontrol.train(task, {argument}=...) or define {type(task).__name__}.{argument}"
+    )

@@ -332,19 +332,35 @@ class PopulationTrainer(eqx.Module):
         return controller.num_parameters
 
 
+def builtin_loss_name(task: Any, requested: str, argument: str) -> str:
+    """The built-in loss a run uses: ``requested`` (``config.loss``), else the task's first.
+
+    Raises:
+        ConfigError: the task has no built-in losses (pass ``argument`` to ``train``), or
+            none called ``requested``.
+    """
+    from ..errors import ConfigError
+
+    if not task.losses:
+        raise ConfigError(
+            f"task {task.name!r} has no built-in losses; pass one to "
+            f"diffcontrol.train(task, {argument}=...)"
+        )
+    name = requested or task.losses[0]
+    if name not in task.losses:
+        raise ConfigError(
+            f"unknown loss {name!r} for task {task.name!r}; choose one of {', '.join(task.losses)}"
+        )
+    return name
+
+
 def make_trainer(
     task: Task, config: TrainConfig, step_loss: StepLoss | None = None
 ) -> Trainer | PopulationTrainer:
-    """Build the ``Trainer`` for ``task`` and ``config`` (validating the loss name)."""
-    from ..errors import ConfigError
-
+    """Build the ``Trainer`` for ``task`` and ``config`` (validating the loss name); a
+    ``PopulationTrainer`` of them when ``config.population > 1``."""
     if step_loss is None:
-        name = config.loss or task.losses[0]
-        if name not in task.losses:
-            raise ConfigError(
-                f"unknown loss {name!r} for task {task.name!r}; choose one of {', '.join(task.losses)}"
-            )
-        step_loss = task.step_loss(name)
+        step_loss = task.step_loss(builtin_loss_name(task, config.loss, "step_loss"))
     trainer = Trainer(
         task=task,
         config=config,

@@ -16,10 +16,12 @@ import numpy as np
 from jaxtyping import PyTree
 
 from .. import io
+from ..checks import validate_task
 from ..controllers import MLPController
 from ..errors import ConfigError, TrainingDiverged
 from ..tasks import AnyTask, ContinuousTask, StepLoss, TrajectoryLoss
 from ._bptt import make_trainer
+from ._diagnostics import Diagnostics
 from ._ode import make_ode_trainer
 
 CHECKPOINT_FILE = "checkpoint.npz"
@@ -139,11 +141,16 @@ def train(
         ``train_seconds`` (wall clock, compilation and evaluation included), ``compile_seconds``, ``simulated_steps``,
         ``simulated_episodes`` (in the task's standard episode length; closed-loop solves for
         continuous-time tasks, whose ``simulated_steps`` are solver steps), the ``curve``, and
-        ``returned_update`` with ``final_eval_return`` (the returned controller's).
+        ``returned_update`` with ``final_eval_return`` (the returned controller's), and
+        ``warnings``: what the run's numbers say went wrong (``TrainingWarning``, also warned
+        and sent to ``progress``): a loss whose gradient is exactly 0 at the first updates, a
+        loss that never moves, ``keep_best`` returning the untrained controller.
 
     Raises:
         ConfigError, RunDirectoryError, ModelFileError: bad settings or directories, or a
             loss that does not return a scalar.
+        TaskCheckError: a method of the task returns the wrong shape or dtype
+            (``diffcontrol.checks.validate_task``, before anything is compiled).
         TrainingDiverged: the loss became non-finite (lower the learning rate or clip).
         SolverFailed: every ODE solve of a continuous-time run failed (say why and what to
             change, e.g. raise max_steps).
@@ -158,6 +165,7 @@ def train(
         )
     say = progress or (lambda line: None)
     params = task_params(task, config.params)
+    validate_task(task, params)  # a wrong shape named here, not as a lax.scan type error
     if isinstance(task, ContinuousTask):
         if step_loss is not None:
             raise ConfigError(f"task {task.name!r} is continuous-time: pass trajectory_loss")
@@ -206,6 +214,7 @@ def train(
     callback_seconds = 0.0  # time spent in on_point, left out of the training time
     best_index = int(meta["best_index"])
     last_returns = None
+    diagnostics = Diagnostics(say, config.updates, int(ts.update), meta.get("warnings"))
 
     def record(ts: Any, loss: float, grad_norm: float) -> dict[str, Any]:
         nonlocal eval_seconds, best, best_index, last_returns, callback_seconds
@@ -264,6 +273,7 @@ def train(
             raise type(e)(f"{e}{where}") from None
         for note in notes:
             say("note: " + note)
+        diagnostics.after_chunk(losses, np.asarray(stats.grad_norm)[:done], config.learning_rate)
         ts = new_ts
         with np.errstate(all="ignore"):  # chunks whose members all failed hold only nan
             record(
@@ -282,6 +292,7 @@ def train(
                     - callback_seconds,
                     "compile_seconds_before": float(meta["compile_seconds_before"])
                     + compile_seconds,
+                    "warnings": diagnostics.warnings,
                 },
             )
 
@@ -293,6 +304,7 @@ def train(
         if last_returns is None:  # resumed after the last chunk: evaluate once more
             last_returns = np.asarray(evaluate(ts.controller, params, k_eval))
         controller = trainer.pick(ts.controller, last_returns)
+    diagnostics.finish(config, curve, chosen["update"])
     counts = trainer.counts(ts)
     metrics = {
         "task": task.name,
@@ -312,6 +324,7 @@ def train(
         "eval_episodes": getattr(config, "eval_episodes", 1),
         "num_parameters": trainer.num_parameters(controller),
         "curve": curve,
+        "warnings": diagnostics.warnings,
         "config": config.to_json(),
         "jax_version": jax.__version__,
         "device": str(jax.devices()[0].platform),

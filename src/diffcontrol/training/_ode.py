@@ -26,7 +26,7 @@ from ..controllers import MLPController
 from ..errors import ConfigError, SolverFailed
 from ..rollout import solve_closed_loop, value_and_grad
 from ..tasks import ContinuousTask, TrajectoryLoss
-from ._bptt import make_optimizer
+from ._bptt import builtin_loss_name, make_optimizer
 
 FAIL_NONE, FAIL_MAX_STEPS, FAIL_SOLVER, FAIL_NAN = 0, 1, 2, 3
 
@@ -313,11 +313,7 @@ def make_ode_trainer(
         ConfigError: an unknown loss name, or a loss that does not return a scalar.
     """
     if trajectory_loss is None:
-        name = config.loss or task.losses[0]
-        if name not in task.losses:
-            raise ConfigError(
-                f"unknown loss {name!r} for task {task.name!r}; choose one of {', '.join(task.losses)}"
-            )
+        name = builtin_loss_name(task, config.loss, "trajectory_loss")
         trajectory_loss = task.trajectory_loss(name)
     trainer = ODETrainer(
         task=task, config=config, loss_fn=trajectory_loss, optimizer=make_optimizer(config)
