@@ -21,10 +21,59 @@ def _opt(doc: str, **kwargs: Any) -> Any:
     return field(metadata={"help": doc}, **kwargs)
 
 
+MAX_COUNT = 2**31 - 1
+"""The largest count (updates, steps, seed): the trainer counts in 32-bit integers."""
+MAX_WIDTH = 2**20
+"""The largest batch, population, layer width or number of episodes a run may ask for."""
+_WIDE = ("batch", "eval_episodes", "population", "starts")
+
+
 class _Config:
     """What every configuration shares: validation helpers, ``replace`` and JSON round trips."""
 
+    def _check_types(self) -> None:
+        """Every field has its declared type (numbers of the right kind, strings, a tuple of
+        widths, (name, value) pairs), within the bounds a run can hold; integers given for
+        floats and lists for tuples are converted."""
+        for f in dataclasses.fields(self):
+            value, kind = getattr(self, f.name), str(f.type)
+            if kind == "int":
+                if not isinstance(value, int) or isinstance(value, bool):
+                    raise ConfigError(f"{f.name} must be an integer, got {value!r}")
+                limit = MAX_WIDTH if f.name in _WIDE else MAX_COUNT
+                if not (0 <= value <= limit):
+                    raise ConfigError(f"{f.name} must be in 0 ... {limit:,}, got {value!r}")
+            elif kind == "float":
+                if not isinstance(value, int | float) or isinstance(value, bool):
+                    raise ConfigError(f"{f.name} must be a number, got {value!r}")
+                object.__setattr__(self, f.name, float(value))
+            elif kind in ("str", "bool"):
+                if type(value).__name__ != kind:
+                    what = "text" if kind == "str" else "true or false"
+                    raise ConfigError(f"{f.name} must be {what}, got {value!r}")
+            elif kind == "tuple[int, ...]":
+                if not isinstance(value, tuple | list) or not all(
+                    isinstance(w, int) and not isinstance(w, bool) and 0 < w <= MAX_WIDTH
+                    for w in value
+                ):
+                    raise ConfigError(
+                        f"{f.name} must be positive layer widths such as (64, 64), got {value!r}"
+                    )
+                object.__setattr__(self, f.name, tuple(value))
+            elif f.name == "params":
+                object.__setattr__(self, f.name, _pairs(value))
+
     def _check_common(self) -> None:
+        from .controllers import ACTIVATIONS, HEADS
+
+        if self.activation not in ACTIVATIONS:
+            raise ConfigError(
+                f"activation must be one of {', '.join(ACTIVATIONS)}, got {self.activation!r}"
+            )
+        if self.head and self.head not in HEADS:
+            raise ConfigError(
+                f"head must be empty (the task's) or one of {', '.join(HEADS)}, got {self.head!r}"
+            )
         for name in ("updates", "eval_every"):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value <= 0:
@@ -81,6 +130,23 @@ class _Config:
             if value is None and isinstance(fields[name].default, float):
                 data[name] = math.nan
         return cls(**data)
+
+
+def _pairs(value: Any) -> tuple[tuple[str, float], ...]:
+    """``params`` as ``((name, value), ...)``: names are text, values finite numbers."""
+    ok = isinstance(value, tuple | list) and all(
+        isinstance(p, tuple | list)
+        and len(p) == 2
+        and isinstance(p[0], str)
+        and isinstance(p[1], int | float)
+        and not isinstance(p[1], bool)
+        for p in value
+    )
+    if not ok:
+        raise ConfigError(
+            f"params must be (name, value) pairs such as (('g', 9.81),), got {value!r}"
+        )
+    return tuple((name, float(v)) for name, v in value)
 
 
 def _check_curriculum(config: Any) -> None:
@@ -169,6 +235,12 @@ class TrainConfig(_Config):
     )
 
     def __post_init__(self) -> None:
+        self._check_types()
+        if math.isinf(self.target_return):
+            raise ConfigError(
+                f"target_return must be a finite return, or nan to never stop early, got "
+                f"{self.target_return!r}"
+            )
         for name in ("batch", "window", "eval_episodes", "population"):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value <= 0:
@@ -270,6 +342,7 @@ class ODETrainConfig(_Config):
     )
 
     def __post_init__(self) -> None:
+        self._check_types()
         for name in ("saves", "max_steps", "population", "starts"):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value <= 0:

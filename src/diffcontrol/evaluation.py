@@ -118,7 +118,16 @@ def _env(task: Task, real: tuple[str, dict | None] | None) -> tuple[Any, str]:
 
     env_id, kwargs = real
     args = ", ".join(f"{k}={v}" for k, v in (kwargs or {}).items())
-    return make_env(env_id, kwargs), f"{env_id}({args})" if args else env_id
+    try:
+        env = make_env(env_id, kwargs)
+    except ImportError as e:  # the module before ':' of an id the user named
+        from .errors import ConfigError
+
+        raise ConfigError(
+            f"cannot make the environment {env_id!r}: {type(e).__name__}: {e}; check the "
+            "module path (run from the directory that holds it, or install its package)"
+        ) from None
+    return env, f"{env_id}({args})" if args else env_id
 
 
 def record_episode(

@@ -55,6 +55,8 @@ import numpy as np
 from .controllers import ACTIVATIONS, HEADS, MLPController
 from .errors import ModelFileError, RunDirectoryError
 
+MAX_JSON_BYTES = 256 * 2**20
+"""The largest JSON file read (a model.json of a very wide network is a few MiB)."""
 MODEL_FORMAT = "diffcontrol-model"
 GYM_KINDS = {"sign": "discrete_sign", "argmax": "discrete"}
 """The Gymnasium action kind (``action.gym``) of a head; every other head's is ``"box"``."""
@@ -149,11 +151,20 @@ def read_json(path: str | os.PathLike, what: str = "file") -> Any:
     """Read JSON, turning a missing or malformed file into a ``ModelFileError``."""
     path = Path(path)
     try:
+        if path.stat().st_size > MAX_JSON_BYTES:
+            raise ModelFileError(
+                f"{what} {path} is larger than {MAX_JSON_BYTES // 2**20} MiB; it is not one "
+                "diffcontrol writes"
+            )
         return json.loads(path.read_text())
     except FileNotFoundError:
         raise ModelFileError(f"{what} {path} does not exist") from None
+    except IsADirectoryError:
+        raise ModelFileError(f"{what} {path} is a directory, not a file") from None
     except (json.JSONDecodeError, UnicodeDecodeError) as e:
         raise ModelFileError(f"{what} {path} is not valid JSON ({e}); re-create it") from None
+    except RecursionError:
+        raise ModelFileError(f"{what} {path} is nested too deeply to be one of ours") from None
 
 
 def now_iso() -> str:
@@ -260,8 +271,23 @@ def _check_model(doc: Any, path: Path) -> None:
         if act["head"] == "argmax" and act["size"] < 2:
             raise bad(f"the argmax head needs at least 2 choices, not {act['size']}")
         size = obs["size"]
-        if len(obs["offset"]) != size or len(obs["scale"]) != size:
-            raise bad("observation offset/scale do not match its size")
+        if not isinstance(size, int) or isinstance(size, bool) or size < 1:
+            raise bad(f"the observation size {size!r} is not a positive integer")
+        for name in ("offset", "scale"):
+            v = np.asarray(obs[name], float)
+            if v.shape != (size,) or not np.all(np.isfinite(v)):
+                raise bad(f"observation {name} is not {size} finite numbers")
+        if not isinstance(act["size"], int) or act["size"] < 1:
+            raise bad(f"the action size {act['size']!r} is not a positive integer")
+        if act["head"] in ("tanh", "sigmoid"):
+            for name in ("low", "high"):
+                v = np.asarray(act.get(name), float)
+                if v.shape != (act["size"],) or not np.all(np.isfinite(v)):
+                    raise bad(f"the {act['head']} head needs {act['size']} finite action {name}s")
+            if np.any(np.asarray(act["low"], float) >= np.asarray(act["high"], float)):
+                raise bad("an action bound has low >= high")
+        if not net["layers"]:
+            raise bad("the network has no layers")
         if "features" in obs:
             if len(obs["features"]) != size:
                 raise bad("observation features do not match its size")
@@ -328,8 +354,22 @@ class NumpyPolicy:
         self._high = None if a.get("high") is None else np.asarray(a["high"], np.float64)
 
     def action(self, obs: np.ndarray) -> np.ndarray:
-        """The controller's action vector for one observation (or a batch, leading axis)."""
-        h = (np.asarray(obs, np.float64) - self._offset) * self._scale
+        """The controller's action vector for one observation (or a batch, leading axis).
+
+        Raises:
+            ValueError: the observation is not a vector (or batch) of the controller's size,
+                or holds NaN or infinity.
+        """
+        obs = np.asarray(obs, np.float64)
+        size = self._offset.shape[0]
+        if obs.ndim == 0 or obs.shape[-1] != size:
+            raise ValueError(
+                f"the {self.task} controller takes observations of size {size}, got shape "
+                f"{obs.shape}"
+            )
+        if not np.all(np.isfinite(obs)):
+            raise ValueError(f"the observation holds NaN or infinity: {obs}")
+        h = (obs - self._offset) * self._scale
         for w, b in self._layers[:-1]:
             h = self._act(h @ w.T + b)
         w, b = self._layers[-1]
@@ -485,6 +525,36 @@ def save_checkpoint(path: str | os.PathLike, tree: Any, meta: dict) -> None:
     write_bytes(path, buf.getvalue())
 
 
+def _npz_shape(data: Any, name: str) -> tuple[tuple[int, ...], np.dtype]:
+    """The shape and dtype an ``.npz`` member declares, read from its header alone."""
+    with data.zip.open(f"{name}.npy") as f:
+        version = np.lib.format.read_magic(f)
+        read = {
+            (1, 0): np.lib.format.read_array_header_1_0,
+            (2, 0): np.lib.format.read_array_header_2_0,
+        }.get(version)
+        if read is None:
+            raise ValueError(f"unsupported .npy version {version}")
+        shape, _, dtype = read(f)
+    return tuple(shape), dtype
+
+
+def _check_meta(meta: Any, bad: Any) -> None:
+    """A checkpoint's ``meta``: the curve so far, the best point's index, the seconds."""
+    if not isinstance(meta, dict) or not isinstance(meta.get("curve"), list):
+        raise bad("holds no learning curve")
+    curve = meta["curve"]
+    if not all(isinstance(p, dict) and isinstance(p.get("update"), int) for p in curve):
+        raise bad("holds a malformed learning curve")
+    best = meta.get("best_index")
+    if not isinstance(best, int) or not (0 <= best < max(1, len(curve))):
+        raise bad(f"holds a best point {best!r} outside its curve")
+    for name in ("seconds_before", "compile_seconds_before"):
+        value = meta.get(name)
+        if not isinstance(value, int | float) or not (0 <= value < math.inf):
+            raise bad(f"holds a bad {name} ({value!r})")
+
+
 def load_checkpoint(path: str | os.PathLike, like: Any) -> tuple[Any, dict]:
     """Load a checkpoint into the structure of ``like``; returns ``(tree, meta)``.
 
@@ -508,19 +578,21 @@ def load_checkpoint(path: str | os.PathLike, like: Any) -> tuple[Any, dict]:
                 raise bad("has an unknown format or version")
             if header["leaves"] != len(leaves_like):
                 raise bad("does not match this run's configuration")
+            _check_meta(header.get("meta"), bad)
             leaves = []
             for i, ref in enumerate(leaves_like):
-                arr = data[f"leaf_{i:04d}"]
+                name = f"leaf_{i:04d}"
                 ref_arr = np.asarray(ref)
-                if arr.shape != ref_arr.shape or arr.dtype != ref_arr.dtype:
+                # the stored shape first: a file that claims a huge array is refused unread
+                if _npz_shape(data, name) != (ref_arr.shape, ref_arr.dtype):
                     raise bad("does not match this run's configuration")
-                leaves.append(jax.numpy.asarray(arr))
+                leaves.append(jax.numpy.asarray(data[name]))
+    except ModelFileError:
+        raise
     except FileNotFoundError:
         raise bad("does not exist") from None
-    except (OSError, ValueError, KeyError, json.JSONDecodeError) as e:
-        if isinstance(e, ModelFileError):
-            raise
-        raise bad(f"is corrupt ({e})") from None
+    except Exception as e:  # truncated, not a zip, a list header...: never a traceback
+        raise bad(f"is corrupt ({type(e).__name__}: {e})") from None
     return jax.tree.unflatten(treedef, leaves), header["meta"]
 
 

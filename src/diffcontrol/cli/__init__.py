@@ -8,6 +8,7 @@ and the one-line-error parser.
 from __future__ import annotations
 
 import argparse
+import errno
 import sys
 
 from ..errors import DiffcontrolError
@@ -57,3 +58,17 @@ def main(argv: list[str] | None = None) -> int:
     except DiffcontrolError as e:
         print(f"diffcontrol {args.command}: error: {e}", file=sys.stderr)
         return EXIT_USAGE
+    except OSError as e:
+        if e.errno not in _FILE_SYSTEM_ERRORS:
+            raise
+        where = f" ({e.filename})" if e.filename else ""
+        hint = " then continue with --resume" if args.command == "train" else ""
+        print(
+            f"diffcontrol {args.command}: error: {e.strerror}{where}; make room or choose "
+            f"another place,{hint or ' then run the command again'}",
+            file=sys.stderr,
+        )
+        return EXIT_USAGE
+
+
+_FILE_SYSTEM_ERRORS = {errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EFBIG}

@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import DiffcontrolError
-from ._args import finite_float, param, positive_int
+from ._args import finite_float, nonneg_int, param, positive_int
 
 
 def _add_task_option(p: Any) -> None:
@@ -62,7 +62,7 @@ def add_parsers(sub: Any) -> None:
     )
     p.add_argument(
         "--seed",
-        type=int,
+        type=nonneg_int,
         default=0,
         metavar="S",
         help="first reset seed, or the seed of the random targets (default 0)",
@@ -80,7 +80,11 @@ def add_parsers(sub: Any) -> None:
     )
     p.add_argument("run_dir", metavar="DIR", help="a directory written by `diffcontrol train`")
     p.add_argument(
-        "--seed", type=int, default=0, metavar="S", help="reset seed of the episode (default 0)"
+        "--seed",
+        type=nonneg_int,
+        default=0,
+        metavar="S",
+        help="reset seed of the episode (default 0)",
     )
     p.add_argument("--out", metavar="FILE", default=None, help="GIF path (default DIR/rollout.gif)")
     p.add_argument(

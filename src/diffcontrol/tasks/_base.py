@@ -69,6 +69,37 @@ class _TaskBase(abc.ABC):
     """Whether ``--final-eval 0`` skips the final evaluation; ``False`` where it is part of
     what a run reports and its pictures are drawn from it anyway (a reference solve)."""
 
+    positive_params: ClassVar[tuple[str, ...]] = ()
+    """Physical parameters that must be > 0 (masses, lengths, time steps)."""
+    nonnegative_params: ClassVar[tuple[str, ...]] = ()
+    """Physical parameters that must be >= 0 (friction, limits)."""
+
+    def check_params(self, params: PyTree) -> None:
+        """Refuse physical parameters the simulator cannot run with: NaN anywhere, and the
+        ranges of ``positive_params`` and ``nonnegative_params``.
+
+        Raises:
+            ConfigError: naming the parameter, its value and the range.
+        """
+        from ..errors import ConfigError
+
+        for name in (*self.positive_params, *self.nonnegative_params):
+            if not hasattr(params, name):  # a fitted model's parameters: checked in its physics
+                continue
+            value = float(np.asarray(getattr(params, name)))
+            positive = name in self.positive_params
+            if np.isnan(value) or value < 0 or (positive and value == 0):
+                need = "> 0" if positive else ">= 0"
+                raise ConfigError(
+                    f"parameter {name}={value:g} of task {self.name!r} must be {need} (the "
+                    "simulator has no meaning otherwise)"
+                )
+        import jax
+
+        for leaf in jax.tree.leaves(params):
+            if np.any(np.isnan(np.asarray(leaf, float))):
+                raise ConfigError(f"the parameters of task {self.name!r} hold NaN")
+
     def load_policy(self, doc: dict) -> Any:
         """The NumPy policy of a ``model.json`` document (what ``diffcontrol.load`` returns).
 

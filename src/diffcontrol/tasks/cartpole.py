@@ -42,6 +42,15 @@ class CartPole(Task):
         "pole speed θ̇ (rad/s)",
     )
     action_labels = ("push (±1 × 10 N)",)
+    positive_params = (
+        "masscart",
+        "masspole",
+        "length",
+        "force_mag",
+        "tau",
+        "theta_threshold",
+        "x_threshold",
+    )
     env_name = "CartPole"
 
     def frames(self, recording, every):

@@ -67,6 +67,7 @@ class MountainCarContinuous(Task):
     losses = ("energy", "cost")
     state_labels = ("position", "velocity (per step)")
     action_labels = ("force",)
+    positive_params = ("power", "max_action", "max_speed")
 
     deficit_weight: ClassVar[float] = 0.05
     """Weight of the logarithmic energy deficit per step in the ``energy`` loss."""

@@ -36,6 +36,8 @@ class Pendulum(Task):
     losses = ("cost", "squared_cost")
     state_labels = ("angle θ (rad, 0 = up)", "angular speed θ̇ (rad/s)")
     action_labels = ("torque (N m)",)
+    positive_params = ("m", "l", "dt", "max_speed")
+    nonnegative_params = ("max_torque", "friction")
 
     def default_params(self) -> pend.PendulumParams:
         return pend.PendulumParams()

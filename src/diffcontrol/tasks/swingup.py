@@ -118,6 +118,8 @@ class CartPoleSwingUp(ContinuousTask):
         "pole rate θ̇ (rad/s)",
     )
     action_labels = ("force (N)",)
+    positive_params = ("pole_mass", "cart_mass", "length", "coulomb_speed", "coulomb_rate")
+    nonnegative_params = ("cart_viscous", "cart_coulomb", "pole_viscous", "pole_coulomb")
 
     def default_params(self) -> cp.SwingUpParams:
         return cp.SwingUpParams()

@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
+import signal
+import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -65,6 +68,7 @@ def task_params(task: AnyTask, overrides: tuple[tuple[str, float], ...] = ()) ->
                 f"task {task.name!r} has no parameter {name!r}; its parameters are {', '.join(fields)}"
             )
         params = eqx.tree_at(lambda p, n=name: getattr(p, n), params, value)
+    task.check_params(params)
     return jax.tree.map(lambda x: jnp.asarray(x, dtype=float), params)
 
 
@@ -164,6 +168,7 @@ def train(
             f"{type(config).__name__}; start from task.default_config()"
         )
     say = progress or (lambda line: None)
+    _check_head(task, config.head)
     params = task_params(task, config.params)
     validate_task(task, params)  # a wrong shape named here, not as a lax.scan type error
     if isinstance(task, ContinuousTask):
@@ -180,7 +185,8 @@ def train(
 
     key = jax.random.PRNGKey(config.seed)
     k_train, k_eval = jax.random.split(key)
-    ts = eqx.filter_jit(trainer.init)(k_train, params)  # one program, not op by op
+    with interrupts_deferred():
+        ts = eqx.filter_jit(trainer.init)(k_train, params)  # one program, not op by op
     best = None  # the controller of the best evaluation point so far
 
     out = None
@@ -205,7 +211,8 @@ def train(
     # The evaluation first: a loss or a solve that fails on the untrained controller is
     # reported before the (longer) compilation of the training chunk.
     t0 = time.perf_counter()
-    evaluate = jax.jit(trainer.evaluate).lower(ts.controller, params, k_eval).compile()
+    with interrupts_deferred():
+        evaluate = jax.jit(trainer.evaluate).lower(ts.controller, params, k_eval).compile()
     compile_seconds = time.perf_counter() - t0
 
     curve: list[dict[str, Any]] = list(meta["curve"])
@@ -254,7 +261,8 @@ def train(
 
     t0 = time.perf_counter()
     total = jnp.asarray(config.updates, jnp.int32)
-    chunk = jax.jit(trainer.chunk).lower(ts, params, total).compile()
+    with interrupts_deferred():
+        chunk = jax.jit(trainer.chunk).lower(ts, params, total).compile()
     compile_seconds += time.perf_counter() - t0
 
     stopped_early = False
@@ -334,6 +342,46 @@ def train(
     return TrainResult(
         task=task, config=config, params=params, controller=controller, metrics=metrics
     )
+
+
+@contextlib.contextmanager
+def interrupts_deferred() -> Iterator[None]:
+    """Hold Ctrl-C (SIGINT) while XLA compiles and deliver it as ``KeyboardInterrupt`` once
+    the compiler has returned: an interrupt inside the compiler can crash the process instead
+    of ending it with the resume hint. Only the main thread can take signals; elsewhere this
+    does nothing."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    pending: list[int] = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: pending.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if pending:
+        raise KeyboardInterrupt
+
+
+_CONTINUOUS_HEADS = ("linear", "tanh", "sigmoid")
+
+
+def _check_head(task: AnyTask, head: str) -> None:
+    """A head override must make the same kind of action as the task's own head: a discrete
+    head cannot replace a continuous one (or the reverse), and a bounded one needs bounds."""
+    if not head or head == task.action_head:
+        return
+    own_continuous = task.action_head in _CONTINUOUS_HEADS
+    if head not in _CONTINUOUS_HEADS or not own_continuous:
+        raise ConfigError(
+            f"head {head!r} does not fit task {task.name!r}, whose actions come from its "
+            f"{task.action_head!r} head; leave --head empty"
+            + ("" if not own_continuous else " or choose linear, tanh or sigmoid")
+        )
+    if head != "linear" and (task.action_low is None or task.action_high is None):
+        raise ConfigError(
+            f"head {head!r} needs action bounds, and task {task.name!r} has none; use linear"
+        )
 
 
 def _population(config: Any) -> int:
