@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 import diffcontrol
-from diffcontrol import data
+from diffcontrol.identify import data
 from diffcontrol.cli import main
-from diffcontrol.data import DataFileError, TrajectoryData, read_trajectories
+from diffcontrol.identify.data import DataFileError, TrajectoryData, read_trajectories
 from diffcontrol.errors import ConfigError
 from diffcontrol.io import controller_to_dict, write_json
 

@@ -42,6 +42,12 @@ class CartPole(Task):
         "pole speed θ̇ (rad/s)",
     )
     action_labels = ("push (±1 × 10 N)",)
+
+    def data_columns(self):
+        return ("obs.x [m]", "obs.x_dot [m/s]", "obs.theta [rad]", "obs.theta_dot [rad/s]"), (
+            "action.push [index]",
+        )
+
     env_name = "CartPole"
 
     def frames(self, recording, every):

@@ -36,6 +36,12 @@ class Pendulum(Task):
     losses = ("cost", "squared_cost")
     state_labels = ("angle θ (rad, 0 = up)", "angular speed θ̇ (rad/s)")
     action_labels = ("torque (N m)",)
+    fit_parameter_names = ("g", "friction")
+
+    def data_columns(self):
+        return ("obs.cos_theta [1]", "obs.sin_theta [1]", "obs.theta_dot [rad/s]"), (
+            "action.torque [N m]",
+        )
 
     def default_params(self) -> pend.PendulumParams:
         return pend.PendulumParams()

@@ -13,8 +13,8 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import DataFileError
-from ..io import _finite, write_bytes
+from ...errors import DataFileError
+from ...io import _finite, write_bytes
 from ._format import FORMAT, VERSION, parse_column, validate
 from ._table import TrajectoryData
 

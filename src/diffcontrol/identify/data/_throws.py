@@ -42,8 +42,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import ConfigError, DataFileError
-from ..io import _finite, write_bytes
+from ...errors import ConfigError, DataFileError
+from ...io import _finite, write_bytes
 from ._files import check_header, csv_parts, file_suffix, readable_suffix
 from ._format import parse_column
 

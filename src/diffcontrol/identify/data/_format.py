@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import DataFileError
+from ...errors import DataFileError
 
 FORMAT = "diffcontrol-trajectories"
 VERSION = 1
