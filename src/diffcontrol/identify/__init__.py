@@ -20,6 +20,7 @@
 
 from . import data
 from ._fit import FitDir, fit, fit_dir, save_fit
+from ._loop import loop
 from ._shooting import HORIZONS, MODEL_TYPES, NETWORK_MODELS, FitResult
 from .data import ThrowData, TrajectoryData, concat, read_throws, read_trajectories
 from .fitted import (
@@ -34,7 +35,6 @@ from .fitted import (
     real_system,
 )
 from .hybrid import MIN_TRANSITIONS, HybridModel, NeuralModel, fit_model, model_task
-from ._loop import loop
 from .network import Correction, correction_from_dict, correction_to_dict
 from .recording import describe, record, record_data
 from .steps import fit_parameters, predict, prediction_errors

@@ -17,7 +17,6 @@ import gymnasium
 import numpy as np
 from gymnasium import spaces
 
-from .. import __version__
 from ..envs import make_env
 from ..errors import ConfigError
 from ..io import now_iso
@@ -199,6 +198,8 @@ def record(
     env.close()
     if source is None:
         source = "random actions" if policy is None else f"policy {policy!r}"
+    from .. import __version__
+
     metadata = {
         "env_id": env_id,
         "env_kwargs": dict(env_kwargs or {}),
