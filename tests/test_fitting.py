@@ -18,8 +18,8 @@ import pytest
 import diffcontrol
 from diffcontrol import identify
 from diffcontrol.cli import main
-from diffcontrol.identify.data import write_trajectories
 from diffcontrol.errors import ConfigError, DataFileError, InsufficientDataError
+from diffcontrol.identify.data import write_trajectories
 from diffcontrol.wrappers import PENDULUM_FRICTION_ID
 
 TRUTH = {"g": 12.0, "friction": 0.1}

@@ -12,8 +12,8 @@ import pytest
 import diffcontrol
 from diffcontrol import identify
 from diffcontrol.cli import main
-from diffcontrol.identify.data import write_trajectories
 from diffcontrol.errors import ConfigError, InsufficientDataError, ModelFileError
+from diffcontrol.identify.data import write_trajectories
 
 REAL = {"g": 12.0, "friction": 0.1}
 
@@ -71,7 +71,9 @@ def test_hybrid_and_neural_fits_beat_the_nominal_model_on_held_out_data(task, da
     nominal = identify.prediction_errors(task, task.default_params(), held_out)
     for kind, fit in fits.items():
         assert not fit.diverged and np.isfinite(fit.loss) and fit.loss < fit.nominal_loss
-        errors = identify.prediction_errors(identify.model_task(task, fit.model), fit.model, held_out)
+        errors = identify.prediction_errors(
+            identify.model_task(task, fit.model), fit.model, held_out
+        )
         factor = 0.5 if kind == "hybrid" else 0.8  # the black box learns everything: slower
         for h in (1, 10):
             assert errors[h]["rmse"] < factor * nominal[h]["rmse"], (kind, h)

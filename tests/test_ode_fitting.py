@@ -16,10 +16,10 @@ import numpy as np
 import pytest
 
 import diffcontrol
-from diffcontrol.tasks import fitted_swingup as of
-from diffcontrol.identify.data import TrajectoryData
 from diffcontrol.errors import ConfigError, DataFileError, InsufficientDataError
+from diffcontrol.identify.data import TrajectoryData
 from diffcontrol.systems import cartpole_swingup as cp
+from diffcontrol.tasks import fitted_swingup as of
 from diffcontrol.tasks.fitted_swingup import (
     FittedSwingUp,
     frictionless,

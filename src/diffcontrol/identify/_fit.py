@@ -105,8 +105,8 @@ def fit_dir(
     ``model`` (``fit``) and write ``out/fitted.json`` and ``out/prediction.png``.
 
     Raises:
-        RunDirectoryError: ``out`` cannot take the files (or holds a fit, without ``force``).
-        And what ``fit`` raises; nothing is created for a refused fit.
+        RunDirectoryError: ``out`` cannot take the files (or holds a fit, without ``force``);
+            otherwise what ``fit`` raises, and nothing is created for a refused fit.
     """
     route = task.model_route()
     if hasattr(route, "check_model"):  # before anything is read or created

@@ -50,8 +50,9 @@ def loop(
     ``report`` gets each round's line and the last one. Returns the loop's state.
 
     Raises:
-        ConfigError: a task that records no Gymnasium episodes; RunDirectoryError: ``out``
-        holds another loop (or, without ``resume``, any loop), or other files.
+        ConfigError: a task that records no Gymnasium episodes.
+        RunDirectoryError: ``out`` holds another loop (or, without ``resume``, any loop), or
+            other files.
     """
     from ..envs import env_id as own_id
     from ..runs import fitted_training, save_run

@@ -25,7 +25,7 @@ Predictor = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
 
 def task_predictor(task: Any, params: Any) -> Predictor:
-    """Open loop through a discrete-time task's step with ``params`` (``fitting.predict``), in
+    """Open loop through a discrete-time task's step with ``params`` (``steps.predict``), in
     float64; ``task`` may be ``hybrid.model_task(task, model)`` with the model as ``params``."""
 
     @eqx.filter_jit  # one program per segment length, not one per segment

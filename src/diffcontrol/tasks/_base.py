@@ -238,7 +238,7 @@ class Task(_TaskBase):
 
     def state_from_observation(self, observation: Array) -> Array:
         """The state that ``observe`` maps to ``observation`` (the inverse of ``observe``), so
-        that a model can be fitted to recorded observations (``diffcontrol.fitting``).
+        that a model can be fitted to recorded observations (``diffcontrol.identify``).
 
         Raises:
             NotImplementedError: the task cannot reconstruct its state (the default).
