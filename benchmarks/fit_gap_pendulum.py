@@ -6,9 +6,9 @@ has none). For each seed S: 10 episodes of 200 steps with random torques in [-2,
 recorded from the real system (reset seeds 100 S ..) with Gaussian sensor noise (standard
 deviation 0.01 on cos(theta) and sin(theta), 0.05 rad/s on theta_dot, as in
 ``fit_pendulum.py``); 8 are fitted and 2 held out. From them
-three models are fitted: grey box (g and friction, ``fitting.fit_parameters``), hybrid (the
+three models are fitted: grey box (g and friction, ``identify.fit_parameters``), hybrid (the
 nominal physics plus a 32-32 network) and black box (a 32-32 network alone;
-``models.fit_model``). A controller is then trained with the task's default settings
+``identify.fit_model``). A controller is then trained with the task's default settings
 (seed S; with ``--restarts K``, seeds S + 1000 j for j < K and the controller with the best
 return on that model's own simulator kept, never chosen on the real system) through each
 of: the nominal model, the three fitted models, and the true model; every controller is
@@ -40,7 +40,7 @@ sys.path.insert(0, str(HERE))
 from _common import machine  # noqa: E402
 
 import diffcontrol  # noqa: E402
-from diffcontrol import fitting, io, models  # noqa: E402
+from diffcontrol import identify, io  # noqa: E402
 from diffcontrol.evaluation import evaluate  # noqa: E402
 
 REAL = ("diffcontrol/PendulumFriction-v0", {"g": 12.0, "friction": 0.1})
@@ -60,16 +60,16 @@ def fit_all(task, seed: int) -> tuple[dict, dict, dict]:
     nominal = task.default_params()
     fitted, seconds = {"nominal": (task, nominal)}, {}
     t0 = time.perf_counter()
-    grey = fitting.fit_parameters(task, train, ("g", "friction"))
+    grey = identify.fit_parameters(task, train, ("g", "friction"))
     seconds["params"] = time.perf_counter() - t0
     fitted["params"] = (task, grey.params)
     for kind in ("hybrid", "neural"):
         t0 = time.perf_counter()
-        result = models.fit_model(task, train, kind, seed=seed)
+        result = identify.fit_model(task, train, kind, seed=seed)
         seconds[kind] = time.perf_counter() - t0
-        fitted[kind] = (models.model_task(task, result.model), result.model)
+        fitted[kind] = (identify.model_task(task, result.model), result.model)
     errors = {
-        label: {h: e["rmse"] for h, e in fitting.prediction_errors(t, p, held_out).items()}
+        label: {h: e["rmse"] for h, e in identify.prediction_errors(t, p, held_out).items()}
         for label, (t, p) in fitted.items()
     }
     extra = {"params_values": grey.values, "params_standard_errors": grey.standard_errors}

@@ -4,7 +4,7 @@ The "real" pendulum is Gymnasium's own ``Pendulum-v1`` with g = 12 m/s^2 (the no
 has 10) wrapped with joint friction 0.1 N m s/rad (``diffcontrol/PendulumFriction-v0``; the
 nominal has none). For each data seed S: 10 episodes of 200 steps with random torques in
 [-2, 2] N m (reset seeds 100 S .. 100 S + 9), the first 8 fitted with
-``diffcontrol.fitting.fit_parameters`` (window 10, 300 Adam steps, 20 Levenberg-Marquardt
+``diffcontrol.identify.fit_parameters`` (window 10, 300 Adam steps, 20 Levenberg-Marquardt
 steps), the last 2 held out; once noise-free and once with Gaussian sensor noise of standard
 deviation 0.01 on cos(theta) and sin(theta) and 0.05 rad/s on theta_dot.
 
@@ -29,7 +29,7 @@ sys.path.insert(0, str(HERE))
 from _common import machine  # noqa: E402
 
 import diffcontrol  # noqa: E402
-from diffcontrol import fitting  # noqa: E402
+from diffcontrol import identify as fitting  # noqa: E402
 
 TRUTH = {"g": 12.0, "friction": 0.1}
 NOISE = np.array([0.01, 0.01, 0.05])

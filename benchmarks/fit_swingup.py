@@ -3,7 +3,7 @@
 The "real" system is ``cartpole-swingup-friction``'s cart-pole with its friction (viscous
 1 N s/m and Coulomb 0.5 N on the cart, viscous 0.1 N m s/rad in the joint); the nominal model
 is the same physics without friction. Data: 10 episodes of 5 s at 50 Hz from the real system
-under exploratory forces (``diffcontrol.ode_fitting.record_swingup``, seed 0), the first 8
+under exploratory forces (``diffcontrol.tasks.fitted_swingup.record_swingup``, seed 0), the first 8
 fitted, the last 2 held out for the prediction errors. Models, fitted by multiple shooting on
 windows of 10 intervals (``fit_swingup_model``): ``params`` (grey box, the four friction
 coefficients), ``hybrid`` (frictionless physics + a 2-32-32-2 network of generalised
@@ -35,8 +35,9 @@ sys.path.insert(0, str(HERE))
 from _common import machine  # noqa: E402
 
 import diffcontrol  # noqa: E402
-from diffcontrol import ode_fitting as of  # noqa: E402
+from diffcontrol import identify  # noqa: E402
 from diffcontrol.evaluation import simulate_continuous, swingup_result  # noqa: E402
+from diffcontrol.tasks import fitted_swingup as of  # noqa: E402
 from diffcontrol.tasks.fitted_swingup import FittedSwingUp, SwingUpModel  # noqa: E402
 
 TASK = "cartpole-swingup-friction"
@@ -84,9 +85,9 @@ def main() -> None:
 
     errors = {k: of.prediction_errors(m, held_out) for k, m in models.items()}
     print("\nheld-out RMS state error (x, x_dot, theta, theta_dot together), steps ahead at 50 Hz")
-    print(f"{'model':<8}" + "".join(f"{h:>10}" for h in of.HORIZONS))
+    print(f"{'model':<8}" + "".join(f"{h:>10}" for h in identify.HORIZONS))
     for k, e in errors.items():
-        print(f"{k:<8}" + "".join(f"{e[h]['rmse']:>10.4f}" for h in of.HORIZONS))
+        print(f"{k:<8}" + "".join(f"{e[h]['rmse']:>10.4f}" for h in identify.HORIZONS))
 
     config = task.default_config()
     if args.updates:

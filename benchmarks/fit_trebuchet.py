@@ -6,7 +6,7 @@ degrees and 200 lb in calm air it throws 63 m where the nominal model says 83 m.
 
 1. Parameter recovery: for data seeds S = 0 .. 4, ``N_THROWS`` throws of the real trebuchet
    with random inputs (winds N(0, 5^2) m/s, angles U(20, 70) deg, counterweights U(50, 450) lb;
-   ``diffcontrol.fit_throws.record_throws(seed=S)``), once noise-free and once with Gaussian
+   ``diffcontrol.identify.throws.record_throws(seed=S)``), once noise-free and once with Gaussian
    noise of ``NOISE_M`` m on the measured distance; ``fit_throws`` fits drag_coefficient and
    wind_factor (300 Adam steps, 20 Levenberg-Marquardt steps). Held-out: 200 more throws
    (seed 1000 + S, same noise) predicted by the nominal and the fitted model.
@@ -36,8 +36,8 @@ sys.path.insert(0, str(HERE))
 from _common import machine  # noqa: E402
 
 import diffcontrol  # noqa: E402
-from diffcontrol import fit_throws as ft  # noqa: E402
 from diffcontrol import io  # noqa: E402
+from diffcontrol.identify import throws as ft  # noqa: E402
 from diffcontrol.systems import trebuchet as tb  # noqa: E402
 
 TRUTH = {"drag_coefficient": 1.5, "wind_factor": 1.5}

@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 
 import diffcontrol
-from diffcontrol import data
 from diffcontrol.cli import main
-from diffcontrol.data import DataFileError, TrajectoryData, read_trajectories
 from diffcontrol.errors import ConfigError
+from diffcontrol.identify import data
+from diffcontrol.identify.data import DataFileError, TrajectoryData, read_trajectories
 from diffcontrol.io import controller_to_dict, write_json
 
 PENDULUM_OBS, PENDULUM_ACT = data.KNOWN_COLUMNS["Pendulum-v1"]

@@ -13,10 +13,10 @@ import jax
 import numpy as np
 import pytest
 
-from diffcontrol import fit_throws as ft
 from diffcontrol.cli import main
-from diffcontrol.data import THROW_COLUMNS, ThrowData, read_throws, write_throws
 from diffcontrol.errors import ConfigError, DataFileError, InsufficientDataError
+from diffcontrol.identify import throws as ft
+from diffcontrol.identify.data import THROW_COLUMNS, ThrowData, read_throws, write_throws
 from diffcontrol.systems import trebuchet as tb
 
 TRUTH = {"drag_coefficient": 1.5, "wind_factor": 1.5}

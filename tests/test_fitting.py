@@ -16,10 +16,10 @@ import numpy as np
 import pytest
 
 import diffcontrol
-from diffcontrol import fitting
+from diffcontrol import identify
 from diffcontrol.cli import main
-from diffcontrol.data import write_trajectories
 from diffcontrol.errors import ConfigError, DataFileError, InsufficientDataError
+from diffcontrol.identify.data import write_trajectories
 from diffcontrol.wrappers import PENDULUM_FRICTION_ID
 
 TRUTH = {"g": 12.0, "friction": 0.1}
@@ -54,12 +54,12 @@ def noisy(clean):
 
 @pytest.fixture(scope="module")
 def clean_fit(task, clean):
-    return fitting.fit_parameters(task, clean[0], ("g", "friction"), **FIT)
+    return identify.fit_parameters(task, clean[0], ("g", "friction"), **FIT)
 
 
 @pytest.fixture(scope="module")
 def noisy_fit(task, noisy):
-    return fitting.fit_parameters(task, noisy[0], ("g", "friction"), **FIT)
+    return identify.fit_parameters(task, noisy[0], ("g", "friction"), **FIT)
 
 
 def _relative_errors(result):
@@ -86,8 +86,8 @@ def test_recovers_with_sensor_noise_and_the_errors_cover_the_truth(noisy_fit):
 
 def test_fitted_model_predicts_held_out_episodes_better(task, clean, noisy, clean_fit, noisy_fit):
     for (_, held_out), result, factor in ((clean, clean_fit, 0.01), (noisy, noisy_fit, 0.5)):
-        nominal = fitting.prediction_errors(task, task.default_params(), held_out)
-        fitted = fitting.prediction_errors(task, result.params, held_out)
+        nominal = identify.prediction_errors(task, task.default_params(), held_out)
+        fitted = identify.prediction_errors(task, result.params, held_out)
         assert set(fitted) == {1, 10, 50} and fitted[10]["starts"] == 2 * (200 - 10 + 1)
         assert fitted[10]["rmse"] < factor * nominal[10]["rmse"], (fitted[10], nominal[10])
         assert fitted[50]["rmse"] < nominal[50]["rmse"]
@@ -95,13 +95,13 @@ def test_fitted_model_predicts_held_out_episodes_better(task, clean, noisy, clea
 
 def test_parameters_the_data_cannot_separate_get_infinite_errors(task, clean):
     # g, m and l enter the Pendulum only as g / l and 1 / (m l^2): one direction is flat
-    result = fitting.fit_parameters(task, clean[0], ("g", "m", "l"), steps=5, lm_steps=0)
+    result = identify.fit_parameters(task, clean[0], ("g", "m", "l"), steps=5, lm_steps=0)
     assert all(se == np.inf for se in result.standard_errors.values())
     assert all(np.isfinite(v) for v in result.values.values())
 
 
 def test_divergence_is_reported_and_the_best_parameters_kept(task, clean):
-    result = fitting.fit_parameters(task, clean[0], learning_rate=1000.0, steps=5, lm_steps=0)
+    result = identify.fit_parameters(task, clean[0], learning_rate=1000.0, steps=5, lm_steps=0)
     assert result.diverged and "non-finite" in result.message
     assert all(np.isfinite(v) for v in result.values.values())
     assert np.isfinite(result.loss) and result.loss <= result.nominal_loss
@@ -110,17 +110,17 @@ def test_divergence_is_reported_and_the_best_parameters_kept(task, clean):
 def test_too_little_data_says_how_much_is_needed(task):
     short = _record(1, max_steps=60)
     with pytest.raises(InsufficientDataError, match="60 recorded transitions .* at least 100"):
-        fitting.fit_parameters(task, short, ("g", "friction"))
+        identify.fit_parameters(task, short, ("g", "friction"))
     with pytest.raises(InsufficientDataError, match="no episode has 80 steps"):
-        fitting.fit_parameters(task, short, ("g",), window=80)
+        identify.fit_parameters(task, short, ("g",), window=80)
 
 
 def test_unknown_names_and_other_systems_are_refused(task, clean):
     with pytest.raises(ConfigError, match=r"\['mass'\].*'max_torque', 'friction'"):
-        fitting.fit_parameters(task, clean[0], ("g", "mass"))
+        identify.fit_parameters(task, clean[0], ("g", "mass"))
     cartpole = diffcontrol.record("CartPole-v1", 2)
     with pytest.raises(DataFileError, match="CartPole-v1 has the columns"):
-        fitting.fit_parameters(task, cartpole, ("g",))
+        identify.fit_parameters(task, cartpole, ("g",))
 
 
 def test_cli_fit_end_to_end(tmp_path, capsys):

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 import diffcontrol
-from diffcontrol import fitting, models
+from diffcontrol import identify
 from diffcontrol.cli import main
-from diffcontrol.data import write_trajectories
 from diffcontrol.errors import ConfigError, InsufficientDataError, ModelFileError
+from diffcontrol.identify.data import write_trajectories
 
 REAL = {"g": 12.0, "friction": 0.1}
 
@@ -33,13 +33,13 @@ def data():
 @pytest.fixture(scope="module")
 def fits(task, data):
     return {
-        kind: models.fit_model(task, data[0], kind, steps=150, learning_rate=1e-2, hidden=(16,))
-        for kind in models.MODEL_KINDS
+        kind: identify.fit_model(task, data[0], kind, steps=150, learning_rate=1e-2, hidden=(16,))
+        for kind in identify.NETWORK_MODELS
     }
 
 
 def test_correction_round_trips_through_json_and_refuses_malformed_networks():
-    c = models.Correction(
+    c = identify.Correction(
         jax.random.PRNGKey(1),
         4,
         2,
@@ -48,30 +48,32 @@ def test_correction_round_trips_through_json_and_refuses_malformed_networks():
         out_scale=[0.1, 0.2],
         zero_output=False,
     )
-    doc = json.loads(json.dumps(models.correction_to_dict(c)))
-    back = models.correction_from_dict(doc)
+    doc = json.loads(json.dumps(identify.correction_to_dict(c)))
+    back = identify.correction_from_dict(doc)
     x = jnp.arange(4.0)
     np.testing.assert_allclose(back(x), c(x), rtol=1e-6)
     assert float(jnp.max(jnp.abs(c(x)))) > 0
-    zero = models.Correction(jax.random.PRNGKey(1), 4, 2)
+    zero = identify.Correction(jax.random.PRNGKey(1), 4, 2)
     assert np.all(np.asarray(zero(x)) == 0)  # a hybrid starts at exactly the physics
     bad = {**doc, "layers": doc["layers"][:1]}  # the output size no longer matches
     with pytest.raises(ModelFileError, match="shapes"):
-        models.correction_from_dict(bad, "f.json")
+        identify.correction_from_dict(bad, "f.json")
     nan = json.loads(json.dumps(doc))
     nan["layers"][0]["bias"][0] = float("nan")
     with pytest.raises(ModelFileError, match="non-finite"):
-        models.correction_from_dict(nan)
+        identify.correction_from_dict(nan)
     with pytest.raises(ModelFileError, match="malformed"):
-        models.correction_from_dict({"layers": 3})
+        identify.correction_from_dict({"layers": 3})
 
 
 def test_hybrid_and_neural_fits_beat_the_nominal_model_on_held_out_data(task, data, fits):
     held_out = data[1]
-    nominal = fitting.prediction_errors(task, task.default_params(), held_out)
+    nominal = identify.prediction_errors(task, task.default_params(), held_out)
     for kind, fit in fits.items():
         assert not fit.diverged and np.isfinite(fit.loss) and fit.loss < fit.nominal_loss
-        errors = fitting.prediction_errors(models.model_task(task, fit.model), fit.model, held_out)
+        errors = identify.prediction_errors(
+            identify.model_task(task, fit.model), fit.model, held_out
+        )
         factor = 0.5 if kind == "hybrid" else 0.8  # the black box learns everything: slower
         for h in (1, 10):
             assert errors[h]["rmse"] < factor * nominal[h]["rmse"], (kind, h)
@@ -83,7 +85,7 @@ def test_hybrid_and_neural_fits_beat_the_nominal_model_on_held_out_data(task, da
 
 def test_model_task_predicts_with_the_model_and_keeps_the_reward(task, fits):
     model = fits["hybrid"].model
-    mt = models.model_task(task, model)
+    mt = identify.model_task(task, model)
     state, action = jnp.array([0.3, -1.0]), jnp.array([0.5])
     nxt, reward, _ = mt.step(mt.default_params(), state, action)
     physics, reward0, _ = task.step(model.params, state, action)
@@ -97,15 +99,15 @@ def test_model_task_predicts_with_the_model_and_keeps_the_reward(task, fits):
 def test_too_little_data_and_bad_settings_are_refused(task, data):
     short = data[0].select([0])  # 200 transitions
     with pytest.raises(InsufficientDataError, match="200 recorded .* neural model: at least 1000"):
-        models.fit_model(task, short, "neural")
+        identify.fit_model(task, short, "neural")
     with pytest.raises(ConfigError, match="unknown model kind 'lstm'"):
-        models.fit_model(task, short, "lstm")
+        identify.fit_model(task, short, "lstm")
     with pytest.raises(ConfigError, match="hidden"):
-        models.fit_model(task, short, "hybrid", hidden=(0,))
+        identify.fit_model(task, short, "hybrid", hidden=(0,))
 
 
 def test_a_diverging_fit_keeps_the_best_weights_and_no_nan(task, data):
-    fit = models.fit_model(task, data[0], "neural", steps=30, learning_rate=1e6, hidden=(8,))
+    fit = identify.fit_model(task, data[0], "neural", steps=30, learning_rate=1e6, hidden=(8,))
     leaves = jax.tree.leaves(fit.model)
     assert all(bool(jnp.all(jnp.isfinite(x))) for x in leaves)
     assert np.isfinite(fit.loss)
@@ -181,7 +183,7 @@ def test_train_with_a_grey_box_fit_uses_its_parameters(tmp_path, data, capsys):
 
 
 def test_concat_renumbers_episodes_and_refuses_other_columns(data):
-    from diffcontrol.data import DataFileError, concat
+    from diffcontrol.identify.data import DataFileError, concat
 
     a, b = data[0].select([1, 3]), data[1]
     joined = concat([a, b])
@@ -218,7 +220,7 @@ def test_loop_records_fits_trains_and_resumes(tmp_path, capsys):
 
 
 def test_the_real_system_of_a_fitted_model_comes_from_its_data():
-    from diffcontrol.models import as_env, real_params, real_system
+    from diffcontrol.identify import as_env, real_params, real_system
 
     env = real_system({"data": {"env_id": "diffcontrol/PendulumFriction-v0", "env_kwargs": REAL}})
     assert as_env(env) == ("diffcontrol/PendulumFriction-v0", REAL)

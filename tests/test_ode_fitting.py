@@ -16,10 +16,10 @@ import numpy as np
 import pytest
 
 import diffcontrol
-from diffcontrol import ode_fitting as of
-from diffcontrol.data import TrajectoryData
 from diffcontrol.errors import ConfigError, DataFileError, InsufficientDataError
+from diffcontrol.identify.data import TrajectoryData
 from diffcontrol.systems import cartpole_swingup as cp
+from diffcontrol.tasks import fitted_swingup as of
 from diffcontrol.tasks.fitted_swingup import (
     FittedSwingUp,
     frictionless,
@@ -154,7 +154,7 @@ def test_fitted_model_round_trips_through_json(hybrid_fit):
 
 def test_cli_fit_swingup_end_to_end(tmp_path, data, capsys):
     from diffcontrol.cli import main
-    from diffcontrol.data import write_trajectories
+    from diffcontrol.identify.data import write_trajectories
 
     path = tmp_path / "swingup.csv"
     write_trajectories(path, data)
@@ -204,7 +204,7 @@ def test_cli_fit_swingup_end_to_end(tmp_path, data, capsys):
 
 def test_cli_records_the_swingup_state(tmp_path, capsys):
     from diffcontrol.cli import main
-    from diffcontrol.data import read_trajectories
+    from diffcontrol.identify.data import read_trajectories
 
     out = tmp_path / "state.csv"
     argv = ["record", "cartpole-swingup", "--episodes", "1", "--env-arg", "cart_viscous=2"]

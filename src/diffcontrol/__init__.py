@@ -15,11 +15,10 @@ from pathlib import Path as _Path
 
 __version__ = "0.1.0"
 
-from . import controllers, data, envs, rollout, runs, systems, tasks, wrappers  # noqa: E402
+from . import controllers, envs, identify, rollout, runs, systems, tasks, wrappers  # noqa: E402
 from .checks import CheckReport, check_task  # noqa: E402
 from .config import ODETrainConfig, TrainConfig  # noqa: E402
 from .controllers import MLPController, straight_through_sign  # noqa: E402, F401
-from .data import TrajectoryData, read_trajectories  # noqa: E402
 from .errors import (  # noqa: E402
     ConfigError,
     DataFileError,
@@ -33,8 +32,8 @@ from .errors import (  # noqa: E402
     UnknownTaskError,
 )
 from .evaluation import AimResult, EvalResult, evaluate, evaluate_aiming  # noqa: E402
+from .identify import FitResult, TrajectoryData, fit, read_trajectories, record  # noqa: E402
 from .io import AimingPolicy, NumpyPolicy, StatePolicy  # noqa: E402
-from .recording import record  # noqa: E402
 from .rollout import Trajectory  # noqa: E402
 from .runs import Run, open_run  # noqa: E402
 from .tasks import ContinuousTask, Task, make, register, resolve  # noqa: E402
@@ -107,10 +106,12 @@ __all__ = [
     "UnknownTaskError",
     "check_task",
     "controllers",
-    "data",
     "envs",
     "evaluate",
     "evaluate_aiming",
+    "fit",
+    "FitResult",
+    "identify",
     "list_tasks",
     "load",
     "make",

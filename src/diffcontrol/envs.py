@@ -306,3 +306,25 @@ class _Hold(eqx.Module):
 
     def __call__(self, t, state):
         return self.force
+
+
+def make_env(env_id: str, env_kwargs: dict | None = None) -> gymnasium.Env:
+    """``gymnasium.make(env_id, **env_kwargs)``, with an unknown id as a ``ConfigError``.
+
+    Raises:
+        ConfigError: Gymnasium does not know ``env_id`` (the message lists a few it does), or
+            refuses ``env_kwargs``.
+    """
+    try:
+        return gymnasium.make(env_id, **(env_kwargs or {}))
+    except gymnasium.error.Error as e:
+        import difflib
+
+        close = difflib.get_close_matches(env_id, list(gymnasium.registry), n=3)
+        near = f"close ones: {', '.join(close)}; " if close else ""
+        raise ConfigError(
+            f"unknown Gymnasium environment {env_id!r} ({' '.join(str(e).split())}); {near}"
+            '`python -c "import gymnasium; gymnasium.pprint_registry()"` lists the known ones'
+        ) from None
+    except TypeError as e:
+        raise ConfigError(f"{env_id} does not take the arguments {env_kwargs} ({e})") from None

@@ -114,7 +114,7 @@ def _env(task: Task, real: tuple[str, dict | None] | None) -> tuple[Any, str]:
     """The environment to evaluate in and its label: the task's own, or ``real``."""
     if real is None:
         return task.make_gym_env(), task.gym_label
-    from .recording import make_env
+    from .envs import make_env
 
     env_id, kwargs = real
     args = ", ".join(f"{k}={v}" for k, v in (kwargs or {}).items())

@@ -69,7 +69,7 @@ def _judged(task: AnyTask, params: Any, real: dict | None) -> tuple[AnyTask, Any
     judged on the system the model stands for (``task.base``) with the real parameters where
     its data gives them, else on what it was trained on."""
     if real and "params" in real:
-        from .models import real_params
+        from .identify.fitted import real_params
 
         base = getattr(task, "base", task)
         return base, real_params(base, real)
@@ -170,6 +170,10 @@ def open_run(
     if real is True:
         model = metrics.get("model")
         real = model.get("real_system") if isinstance(model, dict) else None
+        if real and "env_id" in real:  # read from a file: used only if it imports nothing
+            from .identify.fitted import checked_env_id
+
+            checked_env_id(real["env_id"], str(directory / METRICS_FILE))
     from .training import task_params
 
     task, params = _judged(task, task_params(task, config.params), real or None)
@@ -214,7 +218,7 @@ def fitted_training(
     Returns:
         The task to train (a hybrid or neural model's own; ``task`` for a grey box), the
         fitted physical parameters as ``(name, value)`` overrides (grey box), the real system
-        the data came from (``models.real_system``; ``None`` where the data does not say) and
+        the data came from (``identify.real_system``; ``None`` where the data does not say) and
         ``metrics["model"]`` with a printable ``"note"``.
 
     Raises:
@@ -224,7 +228,7 @@ def fitted_training(
     import numpy as np
 
     from .errors import ConfigError
-    from .models import fitted_physics, read_fitted, real_system
+    from .identify.fitted import fitted_physics, read_fitted, real_system
 
     doc = read_fitted(fit_dir)
     fitted_physics(task, doc)  # refuses a model of another task

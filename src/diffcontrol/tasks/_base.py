@@ -21,10 +21,6 @@ class _TaskBase(abc.ABC):
 
     name: ClassVar[str]
     summary: ClassVar[str]
-    kind: ClassVar[str] = "control"
-    """Which model-learning route ``diffcontrol fit`` takes: ``"control"`` (trajectories of
-    a discrete-time task), ``"aiming"`` (recorded throws) or ``"ode"`` (recorded states).
-    Nothing else looks at it; the route goes when model learning has one ``fit``."""
     gym_id: ClassVar[str | None] = None
     observation_size: ClassVar[int]
     action_size: ClassVar[int]
@@ -172,6 +168,41 @@ class _TaskBase(abc.ABC):
         """Whether the task defines ``frames`` (an animation of its episodes)."""
         return type(self).frames is not _TaskBase.frames
 
+    # --- hooks of model learning (``diffcontrol.identify``): the data and the fit ----------
+
+    fit_parameter_names: ClassVar[tuple[str, ...]] = ()
+    """The physical parameters a grey-box fit (``--model params``) fits by default."""
+
+    def data_columns(self) -> tuple[tuple[str, ...], tuple[str, ...]]:
+        """The observation and action columns (names with units) of this task's recorded
+        data. Default: ``obs.0 [?]``, ... and ``action.0 [?]``, ... (``action.0 [index]`` for
+        a discrete action); a task that knows its units names them."""
+        obs = tuple(f"obs.{i} [?]" for i in range(self.observation_size))
+        if self.action_head in ("sign", "argmax"):
+            return obs, ("action.0 [index]",)
+        return obs, tuple(f"action.{j} [?]" for j in range(self.action_size))
+
+    def data_file_name(self, env_id: str | None = None) -> str:
+        """The default file ``diffcontrol record`` writes (``ENV_ID`` with ``/`` as ``-``)."""
+        from ..envs import env_id as own_id
+
+        return (env_id or self.gym_id or own_id(self)).replace("/", "-").replace(":", "-") + ".csv"
+
+    def record_data(self, episodes: int, **options: Any) -> Any:
+        """Record ``episodes`` episodes of this task's real system, for model learning
+        (``diffcontrol record``; ``identify.record_data`` lists the ``options``)."""
+        from ..errors import ConfigError
+
+        raise ConfigError(f"task {self.name!r} cannot record data (it defines no record_data)")
+
+    def model_route(self) -> Any:
+        """How models of this task are learned (``identify``'s route object: its data file,
+        fit, prediction errors and plot). Default: by base class, the discrete step
+        (``Task``) or the vector field (``ContinuousTask``)."""
+        from ..identify import _routes
+
+        return _routes.STEPS if isinstance(self, Task) else _routes.ODE
+
     def controller_kwargs(self) -> dict[str, Any]:
         """Keyword arguments that make an ``MLPController`` fit this task."""
         return dict(
@@ -247,7 +278,7 @@ class Task(_TaskBase):
 
     def state_from_observation(self, observation: Array) -> Array:
         """The state that ``observe`` maps to ``observation`` (the inverse of ``observe``), so
-        that a model can be fitted to recorded observations (``diffcontrol.fitting``).
+        that a model can be fitted to recorded observations (``diffcontrol.identify``).
 
         Raises:
             NotImplementedError: the task cannot reconstruct its state (the default).
@@ -301,9 +332,18 @@ class Task(_TaskBase):
     def fitted_task(self, doc: dict) -> Any:
         """This task with its simulator replaced by the hybrid or neural model of a
         ``fitted.json`` document (``diffcontrol train --model``)."""
-        from ..models import fitted_model, model_task
+        from ..identify.fitted import fitted_model
+        from ..identify.hybrid import model_task
 
         return model_task(self, fitted_model(self, doc))
+
+    def record_data(self, episodes: int, **options: Any) -> Any:
+        """Gymnasium episodes of ``options["env_id"]`` (default the task's own environment),
+        whose spaces must match the task's, with the columns named by the task
+        (``identify.record_data``)."""
+        from ..identify.recording import record_gym
+
+        return record_gym(self, episodes, **options)
 
     def step_seconds(self, params: PyTree) -> float | None:
         """Simulated seconds per step, for time axes and recorded data: the parameter ``dt``
@@ -369,7 +409,6 @@ class ContinuousTask(_TaskBase):
             of ``model.json`` (a state name, ``cos(name)`` or ``sin(name)``).
     """
 
-    kind: ClassVar[str] = "ode"
     episode_length: ClassVar[int] = 1  # one closed-loop solve
     state_names: ClassVar[tuple[str, ...]]
     feature_names: ClassVar[tuple[str, ...]]
@@ -421,6 +460,38 @@ class ContinuousTask(_TaskBase):
     def write_figures(self, run: Any, out: Any, animation: bool = True) -> list[str]:
         """No pictures by default."""
         return []
+
+    # --- model learning (``identify.ode``): what a system's model is -----------------------
+
+    def data_columns(self) -> tuple[tuple[str, ...], tuple[str, ...]]:
+        """The recorded state and action: ``state.NAME [?]`` of ``state_names`` by default."""
+        return tuple(f"state.{n} [?]" for n in self.state_names), tuple(
+            f"action.{j} [?]" for j in range(self.action_size)
+        )
+
+    def nominal_model(self, params: PyTree) -> Any:
+        """The known physics as a model (``derivative(state, action)``, ``params``)."""
+        from ..errors import ConfigError
+
+        raise ConfigError(f"task {self.name!r} defines no model to fit (nominal_model)")
+
+    def initial_model(self, model_type: str, nominal: PyTree, data: Any, dt_s: float,
+                      hidden: tuple[int, ...], key: PRNGKeyArray) -> Any:  # fmt: skip
+        """The model of ``model_type`` before fitting, with the ``nominal`` parameters; a
+        network model holds its network as ``correction``."""
+        from ..errors import ConfigError
+
+        raise ConfigError(f"task {self.name!r} defines no model to fit (initial_model)")
+
+    def state_error(self, pred: Array, target: Array) -> Array:
+        """Predicted minus recorded state (a task wraps its angles here)."""
+        return pred - target
+
+    def model_document(self, model: Any) -> dict:
+        """The fitted model as fitted.json's ``all_parameters`` and ``network``."""
+        from ..errors import ConfigError
+
+        raise ConfigError(f"task {self.name!r} cannot store a fitted model (model_document)")
 
     def force_fn(self, controller: Any) -> StateFeedback:
         """The controller as the ODE's input ``(t, state) -> action``: state feedback through

@@ -51,6 +51,12 @@ class CartPole(Task):
         "theta_threshold",
         "x_threshold",
     )
+
+    def data_columns(self):
+        return ("obs.x [m]", "obs.x_dot [m/s]", "obs.theta [rad]", "obs.theta_dot [rad/s]"), (
+            "action.push [index]",
+        )
+
     env_name = "CartPole"
 
     def frames(self, recording, every):

@@ -32,8 +32,10 @@ and the network as lists under ``"network"``), as ``diffcontrol fit`` writes it 
 from __future__ import annotations
 
 import dataclasses
+import math
 from typing import Any
 
+import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -41,14 +43,13 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from ..errors import ConfigError, ModelFileError
-from ..models import Correction, correction_from_dict, correction_to_dict
 from ..systems import cartpole_swingup as cp
-from .swingup import CartPoleSwingUp
+from .swingup import ACTION_COLUMNS, STATE_COLUMNS, CartPoleSwingUp
 
-MODEL_KINDS = ("nominal", "params", "hybrid", "neural")
+MODEL_TYPES = ("nominal", "params", "hybrid", "neural")
 """What a ``SwingUpModel`` can be (module docstring)."""
 
-FRICTION_NAMES = ("cart_viscous", "cart_coulomb", "pole_viscous", "pole_coulomb")
+FRICTION_NAMES = CartPoleSwingUp.fit_parameter_names
 """The swing-up's friction coefficients: zero in the nominal (frictionless) model."""
 
 
@@ -87,30 +88,43 @@ class SwingUpModel(eqx.Module):
             ``None`` for ``nominal`` and ``params``.
     """
 
-    kind: str = eqx.field(static=True)
+    model_type: str = eqx.field(static=True)
     params: cp.SwingUpParams
-    correction: Correction | None = None
+    correction: Any = None
 
     def __check_init__(self):
-        if self.kind not in MODEL_KINDS:
-            raise ConfigError(f"unknown model kind {self.kind!r}; choose one of {MODEL_KINDS}")
-        if (self.correction is None) != (self.kind in ("nominal", "params")):
+        if self.model_type not in MODEL_TYPES:
             raise ConfigError(
-                f"a {self.kind!r} model got correction={type(self.correction).__name__}: hybrid "
+                f"unknown model kind {self.model_type!r}; choose one of {MODEL_TYPES}"
+            )
+        if (self.correction is None) != (self.model_type in ("nominal", "params")):
+            raise ConfigError(
+                f"a {self.model_type!r} model got correction={type(self.correction).__name__}: hybrid "
                 "and neural models need a correction network, nominal and params models none"
             )
+
+    @property
+    def kind(self) -> str:
+        """Deprecated: ``model_type``."""
+        return self.model_type
+
+    def derivative(self, state: Float[Array, " 4"], action: Float[Array, " 1"]) -> Array:
+        """``d state / dt`` under the held ``action`` (the force, N): what ``identify.ode``
+        integrates."""
+        x_acc, theta_acc, _ = self.accelerations(state, action[0])
+        return jnp.stack([state[1], x_acc, state[3], theta_acc])
 
     def accelerations(
         self, state: Float[Array, " 4"], force: Float[Array, ""]
     ) -> tuple[Array, Array, Array]:
         """``(x_acc, theta_acc, friction_power)`` as ``cartpole_swingup.accelerations``."""
         x_dot, theta, theta_dot = state[1], state[2], state[3]
-        if self.kind == "neural":
+        if self.model_type == "neural":
             features = jnp.stack([x_dot, jnp.cos(theta), jnp.sin(theta), theta_dot, force])
             acc = self.correction(features)
             return acc[0], acc[1], jnp.zeros_like(acc[0])
         x_acc, theta_acc, power = cp.accelerations(self.params, state, force)
-        if self.kind == "hybrid":
+        if self.model_type == "hybrid":
             q = self.correction(jnp.stack([x_dot, theta_dot]))
             dx, dth = generalized_force_accelerations(self.params, theta, q[0], q[1])
             x_acc, theta_acc = x_acc + dx, theta_acc + dth
@@ -139,9 +153,9 @@ class FittedSwingUp(CartPoleSwingUp):
             raise TypeError(f"FittedSwingUp wraps a swing-up task, got {task!r}")
         self.base = task
         self.model = model
-        self.name = f"{task.name}[{model.kind}]"
+        self.name = f"{task.name}[{model.model_type}]"
         self.env_name = task.env_name
-        self.summary = f"{task.summary} (through a fitted {model.kind} model)"
+        self.summary = f"{task.summary} (through a fitted {model.model_type} model)"
         self.losses = task.losses
 
     def default_params(self) -> cp.SwingUpParams:
@@ -181,14 +195,16 @@ def model_to_dict(model: SwingUpModel) -> dict[str, Any]:
     """The model as plain JSON: its kind, every physical parameter and, for ``hybrid`` and
     ``neural``, the network (``models.correction_to_dict``) with its inputs and outputs."""
     doc: dict[str, Any] = {
-        "kind": model.kind,
+        "kind": model.model_type,
         "all_parameters": {
             f.name: float(np.asarray(getattr(model.params, f.name)))
             for f in dataclasses.fields(model.params)
         },
     }
     if model.correction is not None:
-        inputs, outputs = NETWORK_SIGNATURES[model.kind]
+        from ..identify.network import correction_to_dict
+
+        inputs, outputs = NETWORK_SIGNATURES[model.model_type]
         doc["network"] = {
             "inputs": inputs,
             "outputs": outputs,
@@ -204,8 +220,10 @@ def model_from_dict(doc: Any, where: str = "the fitted model") -> SwingUpModel:
         ModelFileError: an unknown kind, missing or non-numeric parameters, a malformed
             network, or a network whose sizes do not fit the kind.
     """
+    from ..identify.network import correction_from_dict
+
     kind = doc.get("kind", doc.get("model")) if isinstance(doc, dict) else None
-    if kind not in MODEL_KINDS:
+    if kind not in MODEL_TYPES:
         raise ModelFileError(f"{where}: unknown model kind {kind!r}; refit the model")
     names = [f.name for f in dataclasses.fields(cp.SwingUpParams)]
     values = doc.get("all_parameters") or {}
@@ -227,3 +245,151 @@ def model_from_dict(doc: Any, where: str = "the fitted model") -> SwingUpModel:
             f"outputs, this one {sizes}; refit the model"
         )
     return SwingUpModel(kind, params, net)
+
+
+# --- learning a model from data: the swing-up's hooks of ``identify`` -------------------------
+
+
+def nominal_model(params: cp.SwingUpParams) -> SwingUpModel:
+    """The frictionless physics with ``params``' masses, length and gravity."""
+    return SwingUpModel("nominal", frictionless(params))
+
+
+def initial_model(model_type, nominal, data, dt, hidden, key) -> SwingUpModel:
+    """The model before fitting: zero friction, or a network with a zero last layer whose
+    input and output scalings come from the data (inputs of order 1; an output of 1 is a
+    force that changes a speed by one standard deviation per second, or for ``neural`` one
+    standard deviation of the recorded accelerations)."""
+    if model_type == "params":
+        return SwingUpModel("params", nominal)
+    from ..identify.network import Correction
+
+    y = data.observations
+    std = np.maximum(np.std(y, axis=0), 1e-6)
+    p = nominal
+    if model_type == "hybrid":
+        out = [float(p.cart_mass + p.pole_mass) * std[1], float(p.pole_mass * p.length**2) * std[3]]
+        net = Correction(key, 2, 2, hidden, in_scale=1 / std[[1, 3]], out_scale=out)
+    else:
+        acc = []
+        for ep in data.episodes():
+            acc.append(np.diff(ep.observations[:, [1, 3]], axis=0) / dt)
+        acc_std = np.maximum(np.std(np.concatenate(acc), axis=0), 1e-6)
+        f_std = max(float(np.std(data.actions[np.isfinite(data.actions)])), 1e-6)
+        in_scale = [1 / std[1], 1.0, 1.0, 1 / std[3], 1 / f_std]
+        net = Correction(key, 5, 2, hidden, in_scale=in_scale, out_scale=acc_std, zero_output=False)
+    net = jax.tree.map(lambda a: jnp.asarray(a, jnp.float64) if eqx.is_inexact_array(a) else a, net)
+    return SwingUpModel(model_type, nominal, net)
+
+
+def state_error(pred: Array, target: Array) -> Array:
+    """Predicted minus recorded state, the angle difference wrapped to ``[-pi, pi)``."""
+    err = pred - target
+    return err.at[..., 2].set(cp.wrap_angle(err[..., 2]))
+
+
+def record_swingup(
+    params: cp.SwingUpParams,
+    episodes: int,
+    *,
+    seed: int = 0,
+    dt_s: float = 0.02,
+    duration_s: float = 5.0,
+    force_max: float = 40.0,
+    hold_s: float = 0.2,
+) -> Any:
+    """Record ``episodes`` episodes of the swing-up cart-pole with ``params`` (the "real"
+    system) under exploratory forces.
+
+    Each episode starts at rest at ``x = 0`` with the pole at a uniformly random angle. The
+    force is a random level in ``[-force_max, force_max]`` (N), redrawn every ``hold_s``
+    seconds, minus a weak centring feedback ``5 x + 2 x_dot`` that keeps the cart from running
+    away, clipped to ``+-force_max`` and held over each ``dt_s`` interval. This swings the
+    pole through whole turns at the speeds of a swing-up (|x_dot| up to about 5 m/s,
+    |theta_dot| up to about 10 rad/s), so friction is excited where the controller will meet
+    it. Solved with Tsit5 at rtol 1e-9 / atol 1e-9 in float64.
+
+    Returns:
+        ``TrajectoryData`` with ``STATE_COLUMNS`` and ``ACTION_COLUMNS``, time in seconds,
+        metadata ``system``, ``params``, ``dt_s``, ``seed`` and ``source``.
+    """
+    if not isinstance(episodes, int) or episodes < 1:
+        raise ConfigError(f"episodes must be a positive integer, got {episodes!r}")
+    for name, value in (
+        ("dt_s", dt_s),
+        ("duration_s", duration_s),
+        ("force_max", force_max),
+        ("hold_s", hold_s),
+    ):
+        if not (math.isfinite(value) and value > 0):
+            raise ConfigError(f"{name} must be a positive number, got {value!r}")
+    steps = int(round(duration_s / dt_s))
+    hold = max(1, int(round(hold_s / dt_s)))
+    with jax.enable_x64(True):
+        p = jax.tree.map(lambda x: jnp.asarray(x, jnp.float64), params)
+        model = SwingUpModel("params", p)
+
+        def advance(y, f):
+            term = diffrax.ODETerm(lambda t, y, f: model.vector_field(t, y, lambda t, s: f)[:4])
+            sol = diffrax.diffeqsolve(
+                term,
+                diffrax.Tsit5(),
+                0.0,
+                dt_s,
+                None,
+                y,
+                args=f,
+                stepsize_controller=diffrax.PIDController(rtol=1e-9, atol=1e-9),
+                max_steps=10_000,
+            )
+            return sol.ys[-1]
+
+        @jax.jit
+        def episode(key):
+            k0, k1 = jax.random.split(key)
+            theta0 = jax.random.uniform(k0, (), minval=-jnp.pi, maxval=jnp.pi)
+            levels = jax.random.uniform(k1, (steps // hold + 1,), minval=-1.0, maxval=1.0)
+            drive = force_max * jnp.repeat(levels, hold)[:steps]
+
+            def body(y, d):
+                f = jnp.clip(d - 5.0 * y[0] - 2.0 * y[1], -force_max, force_max)
+                return advance(y, f), (y, f)
+
+            y0 = jnp.array([0.0, 0.0, theta0, 0.0])
+            last, (ys, fs) = jax.lax.scan(body, y0, drive)
+            return jnp.concatenate([ys, last[None]]), fs
+
+        keys = jax.random.split(jax.random.PRNGKey(seed), episodes)
+        runs = [episode(k) for k in keys]
+    names = [f.name for f in dataclasses.fields(params)]
+    from ..identify.data import TrajectoryData
+
+    return TrajectoryData.from_episodes(
+        [np.asarray(ys) for ys, _ in runs],
+        [np.asarray(fs)[:, None] for _, fs in runs],
+        STATE_COLUMNS,
+        ACTION_COLUMNS,
+        dt_s=dt_s,
+        metadata={
+            "system": "cartpole-swingup",
+            "params": {n: float(np.asarray(getattr(params, n))) for n in names},
+            "seed": seed,
+            "source": f"random force levels in +-{force_max} N held {hold_s} s, minus "
+            "5 x + 2 x_dot",
+        },
+    )
+
+
+def fit_swingup_model(data: Any, kind: str = "hybrid", params: Any = None, **settings: Any):
+    """``identify.ode.fit_vector_field`` for the swing-up (``params`` default
+    ``SwingUpParams()``): a ``FitResult`` whose ``model`` is a ``SwingUpModel``."""
+    from ..identify.ode import fit_vector_field
+
+    return fit_vector_field(CartPoleSwingUp(), data, kind, params or cp.SwingUpParams(), **settings)
+
+
+def prediction_errors(model: SwingUpModel, data: Any, horizons: Any = (1, 10, 50), substeps=2):
+    """``identify.ode.prediction_errors`` of a swing-up model on recorded state data."""
+    from ..identify.ode import prediction_errors as errors
+
+    return errors(CartPoleSwingUp(), model, data, horizons, substeps)

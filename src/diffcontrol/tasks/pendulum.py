@@ -38,6 +38,12 @@ class Pendulum(Task):
     action_labels = ("torque (N m)",)
     positive_params = ("m", "l", "dt", "max_speed")
     nonnegative_params = ("max_torque", "friction")
+    fit_parameter_names = ("g", "friction")
+
+    def data_columns(self):
+        return ("obs.cos_theta [1]", "obs.sin_theta [1]", "obs.theta_dot [rad/s]"), (
+            "action.torque [N m]",
+        )
 
     def default_params(self) -> pend.PendulumParams:
         return pend.PendulumParams()

@@ -99,6 +99,12 @@ LOSSES: dict[str, TrajectoryLoss] = {
 }
 
 
+STATE_COLUMNS = ("state.x [m]", "state.x_dot [m/s]", "state.theta [rad]", "state.theta_dot [rad/s]")
+"""The recorded state of the swing-up cart-pole (theta = 0 upright, not wrapped)."""
+ACTION_COLUMNS = ("action.force [N]",)
+"""The recorded force on the cart, held over each interval."""
+
+
 class CartPoleSwingUp(ContinuousTask):
     """Swing the post's cart-pole up from hanging down in 1 s, and stop (the post's loss)."""
 
@@ -192,6 +198,64 @@ class CartPoleSwingUp(ContinuousTask):
 
         animate_swingup(rec, out / "rollout.gif")
         return ["data.json", "swingup.png", "rollout.gif"]
+
+    # --- learning a model from data (``diffcontrol.identify``; ``fitted_swingup``) ------------
+
+    fit_parameter_names = ("cart_viscous", "cart_coulomb", "pole_viscous", "pole_coulomb")
+    """The grey box fits the friction coefficients (the nominal model is frictionless)."""
+
+    def data_columns(self):
+        return STATE_COLUMNS, ACTION_COLUMNS
+
+    def data_file_name(self, env_id=None):
+        return f"{self.name}-state.csv"
+
+    def nominal_model(self, params):
+        from .fitted_swingup import nominal_model
+
+        return nominal_model(params)
+
+    def initial_model(self, model_type, nominal, data, dt_s, hidden, key):
+        """Zero friction, or a hybrid's network of the generalised forces of the velocities
+        (``fitted_swingup``), or a neural network of the accelerations."""
+        from .fitted_swingup import initial_model
+
+        return initial_model(model_type, nominal, data, dt_s, hidden, key)
+
+    def state_error(self, pred, target):
+        from .fitted_swingup import state_error
+
+        return state_error(pred, target)
+
+    def model_document(self, model) -> dict:
+        from .fitted_swingup import model_to_dict
+
+        return {k: v for k, v in model_to_dict(model).items() if k != "kind"}
+
+    def record_data(self, episodes, *, env_id=None, env_kwargs=None, controller=None,
+                    seed=0, max_steps=None, noise_m=None, progress=None):  # fmt: skip
+        """The state and force at 50 Hz under random forces, of the cart-pole with this task's
+        parameters changed by ``env_kwargs`` (``fitted_swingup.record_swingup``)."""
+        from ..errors import ConfigError
+        from ..training import task_params
+        from .fitted_swingup import record_swingup
+
+        for flag, value in (("--controller", controller), ("--max-steps", max_steps)):
+            if value is not None:
+                raise ConfigError(
+                    f"{flag} does not apply to recording {self.name}: its episodes are 5 s of "
+                    "random forces; drop it"
+                )
+        if noise_m is not None:
+            raise ConfigError(f"--noise-m applies to the trebuchet only, not {self.name}; drop it")
+        params = task_params(self, tuple((env_kwargs or {}).items()))
+        if progress:
+            changed = ", ".join(f"{n}={v:g}" for n, v in (env_kwargs or {}).items())
+            progress(
+                f"recording {episodes} episode(s) of the {self.name} cart-pole "
+                f"({changed or 'its parameters'})"
+            )
+        return record_swingup(params, episodes, seed=seed)
 
     def fitted_task(self, doc):
         """The swing-up through a fitted ``SwingUpModel`` (``FittedSwingUp``), under this

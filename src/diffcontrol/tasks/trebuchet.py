@@ -55,7 +55,6 @@ class TrebuchetAiming(Task):
 
     name = "trebuchet"
     summary = "aim the 2019 post's differentiable trebuchet: (target, wind) -> (angle, weight)"
-    kind = "aiming"
     gym_id = None
     default_eval_episodes = 1000  # random targets
     episode_length = 1
@@ -71,8 +70,66 @@ class TrebuchetAiming(Task):
     state_labels = ("target (m)", "wind (m/s)", "distance (m)")
     action_labels = ("release angle (deg)", "counterweight (lb)")
 
+    fit_parameter_names = ("drag_coefficient", "wind_factor")
+    """What the nominal trebuchet does not know: fitted from recorded throws by default."""
+
     def default_params(self) -> tb.TrebuchetParams:
         return tb.TrebuchetParams()
+
+    # --- learning its physics from recorded throws (``identify.throws``) --------------------
+
+    def data_columns(self):
+        return ("obs.target [m]", "obs.wind [m/s]"), (
+            "action.release_angle [deg]",
+            "action.counterweight [lb]",
+        )
+
+    def model_route(self):
+        """A throw is one measured distance: fitted by ``identify.throws``."""
+        from ..identify import _routes
+
+        return _routes.THROWS
+
+    def data_file_name(self, env_id=None) -> str:
+        return "trebuchet-throws.csv"
+
+    def record_data(self, episodes, *, env_id=None, env_kwargs=None, controller=None,
+                    seed=0, max_steps=None, noise_m=None, progress=None):  # fmt: skip
+        """``episodes`` throws with random inputs (or a trained ``controller`` aiming at random
+        targets) of the trebuchet whose parameters ``env_kwargs`` change
+        (``identify.throws.record_throws``)."""
+        from ..errors import ConfigError
+        from ..identify.throws import record_throws, trebuchet_params
+        from ..io import AimingPolicy, read_model
+
+        if max_steps is not None:
+            raise ConfigError(
+                "--max-steps does not apply to the trebuchet (one episode is one throw); drop it"
+            )
+        params = trebuchet_params(list((env_kwargs or {}).items()))
+        policy = None
+        if controller:
+            policy = AimingPolicy(read_model(controller))
+            if policy.task != "trebuchet":
+                raise ConfigError(
+                    f"--controller {controller} was trained for task {policy.task!r}, not "
+                    "trebuchet; give a trebuchet run, or omit --controller for random throws"
+                )
+        if progress:
+            changed = ", ".join(f"{n}={v:g}" for n, v in (env_kwargs or {}).items())
+            what = f"controller {controller}" if policy else "random inputs"
+            progress(
+                f"recording {episodes} throw(s) of the trebuchet "
+                f"({changed or 'the nominal parameters'}) with {what}"
+            )
+        return record_throws(
+            episodes,
+            params,
+            seed=seed,
+            noise_m=noise_m or 0.0,
+            policy=policy,
+            source=f"controller {controller}" if policy else None,
+        )
 
     def reset(self, key, params):
         k_target, k_wind = jax.random.split(key)

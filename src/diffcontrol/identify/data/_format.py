@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import DataFileError
+from ...errors import DataFileError
 
 FORMAT = "diffcontrol-trajectories"
 VERSION = 1
@@ -86,8 +86,8 @@ def validate(
     for name, arr in zip(shapes, (time, episode, observations, actions)):
         if arr.shape != shapes[name]:
             raise bad(f"{name} has shape {arr.shape} but the columns need {shapes[name]}")
-    if episode.dtype.kind not in "iu":
-        whole = episode.dtype.kind == "f" and np.all(np.isfinite(episode))
+    if not np.issubdtype(episode.dtype, np.integer):
+        whole = np.issubdtype(episode.dtype, np.floating) and np.all(np.isfinite(episode))
         if not whole or np.any(episode != np.round(episode)):
             raise bad("episode ids must be whole numbers; number the episodes 0, 1, 2, ...")
     _check_rows(time, episode.astype(np.int64), observations, actions, columns, bad, row)

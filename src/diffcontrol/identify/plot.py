@@ -16,17 +16,17 @@ import jax.numpy as jnp  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from ..io import write_figure  # noqa: E402
 from .data import TrajectoryData  # noqa: E402
-from .fitting import predict  # noqa: E402
-from .io import write_figure  # noqa: E402
+from .steps import predict  # noqa: E402
 
 Predictor = Callable[[np.ndarray, np.ndarray], np.ndarray]
 """``(first observation [k], actions [T, m]) -> predicted observations [T, k]``, open loop."""
 
 
 def task_predictor(task: Any, params: Any) -> Predictor:
-    """Open loop through a discrete-time task's step with ``params`` (``fitting.predict``), in
-    float64; ``task`` may be ``models.model_task(task, model)`` with the model as ``params``."""
+    """Open loop through a discrete-time task's step with ``params`` (``steps.predict``), in
+    float64; ``task`` may be ``hybrid.model_task(task, model)`` with the model as ``params``."""
 
     @eqx.filter_jit  # one program per segment length, not one per segment
     def open_loop(p, obs0, actions):
@@ -36,6 +36,26 @@ def task_predictor(task: Any, params: Any) -> Predictor:
         with jax.enable_x64(True):
             p = jax.tree.map(lambda x: jnp.asarray(x, jnp.float64), params)
             return np.asarray(open_loop(p, jnp.asarray(obs0), jnp.asarray(actions)))
+
+    return run
+
+
+def ode_predictor(model: Any, dt: float, substeps: int) -> Predictor:
+    """A continuous-time model as a ``Predictor``: the states after each held action, open
+    loop in float64 (``identify.ode.predict``, as the prediction errors are measured)."""
+    from .ode import predict as ode_predict
+
+    @eqx.filter_jit  # one program per segment length, not one per segment
+    def open_loop(m, state, actions):
+        return ode_predict(m, state, actions, dt, substeps)
+
+    def run(state0: np.ndarray, actions: np.ndarray) -> np.ndarray:
+        with jax.enable_x64(True):
+            m = jax.tree.map(
+                lambda a: jnp.asarray(a, jnp.float64) if eqx.is_inexact_array(a) else a, model
+            )
+            a = jnp.asarray(actions, jnp.float64)
+            return np.asarray(open_loop(m, jnp.asarray(state0, jnp.float64), a))
 
     return run
 

@@ -41,7 +41,7 @@ have their own small format, ``diffcontrol-throws`` (``ThrowData``, ``read_throw
 ``write_throws``; see ``data/_throws.py``).
 """
 
-from ..errors import DataFileError
+from ...errors import DataFileError
 from ._files import read_trajectories, write_csv, write_npz, write_trajectories
 from ._format import (
     DISCRETE_UNIT,

@@ -1,4 +1,4 @@
-"""Grey-box fitting: a task's physical parameters from recorded trajectories.
+"""Discrete-time grey box: a task's physical parameters from recorded trajectories.
 
 The model is the task's own simulator (``task.step``) with some of its parameters unknown.
 They are fitted by differentiating the simulator through **short windows** (multiple
@@ -40,56 +40,24 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 import optax
 import optimistix as optx
 
-from .data import KNOWN_COLUMNS, TrajectoryData, parse_column
-from .errors import ConfigError, DataFileError, InsufficientDataError
-from .tasks._base import Task
-
-MIN_TRANSITIONS_PER_PARAMETER = 50
-"""The fewest recorded transitions ``(y_t, u_t, y_{t+1})`` per fitted parameter."""
-
-HORIZONS = (1, 10, 50)
-"""The prediction horizons (steps) of the held-out errors."""
-
-
-@dataclasses.dataclass(frozen=True)
-class FitResult:
-    """The outcome of ``fit_parameters``.
-
-    Attributes:
-        params: the task's full parameter PyTree with the fitted values.
-        names: the fitted parameters' names.
-        values, nominal, standard_errors: per name, in the parameter's unit (the standard
-            error is ``inf`` where the data cannot determine the parameter).
-        loss: the mean squared window prediction error at the fit; ``nominal_loss`` at the
-            nominal parameters (in the observations' units squared).
-        loss_history: the loss before each Adam step taken, then (with ``lm_steps``) one
-            entry after the Levenberg-Marquardt refinement (NaN if that diverged).
-        diverged: a step gave a non-finite loss; ``params`` are then the best seen before it.
-        message: one line on how the fit ended.
-        window, windows, transitions: the window length (steps), how many windows and how
-            many recorded transitions the fit used.
-    """
-
-    params: Any
-    names: tuple[str, ...]
-    values: dict[str, float]
-    nominal: dict[str, float]
-    standard_errors: dict[str, float]
-    loss: float
-    nominal_loss: float
-    loss_history: np.ndarray
-    diverged: bool
-    message: str
-    window: int
-    windows: int
-    transitions: int
+from ..errors import ConfigError, DataFileError, InsufficientDataError
+from ..tasks._base import Task
+from ._shooting import (
+    HORIZONS,
+    MIN_TRANSITIONS_PER_PARAMETER,
+    FitResult,
+    adam_fit,
+    check_settings,
+    set_params,
+    standard_errors,
+)
+from .data import TrajectoryData, parse_column
 
 
 def parameter_names(task: Any) -> tuple[str, ...]:
@@ -106,19 +74,20 @@ def check_data(task: Any, data: TrajectoryData) -> None:
         ConfigError: the task cannot be fitted to recorded observations.
     """
     where = data.metadata.get("env_id") or "the data"
-    expected = KNOWN_COLUMNS.get(task.gym_id or "")
-    if expected is None or type(task).state_from_observation is Task.state_from_observation:
+    if type(task).state_from_observation is Task.state_from_observation:
         raise ConfigError(
             f"task {task.name!r} cannot be fitted to recorded data yet (it does not reconstruct "
-            "its state from observations); fit the pendulum"
+            "its state from observations: define its state_from_observation); fit the pendulum"
         )
+    expected = task.data_columns()
     want = [parse_column(c) for c in (*expected[0], *expected[1])]
     got = [parse_column(c) for c in (*data.observation_columns, *data.action_columns)]
     if got != want:
+        system = task.gym_id or task.name
         raise DataFileError(
             f"{where} has the columns {list(data.columns[2:])}, but task {task.name!r} "
-            f"({task.gym_id}) needs {[*expected[0], *expected[1]]}; record the task's system "
-            f"(`diffcontrol record {task.gym_id}`) or fit the task the data is from"
+            f"({system}) needs {[*expected[0], *expected[1]]}; record the task's system "
+            f"(`diffcontrol record {system}`) or fit the task the data is from"
         )
     dt = data.metadata.get("dt_s")
     model_dt = getattr(task.default_params(), "dt", None)
@@ -157,19 +126,10 @@ def predict(task: Any, params: Any, state: jax.Array, actions: jax.Array) -> jax
     return jax.lax.scan(body, state, actions)[1]
 
 
-def _set(params: Any, names: Sequence[str], values: jax.Array) -> Any:
-    """``params`` with the fields ``names`` replaced by ``values`` [len(names)]."""
-    return eqx.tree_at(
-        lambda p: tuple(getattr(p, n) for n in names),
-        params,
-        tuple(values[i] for i in range(len(names))),
-    )
-
-
 def fit_parameters(
     task: Any,
     data: TrajectoryData,
-    names: Sequence[str] = ("g", "friction"),
+    names: Sequence[str] | None = None,
     *,
     window: int = 10,
     steps: int = 300,
@@ -182,8 +142,8 @@ def fit_parameters(
     Args:
         task: a discrete-time task whose ``state_from_observation`` is implemented.
         data: recorded episodes of the task's system (its observation and action columns).
-        names: the parameters to fit, fields of ``task.default_params()``; the others keep
-            their nominal values.
+        names: the parameters to fit, fields of ``task.default_params()`` (default: the
+            task's ``fit_parameter_names``); the others keep their nominal values.
         window: steps predicted from every recorded state (>= 1).
         steps: Adam steps (>= 0) at ``learning_rate`` (in the unconstrained coordinates:
             0.02 is about 2 % of a positive parameter's value per step).
@@ -202,7 +162,7 @@ def fit_parameters(
         InsufficientDataError: fewer than ``MIN_TRANSITIONS_PER_PARAMETER`` transitions per
             fitted parameter, or no episode longer than ``window``.
     """
-    names = tuple(names)
+    names = tuple(names or task.fit_parameter_names)
     known = parameter_names(task)
     bad = [n for n in names if n not in known]
     if bad or not names or len(set(names)) != len(names):
@@ -210,12 +170,7 @@ def fit_parameters(
         raise ConfigError(
             f"{what} for task {task.name!r}; choose distinct names among {list(known)}"
         )
-    if not isinstance(window, int) or window < 1:
-        raise ConfigError(f"window must be a positive number of steps, got {window!r}")
-    if not isinstance(steps, int) or steps < 0 or not isinstance(lm_steps, int) or lm_steps < 0:
-        raise ConfigError(f"steps and lm_steps must be integers >= 0, got {steps!r}, {lm_steps!r}")
-    if not (math.isfinite(learning_rate) and learning_rate > 0):
-        raise ConfigError(f"learning_rate must be a positive number, got {learning_rate!r}")
+    check_settings(window, steps, learning_rate, lm_steps)
     check_data(task, data)
     need = MIN_TRANSITIONS_PER_PARAMETER * len(names)
     if data.num_steps < need:
@@ -251,7 +206,7 @@ def _fit(task, data, names, window, steps, learning_rate, lm_steps, init) -> Fit
 
     def residuals(values, batch):
         states, actions, targets = batch
-        params = _set(nominal_params, names, values)
+        params = set_params(nominal_params, names, values)
         pred = jax.vmap(predict, in_axes=(None, None, 0, 0))(task, params, states, actions)
         return (pred - targets).reshape(-1)
 
@@ -281,14 +236,17 @@ def _fit(task, data, names, window, steps, learning_rate, lm_steps, init) -> Fit
         history.append(lm_loss if math.isfinite(lm_loss) else math.nan)
     values = to_values(best_z)
     # * sqrt(window): the overlapping windows count each recorded point `window` times
-    errors = _standard_errors(lambda v: residuals(v, batch), values) * math.sqrt(window)
-    fitted = _set(nominal_params, names, values)
+    errors = standard_errors(lambda v: residuals(v, batch), values) * math.sqrt(window)
+    fitted = set_params(nominal_params, names, values)
     if not message:
         message = (
             f"mean squared window error {best_loss:.3g} (nominal parameters: {nominal_loss:.3g})"
         )
     return FitResult(
+        model=fitted,
+        model_type="params",
         params=fitted,
+        num_parameters=len(names),
         names=names,
         values=dict(zip(names, np.asarray(values).tolist())),
         nominal=nominal,
@@ -302,89 +260,6 @@ def _fit(task, data, names, window, steps, learning_rate, lm_steps, init) -> Fit
         windows=int(batch[0].shape[0]),
         transitions=data.num_steps,
     )
-
-
-def adam_fit(loss: Any, z: Any, optimiser: Any, steps: int, batch: Any, what: str = "parameters"):
-    """``adam_scan``, and what every fit does with it: the best ``z`` (the last one if its loss
-    is lower still, unless the run diverged), its loss, the loss history of the steps taken,
-    whether it diverged, and a message if it did (naming ``what`` was kept).
-
-    It returns ``(best_z, best_loss, history, diverged, message)``; ``message`` is ``""``
-    unless the run diverged.
-    """
-    (last, best, best_loss, alive), (values, was_alive) = adam_scan(
-        loss, z, optimiser, steps, batch
-    )
-    taken = int(np.sum(np.asarray(was_alive)))  # the steps run, the diverging one included
-    history = [float(v) for v in np.asarray(values)[:taken]]
-    best_loss, diverged, message = float(best_loss), not bool(alive), ""
-    if diverged:
-        message = f"Adam step {taken} gave a non-finite loss; kept the best {what} so far"
-    else:
-        final = float(jax.jit(loss)(last, batch))
-        if math.isfinite(final) and final < best_loss:
-            best, best_loss = last, final
-    if not math.isfinite(best_loss):  # no step at all, or the very first diverged
-        best_loss = float(jax.jit(loss)(best, batch))
-    return best, best_loss, history, diverged, message
-
-
-def adam_scan(loss: Any, z: Any, optimiser: Any, steps: int, batch: Any):
-    """``steps`` optimiser steps on ``loss(z, batch)`` under one jitted ``lax.scan``.
-
-    ``z`` is any PyTree of arrays (parameters, or a network filtered with ``eqx.filter``). A
-    step whose loss or new ``z`` is non-finite freezes the run there (``alive`` turns false);
-    the best ``z`` is the one with the lowest loss seen before it.
-
-    It returns ``(z, best_z, best_loss, alive), (losses, was_alive)``: the last and best ``z``,
-    the best loss (``inf`` if no step ran), whether no step diverged, and per step the loss
-    before it and whether the run was still alive then.
-    """
-
-    def finite(tree):
-        return jnp.all(jnp.stack([jnp.all(jnp.isfinite(x)) for x in jax.tree.leaves(tree)]))
-
-    def where(c, a, b):
-        return jax.tree.map(lambda x, y: jnp.where(c, x, y), a, b)
-
-    @jax.jit
-    def run(z, batch):
-        def body(carry, _):
-            z, opt_state, best_z, best_loss, alive = carry
-            value, grad = jax.value_and_grad(loss)(z, batch)  # the loss at z, before the step
-            updates, new_opt = optimiser.update(grad, opt_state, z)
-            new_z = optax.apply_updates(z, updates)
-            step = alive & jnp.isfinite(value) & finite(new_z)
-            better = step & (value < best_loss)
-            carry = (
-                where(step, new_z, z),
-                where(step, new_opt, opt_state),
-                where(better, z, best_z),
-                jnp.where(better, value, best_loss),
-                step,
-            )
-            return carry, (value, alive)
-
-        inf = jnp.asarray(jnp.inf, jnp.result_type(float))
-        init = (z, optimiser.init(z), z, inf, jnp.asarray(True))
-        (z, _, best_z, best_loss, alive), history = jax.lax.scan(body, init, None, length=steps)
-        return (z, best_z, best_loss, alive), history
-
-    return run(z, batch)
-
-
-def _standard_errors(residual_fn, values: jax.Array) -> jax.Array:
-    """``sqrt(diag(sigma^2 (J^T J)^-1))`` at ``values``; ``inf`` where ``J^T J`` is singular."""
-    r = residual_fn(values)
-    jac = jax.jacfwd(residual_fn)(values)  # [R, p]
-    dof = max(r.size - values.size, 1)
-    sigma2 = jnp.sum(r**2) / dof
-    jtj = jac.T @ jac
-    eig = jnp.linalg.eigvalsh(jtj)
-    if not bool(jnp.all(jnp.isfinite(jtj))) or float(eig[0]) <= 1e-12 * float(eig[-1]):
-        return jnp.full(values.shape, jnp.inf)
-    cov = sigma2 * jnp.linalg.inv(jtj)
-    return jnp.sqrt(jnp.clip(jnp.diag(cov), 0.0))
 
 
 def prediction_errors(

@@ -1,44 +1,32 @@
-"""Recording trajectories from any Gymnasium environment, with a controller or random actions."""
+"""Recording trajectories from any Gymnasium environment, with a controller or random actions.
+
+``record(env_id, ...)`` records any environment; with ``task=`` the environment is the real
+system of a task (its spaces must match the task's) and the columns are named by the task
+(``task.data_columns()``). ``record_data(source, ...)`` is ``diffcontrol record``: a task's
+own recording (its ``record_data`` hook: Gymnasium episodes by default, the trebuchet's throws,
+the swing-up's state) or a plain Gymnasium id, written to a CSV or NPZ file.
+"""
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import gymnasium
 import numpy as np
 from gymnasium import spaces
 
-from . import __version__
+from ..envs import make_env
+from ..errors import ConfigError
+from ..io import now_iso
 from .data import DISCRETE_UNIT, KNOWN_COLUMNS, TrajectoryData
-from .errors import ConfigError
-from .io import now_iso
-
-
-def make_env(env_id: str, env_kwargs: dict | None = None) -> gymnasium.Env:
-    """``gymnasium.make(env_id, **env_kwargs)``, with an unknown id as a ``ConfigError``.
-
-    Raises:
-        ConfigError: Gymnasium does not know ``env_id`` (the message lists a few it does), or
-            refuses ``env_kwargs``.
-    """
-    try:
-        return gymnasium.make(env_id, **(env_kwargs or {}))
-    except gymnasium.error.Error as e:
-        known = ", ".join(list(KNOWN_COLUMNS)[:4])
-        raise ConfigError(
-            f"unknown Gymnasium environment {env_id!r} ({' '.join(str(e).split())}); known ones "
-            f'include {known}, ... (`python -c "import gymnasium; gymnasium.pprint_registry()"` '
-            "lists all)"
-        ) from None
-    except TypeError as e:
-        raise ConfigError(f"{env_id} does not take the arguments {env_kwargs} ({e})") from None
 
 
 def _time_step(env: gymnasium.Env) -> float | None:
     """The environment's time step (s), where it exposes one (``dt``, ``tau``, or a
     diffcontrol control task's parameters); ``None`` otherwise (time is then in steps)."""
-    from .envs import TaskEnv
+    from ..envs import TaskEnv
 
     u = env.unwrapped
     for name in ("dt", "tau"):
@@ -77,6 +65,27 @@ def columns_for(env_id: str, env: gymnasium.Env) -> tuple[tuple[str, ...], tuple
     if known and (len(known[0]), len(known[1])) == (len(observations), len(actions)):
         return known
     return observations, actions
+
+
+def check_spaces(task: Any, env_id: str, env: gymnasium.Env) -> None:
+    """Refuse an environment whose spaces are not the task's (observation size, action space).
+
+    Raises:
+        ConfigError: the spaces differ (naming both).
+    """
+    obs, act = env.observation_space, env.action_space
+    want = task.action_space()
+    same_obs = isinstance(obs, spaces.Box) and obs.shape == (task.observation_size,)
+    if isinstance(want, spaces.Discrete):
+        same_act = isinstance(act, spaces.Discrete) and act.n == want.n
+    else:
+        same_act = isinstance(act, spaces.Box) and act.shape == want.shape
+    if not (same_obs and same_act):
+        raise ConfigError(
+            f"{env_id} has the spaces {obs} and {act}, but task {task.name!r} takes "
+            f"{task.observation_size} observations and {want}; record an environment with "
+            "the task's spaces, or choose the task that fits it"
+        )
 
 
 def _check_policy(policy: Any, env_id: str, obs_size: int) -> None:
@@ -118,6 +127,7 @@ def record(
     max_steps: int | None = None,
     progress: Callable[[str], None] | None = None,
     source: str | None = None,
+    task: Any = None,
 ) -> TrajectoryData:
     """Record ``episodes`` episodes of ``gymnasium.make(env_id, **env_kwargs)``.
 
@@ -139,6 +149,8 @@ def record(
         progress: called with a line after every ~5 % of the episodes.
         source: how the actions were chosen, for the metadata (default: ``random actions``
             or ``policy <repr>``).
+        task: the task whose real system ``env_id`` is: its spaces must match the task's,
+            and the columns are the task's ``data_columns()``.
 
     Returns:
         The ``TrajectoryData``, with metadata ``env_id``, ``env_kwargs``, ``dt_s``,
@@ -153,6 +165,9 @@ def record(
         raise ConfigError(f"episodes must be a positive integer, got {episodes!r}")
     env = make_env(env_id, env_kwargs)
     obs_columns, act_columns = columns_for(env_id, env)
+    if task is not None:
+        check_spaces(task, env_id, env)
+        obs_columns, act_columns = task.data_columns()
     limit = max_steps or (env.spec.max_episode_steps if env.spec else None)
     if limit is None:
         raise ConfigError(f"{env_id} has no episode step limit; pass max_steps")
@@ -183,6 +198,8 @@ def record(
     env.close()
     if source is None:
         source = "random actions" if policy is None else f"policy {policy!r}"
+    from .. import __version__
+
     metadata = {
         "env_id": env_id,
         "env_kwargs": dict(env_kwargs or {}),
@@ -195,4 +212,148 @@ def record(
     }
     return TrajectoryData.from_episodes(
         all_obs, all_act, obs_columns, act_columns, dt_s=_time_step(env), metadata=metadata
+    )
+
+
+def record_gym(
+    task: Any,
+    episodes: int,
+    *,
+    env_id: str | None = None,
+    env_kwargs: dict | None = None,
+    controller: str | None = None,
+    seed: int = 0,
+    max_steps: int | None = None,
+    noise_m: float | None = None,
+    progress: Callable[[str], None] | None = None,
+) -> TrajectoryData:
+    """A task's default ``record_data``: Gymnasium episodes of ``env_id`` (default the task's
+    own environment) as the task's real system, with the columns named by the task."""
+    from ..envs import env_id as own_id
+
+    env_id = env_id or task.gym_id or own_id(task)
+    return _record_env(
+        env_id, episodes, task, env_kwargs, controller, seed, max_steps, noise_m, progress
+    )
+
+
+def _record_env(env_id, episodes, task, env_kwargs, controller, seed, max_steps, noise_m, progress):
+    from ..io import NumpyPolicy, read_model
+
+    if noise_m is not None:
+        raise ConfigError(
+            f"--noise-m applies to `diffcontrol record trebuchet` only, not {env_id}; drop it"
+        )
+    # The network alone (observations -> Gymnasium action), whatever the task.
+    policy = NumpyPolicy(read_model(controller)) if controller else None
+    if progress:
+        what = f"controller {controller}" if policy else "random actions"
+        progress(f"recording {episodes} episode(s) of {env_id} with {what}")
+    return record(
+        env_id,
+        episodes,
+        policy=policy,
+        seed=seed,
+        env_kwargs=env_kwargs,
+        max_steps=max_steps,
+        progress=progress,
+        source=f"controller {controller} (task {policy.task!r})" if policy else None,
+        task=task,
+    )
+
+
+def check_data_file(out: Path, force: bool) -> None:
+    """Refuse, before recording anything, an output the recording could not be written to.
+
+    Raises:
+        DataFileError: a directory, another extension, an existing file (without ``force``)
+            or a directory that cannot be written.
+    """
+    import os
+
+    from ..errors import DataFileError
+
+    if out.is_dir():
+        raise DataFileError(f"--out {out} is a directory; give a file name ending in .csv/.npz")
+    if out.suffix.lower() not in (".csv", ".npz"):
+        raise DataFileError(
+            f"--out {out}: unknown file type {out.suffix or '(none)'!r}; use a .csv or .npz file"
+        )
+    if out.exists() and not force:
+        raise DataFileError(
+            f"--out {out} already exists; pass --force to overwrite it or choose another --out"
+        )
+    parent = out.parent if str(out.parent) else Path(".")
+    if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK):
+        raise DataFileError(
+            f"cannot write --out {out}: {parent} is not a writable directory; choose a "
+            "writable --out"
+        )
+
+
+def record_data(
+    source: str,
+    episodes: int,
+    out: str | Path | None = None,
+    *,
+    task: Any = None,
+    force: bool = False,
+    **options: Any,
+) -> tuple[Any, Path]:
+    """``diffcontrol record``: record ``episodes`` episodes and write them to ``out``.
+
+    Args:
+        source: a registered task's name (its ``record_data``: e.g. the trebuchet's throws,
+            the swing-up's state) or a Gymnasium id (``module:Env-v0`` too; imported because
+            the caller named it).
+        episodes: how many episodes (throws for the trebuchet).
+        out: a ``.csv`` or ``.npz`` file (default: the task's ``data_file_name``, or the id
+            with ``/`` as ``-``).
+        task: the task whose real system the Gymnasium id ``source`` is (its columns).
+        force: overwrite ``out``.
+        options: ``env_kwargs``, ``controller`` (a run directory), ``seed``, ``max_steps``,
+            ``noise_m`` and ``progress`` (called with lines), as the task's hook takes them.
+
+    Returns:
+        The recorded data and the file written.
+    """
+    from .. import tasks
+    from ..errors import DataFileError
+    from .data import ThrowData, write_throws, write_trajectories
+
+    env_id: str | None = source
+    if task is None and source in tasks.names():
+        task, env_id = tasks.make(source), None
+    path = Path(out or (task.data_file_name(env_id) if task else source.replace("/", "-") + ".csv"))
+    check_data_file(path, force)
+    if task is not None:
+        data = task.record_data(episodes, env_id=env_id, **options)
+    else:
+        o = {k: options.get(k) for k in ("env_kwargs", "controller", "max_steps", "noise_m")}
+        data = _record_env(
+            source,
+            episodes,
+            None,
+            seed=options.get("seed", 0),
+            progress=options.get("progress"),
+            **o,
+        )
+    write = write_throws if isinstance(data, ThrowData) else write_trajectories
+    try:
+        write(path, data)
+    except OSError as e:
+        raise DataFileError(
+            f"cannot write --out {path} ({e.strerror}); choose a writable --out"
+        ) from None
+    return data, path
+
+
+def describe(data: Any) -> str:
+    """One line on recorded data: episodes, steps and columns (or throws and their noise)."""
+    if hasattr(data, "num_throws"):
+        return f"{data.num_throws} throw(s), distance noise {data.metadata.get('noise_m', 0):g} m"
+    return (
+        f"{data.num_episodes} episode(s), {data.num_steps} steps, "
+        f"{len(data.observation_columns)} observation and {len(data.action_columns)} action "
+        "column(s)"
     )

@@ -8,7 +8,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from ..errors import ConfigError, DataFileError
+from ...errors import ConfigError, DataFileError
 from ._format import _episode_starts, parse_column, validate
 
 

@@ -42,8 +42,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import ConfigError, DataFileError
-from ..io import _finite, write_bytes
+from ...errors import ConfigError, DataFileError
+from ...io import _finite, write_bytes
 from ._files import check_header, csv_parts, file_suffix, readable_suffix
 from ._format import parse_column
 
@@ -305,7 +305,7 @@ def _read_npz(path: Path) -> ThrowData:
         raise DataFileError(f"{path}: 'columns' in the header must be a list of column names")
     _column_order(columns, path)  # the units the header declares
     for name, arr in arrays.items():
-        if arr.dtype.kind not in "iuf":
+        if not np.issubdtype(arr.dtype, np.integer) and not np.issubdtype(arr.dtype, np.floating):
             raise DataFileError(
                 f"{path}: array {name!r} has dtype {arr.dtype}; it must hold real numbers"
             )

@@ -13,8 +13,8 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import DataFileError
-from ..io import _finite, write_bytes
+from ...errors import DataFileError
+from ...io import _finite, write_bytes
 from ._format import FORMAT, VERSION, parse_column, validate
 from ._table import TrajectoryData
 
@@ -198,7 +198,7 @@ def _read_npz(path: Path) -> TrajectoryData:
     if not isinstance(columns, list) or not all(isinstance(c, str) for c in columns):
         raise DataFileError(f"{path}: the header has no list of column names under 'columns'")
     for name, arr in arrays.items():
-        if arr.dtype.kind not in "iuf":
+        if not np.issubdtype(arr.dtype, np.integer) and not np.issubdtype(arr.dtype, np.floating):
             raise DataFileError(
                 f"{path}: array {name!r} has dtype {arr.dtype}; it must hold real numbers"
             )

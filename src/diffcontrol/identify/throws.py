@@ -1,4 +1,4 @@
-"""The trebuchet's grey box: its unknown physics fitted from recorded throws.
+"""Recorded throws (the trebuchet task's data): its unknown physics fitted to the distances.
 
 A throw is one input ``(wind, release angle, counterweight)`` and one measured outcome, the
 distance. The model is the differentiable trebuchet itself (``systems.trebuchet.shoot``) with
@@ -16,12 +16,12 @@ positive nominal value, ``value = z`` for a nominal 0): Adam (optax) for ``steps
 up to ``lm_steps`` Levenberg-Marquardt steps, each kept only if it lowers the loss. One compiled
 program computes the residuals and their Jacobian (forward mode: one pass per fitted parameter)
 and serves all three stages, Adam (its gradient is ``2 J^T r / N``), Levenberg-Marquardt and the
-standard errors. Why not ``fitting.py``'s scan of Adam steps and optimistix: the trebuchet's
+standard errors. Why not ``identify.steps``' scan of Adam steps and optimistix: the trebuchet's
 three phase scans take about 10-15 s to compile, and separate programs for the Adam scan, the
 optimistix solve and the Jacobian of the standard errors would take three times that; a
 throw batch costs milliseconds, so the host loop's per-step overhead does not matter.
 
-**Uncertainty** from the curvature at the fit (Gauss-Newton, as in ``fitting``):
+**Uncertainty** from the curvature at the fit (Gauss-Newton, as in ``identify.steps``):
 ``cov = sigma^2 (J^T J)^-1``, ``sigma^2 = r^T r / (N - p)``; each throw is one independent
 measurement, so no correction for overlapping windows is needed. ``inf`` where the data cannot
 tell the parameters apart (for instance ``drag_coefficient`` with ``air_density``: only their
@@ -44,11 +44,11 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
+from ..errors import ConfigError, InsufficientDataError
+from ..io import now_iso
+from ..systems import trebuchet as tb
+from ._shooting import FitResult, set_params, standard_errors
 from .data import ThrowData
-from .errors import ConfigError, InsufficientDataError
-from .fitting import FitResult, _set, _standard_errors
-from .io import now_iso
-from .systems import trebuchet as tb
 
 MIN_THROWS_PER_PARAMETER = 5
 """The fewest recorded throws per fitted parameter."""
@@ -71,6 +71,22 @@ def parameter_names() -> tuple[str, ...]:
         for f in dataclasses.fields(p)
         if not f.metadata.get("static", False) and isinstance(getattr(p, f.name), float)
     )
+
+
+def trebuchet_params(env_args: list[tuple[str, float]]) -> tb.TrebuchetParams:
+    """``TrebuchetParams`` with the ``--env-arg NAME=VALUE`` overrides (floats only).
+
+    Raises:
+        ConfigError: an unknown name (the message lists the trebuchet's parameters).
+    """
+    known = parameter_names()
+    bad = [name for name, _ in env_args if name not in known]
+    if bad:
+        raise ConfigError(
+            f"--env-arg {bad[0]}: the trebuchet has no parameter {bad[0]!r}; choose among "
+            f"{', '.join(known)} (e.g. --env-arg drag_coefficient=1.5 --env-arg wind_factor=1.5)"
+        )
+    return tb.TrebuchetParams(**{name: float(value) for name, value in env_args})
 
 
 def params_dict(params: tb.TrebuchetParams) -> dict[str, float]:
@@ -146,7 +162,7 @@ def record_throws(
         wind, angle, weight = (np.broadcast_to(np.asarray(x, np.float64), (n,)) for x in inputs)
         how = "given inputs"
     elif policy is not None:
-        from .tasks.trebuchet import TARGET_RANGE_M
+        from ..tasks.trebuchet import TARGET_RANGE_M
 
         target = rng.uniform(*TARGET_RANGE_M, size=n)
         actions = np.asarray(policy.action(np.stack([target, wind], axis=-1)), np.float64)
@@ -241,7 +257,7 @@ def _residuals_and_jacobian(z, positive, wind, angle, weight, distance, base, na
 
     def residuals(z):
         values = jnp.where(positive, jnp.exp(z), z)
-        p = _set(base, names, values)
+        p = set_params(base, names, values)
         return tb.shoot(wind, angle, weight, p) - distance
 
     return residuals(z), jax.jacfwd(residuals)(z)
@@ -311,7 +327,7 @@ def _fit(data, names, steps, learning_rate, lm_steps, init, base) -> FitResult:
         dvalue_dz = np.where(positive, values, 1.0)
         jac_v = jnp.asarray(best_jac / dvalue_dz)
         r0, v0 = jnp.asarray(best_r), jnp.asarray(values)
-        errors = np.asarray(_standard_errors(lambda v: r0 + jac_v @ (v - v0), v0))
+        errors = np.asarray(standard_errors(lambda v: r0 + jac_v @ (v - v0), v0))
     else:  # diverged at the very start: the nominal values, unknown uncertainty
         values, errors = start, np.full(len(names), math.inf)
     if not message:
@@ -319,8 +335,12 @@ def _fit(data, names, steps, learning_rate, lm_steps, init, base) -> FitResult:
             f"mean squared distance error {best_loss:.3g} m^2 (nominal parameters: "
             f"{nominal_loss:.3g} m^2)"
         )
+    fitted = set_params(base, names, jnp.asarray(values))
     return FitResult(
-        params=_set(base, names, jnp.asarray(values)),
+        model=fitted,
+        model_type="params",
+        params=fitted,
+        num_parameters=len(names),
         names=names,
         values=dict(zip(names, values.tolist())),
         nominal=nominal,
@@ -361,3 +381,37 @@ def _levenberg_marquardt(evaluate, z, loss, r, jac, max_steps):
         else:
             damping *= 10
     return z, loss, r, jac, all_finite
+
+
+def throws_plot(models: dict[str, Any], data: ThrowData, path: Any, title: str = "") -> Any:
+    """Scatter the distances each model in ``models`` (label -> ``TrebuchetParams``) predicts
+    for the throws of ``data`` against the recorded ones (left), and the residuals against
+    the wind (right), where a wrong wind factor shows as a slope; write a PNG atomically."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ..io import write_figure
+
+    fig, (ax, ax_wind) = plt.subplots(1, 2, figsize=(10.0, 4.2))
+    lo = min(0.0, float(np.min(data.distance)))
+    hi = float(np.max(data.distance))
+    for c, (label, params) in enumerate(models.items()):
+        pred = predict_distances(params, data)
+        rms = float(np.sqrt(np.mean((pred - data.distance) ** 2)))
+        style = dict(color=f"C{c}", marker="os^"[c % 3], s=18, alpha=0.8)
+        ax.scatter(data.distance, pred, label=f"{label} (RMS {rms:.2f} m)", **style)
+        ax_wind.scatter(data.wind, pred - data.distance, label=label, **style)
+        lo, hi = min(lo, float(np.min(pred))), max(hi, float(np.max(pred)))
+    ax.plot([lo, hi], [lo, hi], color="0.5", lw=1.0, ls="--", label="predicted = recorded")
+    ax.set_xlabel("recorded distance (m)")
+    ax.set_ylabel("predicted distance (m)")
+    ax.legend(loc="upper left", fontsize=8)
+    ax_wind.axhline(0.0, color="0.5", lw=1.0, ls="--")
+    ax_wind.set_xlabel("wind (m/s, + toward the target)")
+    ax_wind.set_ylabel("predicted - recorded (m)")
+    ax_wind.legend(loc="best", fontsize=8)
+    fig.suptitle(title or f"{data.num_throws} recorded throws", fontsize=9)
+    fig.tight_layout()
+    return write_figure(fig, path, dpi=100)

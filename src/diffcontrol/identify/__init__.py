@@ -1,0 +1,81 @@
+"""Learning models of a system from recorded data, and the loop that uses them.
+
+- **Data** (``identify.data``): the trajectory table ``TrajectoryData`` and its CSV/NPZ
+  files (``diffcontrol-trajectories``), and recorded throws (``ThrowData``,
+  ``diffcontrol-throws``). ``record`` records any Gymnasium environment, as the real system of
+  a task when ``task=`` is given (the columns are then the task's ``data_columns()``).
+- **Models**: ``params`` (grey box: the task's physical parameters), ``hybrid`` (the physics
+  plus a ``Correction`` network) and ``neural`` (a network alone), of a discrete step
+  (``HybridModel``, ``NeuralModel``, ``model_task``) or of a vector field (the task's own
+  model, ``identify.ode``).
+- **Fitting**: ``fit(task, data, model, **settings) -> FitResult``, by the task's route
+  (``task.model_route()``: its step, its vector field, or recorded throws); the prediction
+  errors of ``identify.steps`` / ``identify.ode`` and the plot of ``identify.plot``.
+- **Files**: ``fit_dir`` writes a fit directory (``fitted.json`` by ``save_fit``,
+  ``prediction.png``); ``read_fitted`` and ``fitted_model`` read it back, and
+  ``real_system`` names the system its data came from (an environment id read from a file is
+  used only where it needs no import).
+- **The loop**: ``loop(task, out, ...)``: record -> fit -> train, a few rounds.
+"""
+
+from . import data
+from ._fit import FitDir, fit, fit_dir, save_fit
+from ._loop import loop
+from ._shooting import HORIZONS, MODEL_TYPES, NETWORK_MODELS, FitResult
+from .data import ThrowData, TrajectoryData, concat, read_throws, read_trajectories
+from .fitted import (
+    FITTED_FILE,
+    FITTED_FORMAT,
+    as_env,
+    checked_env_id,
+    fitted_model,
+    fitted_physics,
+    read_fitted,
+    real_params,
+    real_system,
+)
+from .hybrid import MIN_TRANSITIONS, HybridModel, NeuralModel, fit_model, model_task
+from .network import Correction, correction_from_dict, correction_to_dict
+from .recording import describe, record, record_data
+from .steps import fit_parameters, predict, prediction_errors
+
+__all__ = [
+    "FITTED_FILE",
+    "FITTED_FORMAT",
+    "HORIZONS",
+    "MIN_TRANSITIONS",
+    "MODEL_TYPES",
+    "NETWORK_MODELS",
+    "Correction",
+    "FitDir",
+    "FitResult",
+    "HybridModel",
+    "NeuralModel",
+    "ThrowData",
+    "TrajectoryData",
+    "as_env",
+    "checked_env_id",
+    "concat",
+    "correction_from_dict",
+    "correction_to_dict",
+    "data",
+    "fit",
+    "fit_dir",
+    "fit_model",
+    "fit_parameters",
+    "fitted_model",
+    "fitted_physics",
+    "loop",
+    "model_task",
+    "predict",
+    "prediction_errors",
+    "read_fitted",
+    "read_throws",
+    "read_trajectories",
+    "real_params",
+    "real_system",
+    "record",
+    "record_data",
+    "describe",
+    "save_fit",
+]

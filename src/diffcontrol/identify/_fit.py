@@ -1,0 +1,174 @@
+"""``fit``: one entry point for every model of every task, and ``fit_dir``: the ``fit`` directory
+(``fitted.json``, ``prediction.png`` and the printed report) that ``diffcontrol fit`` writes."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from ..errors import ConfigError, RunDirectoryError
+from ._shooting import MODEL_TYPES, FitResult
+from .fitted import FITTED_FILE, FITTED_FORMAT
+
+
+def fit(task: Any, data: Any, model: str = "params", **settings: Any) -> FitResult:
+    """Fit a model of ``task``'s system to recorded ``data``.
+
+    The route (discrete step, vector field, recorded throws) is the task's ``model_route()``;
+    nothing here asks which system the task is.
+
+    Args:
+        task: any task (``diffcontrol.make``/``tasks.resolve``).
+        data: what the task's route reads (``TrajectoryData``; ``ThrowData`` for throws).
+        model: ``params`` (grey box: the task's physical parameters), ``hybrid`` (physics plus
+            a network) or ``neural`` (a network alone).
+        settings: ``names`` (the parameters of a grey box; default the task's
+            ``fit_parameter_names``), ``window``, ``steps``, ``learning_rate``, ``lm_steps``,
+            ``hidden``, ``seed``, ``init``, ``params`` (the physics to start from), and for
+            vector fields ``weight_decay`` and ``substeps``. Adam's ``steps`` and
+            ``learning_rate`` default to the route's for the model type.
+
+    Returns:
+        The ``FitResult``.
+
+    Raises:
+        ConfigError: an unknown model type or setting; DataFileError: data of another
+        system; InsufficientDataError: too little data (the message says how much is needed).
+    """
+    if model not in MODEL_TYPES:
+        raise ConfigError(f"unknown model kind {model!r}; choose one of {list(MODEL_TYPES)}")
+    route = task.model_route()
+    steps, lr = route.defaults.get(model, (None, None))
+    settings = {"steps": steps, "learning_rate": lr, **settings}
+    return route.fit(task, data, model, **{k: v for k, v in settings.items() if v is not None})
+
+
+@dataclasses.dataclass(frozen=True)
+class FitDir:
+    """What ``fit_dir`` wrote: the result, the ``fitted.json`` document, the report's lines
+    (parameters with standard errors, held-out errors, a divergence, the files written) and
+    the fit's duration (s)."""
+
+    result: FitResult
+    doc: dict
+    lines: list[str]
+    seconds: float
+
+
+def check_fit_dir(out: Path, force: bool) -> None:
+    """Refuse, before fitting, an ``out`` that could not take fitted.json (nothing is created)."""
+    if out.exists() and not out.is_dir():
+        raise RunDirectoryError(f"--out {out} is a file; give a directory")
+    if (out / FITTED_FILE).exists() and not force:
+        raise RunDirectoryError(
+            f"{out / FITTED_FILE} already exists; pass --force to replace it or choose "
+            "another --out"
+        )
+    parent = next((p for p in (out, *out.parents) if p.exists()), Path("."))
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise RunDirectoryError(f"cannot write --out {out}: {parent} is not writable")
+
+
+def split(route: Any, data: Any, fraction: float) -> tuple[Any, Any]:
+    """``(fitted, held_out)``: the last ``fraction`` of the episodes (or throws) held out, at
+    least one when ``fraction > 0``; ``held_out`` is None for 0."""
+    n = route.count(data)
+    if fraction == 0:
+        return data, None
+    held = max(1, round(fraction * n))
+    if n - held < 1:
+        unit = route.unit
+        raise ConfigError(
+            f"--holdout {fraction} of {n} {unit}(s) leaves none to fit; record at least 2 "
+            f"{unit}s, or pass --holdout 0"
+        )
+    return route.split(data, n - held)
+
+
+def fit_dir(
+    task: Any,
+    data_file: str | Path,
+    model: str,
+    out: str | Path,
+    *,
+    holdout: float = 0.2,
+    force: bool = False,
+    progress: Callable[[str], None] | None = None,
+    **settings: Any,
+) -> FitDir:
+    """``diffcontrol fit``: read ``data_file``, hold out its last ``holdout`` fraction, fit
+    ``model`` (``fit``) and write ``out/fitted.json`` and ``out/prediction.png``.
+
+    Raises:
+        RunDirectoryError: ``out`` cannot take the files (or holds a fit, without ``force``);
+            otherwise what ``fit`` raises, and nothing is created for a refused fit.
+    """
+    route = task.model_route()
+    if hasattr(route, "check_model"):  # before anything is read or created
+        route.check_model(task, model)
+    steps, lr = route.defaults.get(model, route.defaults["params"])
+    given = {k: v for k, v in settings.items() if v is not None}
+    settings = {"steps": steps, "learning_rate": lr, "window": 10, "hidden": (32, 32)}
+    settings = {**settings, "seed": 0, "lm_steps": 20, **given, "holdout": holdout}
+    data = route.read(data_file)
+    out = Path(out)
+    check_fit_dir(out, force)
+    train, held_out = split(route, data, holdout)
+    if progress:
+        progress(route.announce(task, model, train, held_out, data_file, settings))
+    if hasattr(route, "check_split"):
+        route.check_split(task, data, train, held_out, settings)
+    t0 = time.perf_counter()
+    fit_settings = {k: v for k, v in settings.items() if k != "holdout"}
+    result = fit(task, train, model, **fit_settings)
+    seconds = time.perf_counter() - t0
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise RunDirectoryError(f"cannot create --out {out} ({e.strerror})") from None
+    body, held_lines = route.outputs(task, result, data, train, held_out, data_file, settings, out)
+    doc = save_fit(out, task, result, body, seconds)
+    return FitDir(
+        result, doc, report(body.get("parameters", {}), result, out, seconds, held_lines), seconds
+    )
+
+
+def save_fit(out: str | Path, task: Any, result: FitResult, body: dict, seconds: float) -> dict:
+    """Write ``out/fitted.json``: the format's head, ``body`` (the route's model, settings,
+    data and prediction errors) with how the fit ended, and when and by what; returns it."""
+    from .. import __version__
+    from ..io import now_iso, write_json
+
+    head = {"format": FITTED_FORMAT, "version": 1, "task": task.name, "model": result.model_type}
+    ended = {
+        "loss": result.loss,
+        "nominal_loss": result.nominal_loss,
+        "diverged": result.diverged,
+        "message": result.message,
+        "loss_history": [float(v) for v in result.loss_history],
+        "seconds": seconds,
+    }
+    body = {**body, "fit": {**body.get("fit", {}), **ended}}
+    doc = {**head, **body, "created": now_iso(), "diffcontrol_version": __version__}
+    write_json(Path(out) / FITTED_FILE, doc)
+    return doc
+
+
+def report(parameters: dict, result: FitResult, out: Path, seconds: float, lines: list) -> list:
+    """The printed report: the fitted parameters with their standard errors, the held-out
+    errors, a divergence and the files written."""
+    text = []
+    for n, p in parameters.items():
+        se = p["standard_error"]
+        pm = f" ± {se:.3g}" if math.isfinite(se) else " (not identifiable from this data)"
+        text.append(f"{n} = {p['value']:.6g}{pm} (nominal {p['nominal']:.6g})")
+    text += lines
+    if result.diverged:
+        text.append(f"warning: {result.message}")
+    text.append(f"wrote {out / FITTED_FILE} and {out / 'prediction.png'} ({seconds:.1f} s fit)")
+    return text

@@ -1,0 +1,381 @@
+"""The routes of model learning: how a task's data is read, fitted, judged and drawn.
+
+A task picks its route with its ``model_route()`` hook (by base class: ``STEPS`` for a
+discrete-time ``Task``, ``ODE`` for a ``ContinuousTask``; the trebuchet's ``THROWS``), so
+``identify.fit`` and ``identify.fit_dir`` never ask which system a task is. Each route has
+the same methods: ``read(path)``, ``count(data)``, ``split(data, n)``, ``fit(task, data,
+model_type, **settings)`` and ``outputs(...)`` (the route's part of ``fitted.json``, the lines
+it reports and ``prediction.png``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import ConfigError
+from ._shooting import HORIZONS, FitResult
+
+
+def params_dict(params: Any) -> dict[str, float]:
+    """Every field of a parameter PyTree as a plain float (fitted.json's ``all_parameters``)."""
+    return {f.name: float(np.asarray(getattr(params, f.name))) for f in dataclasses.fields(params)}
+
+
+def parameters_doc(result: FitResult) -> dict:
+    """fitted.json's ``parameters``: per fitted name, its value, standard error and nominal."""
+    return {
+        n: {"value": v, "standard_error": result.standard_errors[n], "nominal": result.nominal[n]}
+        for n, v in result.values.items()
+    }
+
+
+def errors_doc(what: str, errors: dict | None) -> dict | None:
+    """fitted.json's ``prediction_error`` for per-horizon errors by model label."""
+    if errors is None:
+        return None
+    by_label = {label: {str(h): e for h, e in by_h.items()} for label, by_h in errors.items()}
+    return {"what": what, "horizons_steps": list(HORIZONS), **by_label}
+
+
+def _title(task: Any, model_type: str, held_out: Any) -> str:
+    return (
+        f"{task.name} ({model_type}), {'held-out' if held_out is not None else 'fit'} "
+        "episodes: open loop, restarted every 50 steps"
+    )
+
+
+def _data_doc(data_file: Any, train: Any, held_out: Any, **extra: Any) -> dict:
+    return {
+        "file": str(data_file),
+        **extra,
+        "fit_episodes": [e.id for e in train.episodes()],
+        "held_out_episodes": [e.id for e in held_out.episodes()] if held_out else [],
+        "fit_transitions": train.num_steps,
+    }
+
+
+class _Trajectories:
+    """What the trajectory routes share: the data file and its split into episodes."""
+
+    unit = "episode"
+
+    def read(self, path: Any) -> Any:
+        from .data import read_trajectories
+
+        return read_trajectories(path)
+
+    def count(self, data: Any) -> int:
+        return data.num_episodes
+
+    def split(self, data: Any, n: int) -> tuple[Any, Any]:
+        return data.split(n)
+
+    def announce(self, task, model_type, train, held_out, data_file, settings) -> str:
+        names = settings.get("names") or task.fit_parameter_names
+        what = ", ".join(names) if model_type == "params" and names else f"a {model_type} model"
+        return (
+            f"fitting {what} of {task.name} to {train.num_episodes} episode(s) "
+            f"({train.num_steps} transitions) of {data_file}, windows of "
+            f"{settings.get('window', 10)} steps"
+        )
+
+
+class StepRoute(_Trajectories):
+    """A discrete-time task: its step with fitted parameters, or a hybrid or neural model."""
+
+    defaults = {"params": (300, 0.02), "hybrid": (2000, 3e-3), "neural": (2000, 3e-3)}
+    """Adam steps and learning rate by model type."""
+
+    def fit(self, task: Any, data: Any, model_type: str, **s: Any) -> FitResult:
+        if model_type == "params":
+            from .steps import fit_parameters
+
+            keys = ("window", "steps", "learning_rate", "lm_steps", "init")
+            return fit_parameters(
+                task, data, s.get("names"), **{k: s[k] for k in keys if s.get(k) is not None}
+            )
+        from .hybrid import fit_model
+
+        keys = ("params", "window", "steps", "learning_rate", "hidden", "seed")
+        return fit_model(task, data, model_type, **{k: s[k] for k in keys if s.get(k) is not None})
+
+    def predictor(self, task: Any, result: FitResult | None) -> tuple[Any, Any]:
+        """``(task, params)`` to predict with: the nominal model for ``None``."""
+        from .hybrid import model_task
+
+        if result is None:
+            return task, task.default_params()
+        if result.model_type == "params":
+            return task, result.params
+        return model_task(task, result.model), result.model
+
+    def outputs(self, task, result, data, train, held_out, data_file, settings, out):
+        from .plot import prediction_plot, task_predictor
+        from .steps import prediction_errors
+
+        nominal, fitted = self.predictor(task, None), self.predictor(task, result)
+        errors = None
+        if held_out is not None:
+            errors = {
+                "nominal": prediction_errors(*nominal, held_out),
+                "fitted": prediction_errors(*fitted, held_out),
+            }
+        if result.model_type == "params":
+            model_doc = {"parameters": parameters_doc(result)}
+            model_doc["all_parameters"] = params_dict(result.params)
+        else:
+            from .network import correction_to_dict
+
+            model_doc = {
+                "all_parameters": params_dict(result.model.params),
+                "network": {
+                    "what": "hybrid: next state = the task's step with all_parameters + network("
+                    "observation, action); neural: next state = state + network(observation, "
+                    "action)",
+                    "inputs": "observation then action",
+                    "parameters": result.num_parameters,
+                    **correction_to_dict(result.model.correction),
+                },
+            }
+        fit_settings = dict(
+            window_steps=result.window,
+            windows=result.windows,
+            adam_steps=settings["steps"],
+            learning_rate=settings["learning_rate"],
+        )
+        if result.model_type == "params":
+            fit_settings["lm_steps"] = settings.get("lm_steps", 20)
+        else:
+            fit_settings.update(hidden=list(settings["hidden"]), seed=settings["seed"])
+        body = {
+            **model_doc,
+            "fit": fit_settings,
+            "data": _data_doc(
+                data_file,
+                train,
+                held_out,
+                env_id=data.env_id,
+                env_kwargs=data.metadata.get("env_kwargs"),
+            ),
+            "prediction_error": errors_doc(
+                "RMS error of the observations H steps ahead, open loop from every recorded "
+                "state of the held-out episodes with the recorded actions",
+                errors,
+            ),
+        }
+        prediction_plot(
+            {"fitted": task_predictor(*fitted), "nominal": task_predictor(*nominal)},
+            held_out if held_out is not None else train,
+            out / "prediction.png",
+            title=_title(task, result.model_type, held_out),
+        )
+        lines = []
+        if result.model_type != "params":
+            lines.append(
+                f"{result.model_type} model: {result.num_parameters} weights, {result.message}"
+            )
+        if errors is not None:
+            for h in HORIZONS:
+                nom, fit = errors["nominal"][h]["rmse"], errors["fitted"][h]["rmse"]
+                lines.append(
+                    f"held-out RMS error {h:>2} steps ahead: nominal {nom:.3g}, fitted {fit:.3g}"
+                )
+        return body, lines
+
+
+class ODERoute(_Trajectories):
+    """A continuous-time task: its vector field with fitted parameters, hybrid or neural."""
+
+    defaults = {"params": (300, 0.02), "hybrid": (500, 1e-2), "neural": (500, 1e-2)}
+    """Adam steps and learning rate by model type (``benchmarks/fit_swingup.py``)."""
+
+    def announce(self, task, model_type, train, held_out, data_file, settings) -> str:
+        return (
+            f"fitting a {model_type} model of {task.name} to {train.num_episodes} episode(s) "
+            f"({train.num_steps} transitions) of {data_file}, windows of "
+            f"{settings.get('window', 10)} steps"
+        )
+
+    def fit(self, task: Any, data: Any, model_type: str, **s: Any) -> FitResult:
+        from .ode import fit_vector_field
+
+        keys = ("window", "steps", "learning_rate", "lm_steps", "hidden", "seed", "weight_decay")
+        keys += ("substeps",)
+        kw = {k: s[k] for k in keys if s.get(k) is not None}
+        return fit_vector_field(task, data, model_type, s.get("params"), **kw)
+
+    def outputs(self, task, result, data, train, held_out, data_file, settings, out):
+        from .ode import prediction_errors
+        from .plot import ode_predictor, prediction_plot
+
+        nominal = task.nominal_model(task.default_params())
+        errors = None
+        if held_out is not None:
+            errors = {
+                "nominal": prediction_errors(task, nominal, held_out),
+                "fitted": prediction_errors(task, result.model, held_out),
+            }
+        network = result.model_type != "params"
+        body = {
+            "parameters": parameters_doc(result),
+            **task.model_document(result.model),
+            "fit": dict(
+                window_steps=result.window,
+                windows=result.windows,
+                dt_s=result.dt_s,
+                rk4_substeps=result.substeps,
+                adam_steps=settings["steps"],
+                learning_rate=settings["learning_rate"],
+                lm_steps=settings.get("lm_steps", 20) if not network else 0,
+                num_parameters=result.num_parameters,
+                hidden=list(settings["hidden"]) if network else None,
+                seed=settings["seed"],
+            ),
+            "data": _data_doc(
+                data_file,
+                train,
+                held_out,
+                system=data.metadata.get("system"),
+                metadata=data.metadata,
+            ),
+            "prediction_error": errors_doc(
+                "RMS error of the state H steps ahead, open loop from every recorded state of "
+                "the held-out episodes with the recorded actions",
+                errors,
+            ),
+        }
+        dt, substeps = result.dt_s, result.substeps
+        prediction_plot(
+            {
+                "fitted": ode_predictor(result.model, dt, substeps),
+                "nominal": ode_predictor(nominal, dt, substeps),
+            },
+            held_out if held_out is not None else train,
+            out / "prediction.png",
+            title=_title(task, result.model_type, held_out),
+        )
+        lines = []
+        if errors is not None:
+            for h in HORIZONS:
+                nom, fit = errors["nominal"][h]["rmse"], errors["fitted"][h]["rmse"]
+                lines.append(
+                    f"held-out RMS state error {h:>2} steps ahead: nominal {nom:.3g}, "
+                    f"fitted {fit:.3g}"
+                )
+        return body, lines
+
+
+class ThrowRoute:
+    """Recorded throws (a throw is a one-step episode with one measured outcome)."""
+
+    unit = "throw"
+    defaults = {"params": (300, 0.02)}
+
+    def read(self, path: Any) -> Any:
+        from .data import read_throws
+
+        return read_throws(path)
+
+    def count(self, data: Any) -> int:
+        return data.num_throws
+
+    def split(self, data: Any, n: int) -> tuple[Any, Any]:
+        return data.split(n)
+
+    def announce(self, task, model_type, train, held_out, data_file, settings) -> str:
+        names = settings.get("names") or task.fit_parameter_names
+        return f"fitting {', '.join(names)} of the trebuchet to {train.num_throws} throw(s) of " + (
+            f"{data_file}" + (f" ({held_out.num_throws} held out)" if held_out else "")
+        )
+
+    def check_split(self, task, data, train, held_out, settings) -> None:
+        from ..errors import InsufficientDataError
+        from .throws import MIN_THROWS_PER_PARAMETER
+
+        names = settings.get("names") or task.fit_parameter_names
+        need = MIN_THROWS_PER_PARAMETER * len(names)
+        if held_out is not None and train.num_throws < need <= data.num_throws:
+            raise InsufficientDataError(
+                f"holding out {held_out.num_throws} of the {data.num_throws} throws (--holdout "
+                f"{settings.get('holdout')}) leaves {train.num_throws} to fit {len(names)} "
+                f"parameter(s), but at least {need} are needed; record more throws or pass "
+                "--holdout 0"
+            )
+
+    def check_model(self, task: Any, model_type: str) -> None:
+        """Refuse a network model: a throw has no trajectory to learn a correction from."""
+        if model_type != "params":
+            raise ConfigError(
+                f"--model {model_type} is not supported for aiming tasks such as {task.name!r} "
+                "(a throw has no trajectory to learn a correction from); use --model params to "
+                "fit its physical parameters"
+            )
+
+    def fit(self, task: Any, data: Any, model_type: str, **s: Any) -> FitResult:
+        from .throws import fit_throws
+
+        self.check_model(task, model_type)
+        keys = ("steps", "learning_rate", "lm_steps", "init", "params")
+        kw = {k: s[k] for k in keys if s.get(k) is not None}
+        return fit_throws(data, tuple(s.get("names") or task.fit_parameter_names), **kw)
+
+    def outputs(self, task, result, data, train, held_out, data_file, settings, out):
+        from .throws import distance_errors, params_dict, throws_plot
+
+        nominal = task.default_params()
+        errors = None
+        if held_out is not None:
+            errors = {
+                "nominal": distance_errors(nominal, held_out),
+                "fitted": distance_errors(result.params, held_out),
+            }
+        body = {
+            "parameters": parameters_doc(result),
+            # the float fields of TrebuchetParams only (its step budgets are static, not fitted)
+            "all_parameters": params_dict(result.params),
+            "fit": dict(
+                residual="predicted minus recorded distance (m), one per throw",
+                adam_steps=settings["steps"],
+                learning_rate=settings["learning_rate"],
+                lm_steps=settings.get("lm_steps", 20),
+            ),
+            "data": {
+                "file": str(data_file),
+                "kind": "throws",
+                "metadata": data.metadata,
+                "fit_throws": train.num_throws,
+                "held_out_throws": held_out.num_throws if held_out else 0,
+            },
+            "prediction_error": None
+            if errors is None
+            else {
+                "what": "error of the predicted distance (m) of the held-out throws (the last "
+                "ones of the file), with their recorded inputs",
+                **errors,
+            },
+        }
+        shown = held_out if held_out is not None else train
+        throws_plot(
+            {"fitted": result.params, "nominal": nominal},
+            shown,
+            out / "prediction.png",
+            title=f"trebuchet, {shown.num_throws} {'held-out' if held_out else 'fitted'} throws "
+            f"of {Path(data_file).name}",
+        )
+        lines = []
+        if errors is not None:
+            nom, fit = errors["nominal"]["rmse_m"], errors["fitted"]["rmse_m"]
+            lines.append(
+                f"held-out RMS distance error over {held_out.num_throws} throw(s): nominal "
+                f"{nom:.3g} m, fitted {fit:.3g} m"
+            )
+        return body, lines
+
+
+STEPS = StepRoute()
+ODE = ODERoute()
+THROWS = ThrowRoute()

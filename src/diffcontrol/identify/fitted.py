@@ -1,0 +1,142 @@
+"""``fitted.json``: the one fitted-model file (format ``diffcontrol-fitted-model``, version 1).
+
+Written by ``save_fit`` (``diffcontrol fit``), read back by ``read_fitted`` for ``diffcontrol
+train --model``: ``fitted_physics`` / ``fitted_model`` rebuild the model, and ``real_system`` /
+``as_env`` / ``real_params`` give the system the model's data came from, where a controller
+trained through the model is judged. An environment id read from a file is only used where it
+needs no import (``checked_env_id``): diffcontrol never imports a module because a file names it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import sys
+from pathlib import Path
+from typing import Any
+
+import equinox as eqx
+
+from ..errors import ConfigError, ModelFileError
+from ._shooting import MODEL_TYPES, NETWORK_MODELS
+from .hybrid import HybridModel, NeuralModel
+from .network import correction_from_dict
+
+FITTED_FILE = "fitted.json"
+FITTED_FORMAT = "diffcontrol-fitted-model"
+
+
+def read_fitted(path: str | os.PathLike) -> dict[str, Any]:
+    """Read and check a ``fitted.json`` (or the directory holding one).
+
+    Raises:
+        ModelFileError: the file is missing, not a fitted model, or malformed (says which).
+    """
+    from ..io import read_json
+
+    path = Path(path)
+    if path.is_dir():
+        path = path / FITTED_FILE
+    if not path.exists():
+        raise ModelFileError(
+            f"no fitted model at {path}; make one with `diffcontrol fit TASK --data FILE "
+            "--model {params,hybrid,neural} --out DIR`"
+        )
+    doc = read_json(path, "fitted model")
+    if not isinstance(doc, dict) or doc.get("format") != FITTED_FORMAT:
+        raise ModelFileError(f"{path} is not a {FITTED_FORMAT} file (written by `diffcontrol fit`)")
+    if doc.get("version") != 1:
+        raise ModelFileError(f"{path} has version {doc.get('version')!r}; this diffcontrol reads 1")
+    model_type = doc.get("model")
+    if model_type not in MODEL_TYPES:
+        raise ModelFileError(f"{path}: unknown model kind {model_type!r}")
+    values = doc.get("all_parameters")
+    if not isinstance(values, dict) or not all(
+        isinstance(v, int | float) and math.isfinite(v) for v in values.values()
+    ):
+        raise ModelFileError(f"{path}: 'all_parameters' must map names to finite numbers")
+    if model_type in NETWORK_MODELS and not isinstance(doc.get("network"), dict):
+        raise ModelFileError(f"{path}: a {model_type} model needs its 'network'")
+    doc["_path"] = str(path)
+    return doc
+
+
+def fitted_physics(task: Any, doc: dict[str, Any]) -> Any:
+    """The task's parameters with the fitted file's ``all_parameters``.
+
+    Raises:
+        ModelFileError: the file is for another task or names a parameter the task lacks.
+    """
+    where = doc.get("_path", "the fitted model")
+    if doc.get("task") != task.name:
+        raise ModelFileError(
+            f"{where} was fitted for task {doc.get('task')!r}, not {task.name!r}; train "
+            f"{doc.get('task')} with it, or fit {task.name}"
+        )
+    params = task.default_params()
+    known = {f.name for f in dataclasses.fields(params)}
+    unknown = sorted(set(doc["all_parameters"]) - known)
+    if unknown:
+        raise ModelFileError(f"{where}: task {task.name!r} has no parameter(s) {unknown}")
+    names = sorted(doc["all_parameters"])
+    return eqx.tree_at(
+        lambda p: tuple(getattr(p, n) for n in names),
+        params,
+        tuple(float(doc["all_parameters"][n]) for n in names),
+    )
+
+
+def fitted_model(task: Any, doc: dict[str, Any]) -> HybridModel | NeuralModel | Any:
+    """The model of a fitted file: the physical parameters (``params``), or a ``HybridModel``
+    / ``NeuralModel`` (use ``model_task(task, model)`` to train or predict with it)."""
+    physics = fitted_physics(task, doc)
+    if doc["model"] == "params":
+        return physics
+    correction = correction_from_dict(doc["network"], doc.get("_path", "the fitted model"))
+    cls = HybridModel if doc["model"] == "hybrid" else NeuralModel
+    return cls(physics, correction)
+
+
+def real_system(doc: dict) -> dict | None:
+    """The system a fitted model's data came from: ``{"env_id", "env_kwargs"}`` for recorded
+    trajectories, ``{"params"}`` (the simulated trebuchet's) for recorded throws, or None."""
+    data = doc.get("data") or {}
+    if data.get("env_id"):
+        env_id = checked_env_id(data["env_id"], doc.get("_path", "the fitted model"))
+        return {"env_id": env_id, "env_kwargs": data.get("env_kwargs") or {}}
+    params = (data.get("metadata") or {}).get("params")
+    return {"params": params} if isinstance(params, dict) else None
+
+
+def checked_env_id(env_id: Any, where: str = "a file") -> str:
+    """``env_id`` read from a file, if using it imports nothing: an id without ``:``, or one
+    whose module is already imported (e.g. by this process's own recording).
+
+    Raises:
+        ConfigError: the id names a module that is not imported (``module:Env-v0``), or is
+            not a string: one line saying to pass ``--env`` explicitly.
+    """
+    if not isinstance(env_id, str) or not env_id:
+        raise ConfigError(f"{where} names the environment {env_id!r}, not an id; pass --env")
+    module, sep, _ = env_id.partition(":")
+    if sep and module not in sys.modules:
+        raise ConfigError(
+            f"{where} names the environment {env_id!r}, whose module {module!r} would have to "
+            f"be imported; diffcontrol does not import modules named by files: pass "
+            f"--env {env_id} explicitly if you trust it"
+        )
+    return env_id
+
+
+def as_env(real: dict | None) -> tuple[str, dict] | None:
+    """``(env_id, env_kwargs)`` of a real system that is a Gymnasium environment, else None."""
+    return (real["env_id"], real["env_kwargs"]) if real and "env_id" in real else None
+
+
+def real_params(task: Any, real: dict | None) -> Any:
+    """The task's parameters of a real system given by its parameters (the trebuchet's recorded
+    throws), else None."""
+    if not real or "params" not in real:
+        return None
+    return fitted_physics(task, {"task": task.name, "all_parameters": real["params"]})
