@@ -21,18 +21,17 @@ def _files(d):
 
 def test_resume_needs_only_the_directory(tmp_path, monkeypatch, capsys):
     out = tmp_path / "run"
-    real_save = runs.save_run
 
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(runs, "save_run", interrupted)
+    monkeypatch.setattr(runs._train, "save_run", interrupted)
     argv = ["train", "cartpole", "--out", str(out), "--quiet", *TINY_CARTPOLE]
     assert main([*argv, "--final-eval", "3", "--no-animation"]) == 130
     err = capsys.readouterr().err
     assert f"diffcontrol train --out {out} --resume" in err
     assert not (out / "metrics.json").exists()
-    monkeypatch.setattr(runs, "save_run", real_save)
+    monkeypatch.undo()
     # the settings come from run.json: 3 evaluation episodes, no animation
     assert main(["train", "--out", str(out), "--resume", "--quiet"]) == 0
     metrics = json.loads((out / "metrics.json").read_text())

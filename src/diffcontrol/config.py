@@ -36,22 +36,22 @@ class _Config:
         widths, (name, value) pairs), within the bounds a run can hold; integers given for
         floats and lists for tuples are converted."""
         for f in dataclasses.fields(self):
-            value, kind = getattr(self, f.name), str(f.type)
-            if kind == "int":
+            value, declared = getattr(self, f.name), str(f.type)
+            if declared == "int":
                 if not isinstance(value, int) or isinstance(value, bool):
                     raise ConfigError(f"{f.name} must be an integer, got {value!r}")
                 limit = MAX_WIDTH if f.name in _WIDE else MAX_COUNT
                 if not (0 <= value <= limit):
                     raise ConfigError(f"{f.name} must be in 0 ... {limit:,}, got {value!r}")
-            elif kind == "float":
+            elif declared == "float":
                 if not isinstance(value, int | float) or isinstance(value, bool):
                     raise ConfigError(f"{f.name} must be a number, got {value!r}")
                 object.__setattr__(self, f.name, float(value))
-            elif kind in ("str", "bool"):
-                if type(value).__name__ != kind:
-                    what = "text" if kind == "str" else "true or false"
+            elif declared in ("str", "bool"):
+                if type(value).__name__ != declared:
+                    what = "text" if declared == "str" else "true or false"
                     raise ConfigError(f"{f.name} must be {what}, got {value!r}")
-            elif kind == "tuple[int, ...]":
+            elif declared == "tuple[int, ...]":
                 if not isinstance(value, tuple | list) or not all(
                     isinstance(w, int) and not isinstance(w, bool) and 0 < w <= MAX_WIDTH
                     for w in value

@@ -195,7 +195,7 @@ def check_new_file(path: str | os.PathLike, suffix: str) -> Path:
 
 def controller_to_dict(controller: MLPController, task: Any, metadata: dict | None = None) -> dict:
     """The ``model.json`` document of a trained ``MLPController`` for ``task``."""
-    gym_kind = GYM_KINDS.get(controller.head, "box")
+    gym_space = GYM_KINDS.get(controller.head, "box")
     layers = [
         {"weight": np.asarray(l.weight).tolist(), "bias": np.asarray(l.bias).tolist()}
         for l in controller.layers
@@ -206,7 +206,7 @@ def controller_to_dict(controller: MLPController, task: Any, metadata: dict | No
         "offset": np.asarray(controller.obs_offset).tolist(),
         "scale": np.asarray(controller.obs_scale).tolist(),
     }
-    if getattr(task, "kind", None) == "ode":
+    if getattr(task, "feature_names", None):  # a continuous-time task: state feedback
         observation["state"] = list(task.state_names)
         observation["features"] = list(task.feature_names)
     return {
@@ -221,7 +221,7 @@ def controller_to_dict(controller: MLPController, task: Any, metadata: dict | No
             "head": controller.head,
             "low": np.asarray(controller.action_low).tolist() if bounded else None,
             "high": np.asarray(controller.action_high).tolist() if bounded else None,
-            "gym": gym_kind,
+            "gym": gym_space,
         },
         "metadata": dict(metadata or {}),
     }
@@ -263,11 +263,11 @@ def _check_model(doc: Any, path: Path) -> None:
             raise bad(f"unknown activation {net['activation']!r}")
         if act["head"] not in HEADS:
             raise bad(f"unknown action head {act['head']!r}")
-        gym_kind = act.get("gym", "box")
-        if gym_kind not in ("box", *GYM_KINDS.values()):
-            raise bad(f"unknown Gymnasium action kind {gym_kind!r}")
-        if (act["head"] == "argmax") != (gym_kind == "discrete"):
-            raise bad(f"action head {act['head']!r} does not go with 'gym': {gym_kind!r}")
+        gym_space = act.get("gym", "box")
+        if gym_space not in ("box", *GYM_KINDS.values()):
+            raise bad(f"unknown Gymnasium action kind {gym_space!r}")
+        if (act["head"] == "argmax") != (gym_space == "discrete"):
+            raise bad(f"action head {act['head']!r} does not go with 'gym': {gym_space!r}")
         if act["head"] == "argmax" and act["size"] < 2:
             raise bad(f"the argmax head needs at least 2 choices, not {act['size']}")
         size = obs["size"]
@@ -602,6 +602,24 @@ def load_checkpoint(path: str | os.PathLike, like: Any) -> tuple[Any, dict]:
 RUN_FILE = "run.json"
 
 
+def check_same_run(out: Path, old: dict, run: dict) -> None:
+    """Refuse to resume ``old`` (a ``run.json``) as ``run``: another task or other settings.
+
+    Raises:
+        RunDirectoryError: naming what differs.
+    """
+    if old.get("task") != run["task"] or old.get("config") != run["config"]:
+        stored = old.get("config") if isinstance(old.get("config"), dict) else {}
+        changed = sorted(
+            k for k in set(stored) | set(run["config"]) if stored.get(k) != run["config"].get(k)
+        )
+        what = "task" if old.get("task") != run["task"] else ", ".join(changed)
+        raise RunDirectoryError(
+            f"{out} holds a different run (differs in: {what}); resume it with the same "
+            "options or choose a new --out"
+        )
+
+
 def prepare_run_dir(out_dir: str | os.PathLike, run: dict, resume: bool) -> Path:
     """Check that ``out_dir`` can take this run, create it, and write ``run.json``.
 
@@ -624,19 +642,9 @@ def prepare_run_dir(out_dir: str | os.PathLike, run: dict, resume: bool) -> Path
                 f"{old.get('config', {}).get('seed')!r}); pass --resume to continue it or "
                 "choose a new --out"
             )
+        check_same_run(out, old, run)
         if old.get("complete"):
             raise RunDirectoryError(f"{out} holds a finished run; there is nothing to resume")
-        if old.get("task") != run["task"] or old.get("config") != run["config"]:
-            changed = sorted(
-                k
-                for k in set(old.get("config", {})) | set(run["config"])
-                if old.get("config", {}).get(k) != run["config"].get(k)
-            )
-            what = "task" if old.get("task") != run["task"] else ", ".join(changed)
-            raise RunDirectoryError(
-                f"{out} holds a different run (differs in: {what}); resume it with the same "
-                "options or choose a new --out"
-            )
         return out
     if resume:
         raise RunDirectoryError(f"nothing to resume: {out} holds no {RUN_FILE}; drop --resume")

@@ -4,13 +4,11 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import os
 import sys
 from pathlib import Path
 from typing import Any
 
 from ..config import ODETrainConfig, TrainConfig, help_of
-from ..errors import DiffcontrolError
 from ._args import (
     add_common,
     finite_float,
@@ -141,74 +139,9 @@ def add_parser(sub: Any) -> None:
     )
 
 
-def _resume_settings(args: argparse.Namespace) -> bool:
-    """With --resume, take what the command line leaves out from the run's own run.json (the
-    task, the fitted model, the final evaluation, the animation). Returns False when the run
-    is finished (nothing to do)."""
-    from .. import tasks
-    from ..runs import read_run_file
-
-    stored = read_run_file(args.out) if args.resume else None
-    if stored is None:
-        if args.task is None:
-            raise DiffcontrolError("name the TASK to train (or --resume the run in --out)")
-        return True
-    if stored.get("complete"):
-        return False
-    invocation = stored.get("invocation") or {}
-    if args.task is None:
-        spec = invocation.get("task") or stored.get("task")
-        if spec not in tasks.names():  # never import a module because a file names it
-            raise DiffcontrolError(
-                f"{args.out} was trained on the task {spec!r}, which is not registered; name "
-                f"it: diffcontrol train {spec} --out {args.out} --resume"
-            )
-        args.task = spec
-    args.model = args.model or invocation.get("model")
-    if args.final_eval is None:
-        args.final_eval = invocation.get("final_eval")
-    args.no_animation = args.no_animation or invocation.get("animation") is False
-    return True
-
-
 def cmd_train(args: argparse.Namespace) -> int:
-    from .. import _jax_setup, io
-    from ..runs import describe, fitted_training, mark_complete, release_claim, save_run
-    from ..tasks import resolve
-    from ..training import resolve_config, train
+    from ..runs import RunInterrupted, train_run
 
-    if not _resume_settings(args):
-        print(f"{args.out} holds a finished run; nothing to resume (its files are unchanged)")
-        return 0
-    task = resolve(args.task)
-    config_cls = type(task.default_config())
-    fields = {f.name for f in dataclasses.fields(config_cls)}
-    overrides = {name: getattr(args, name) for name in _SETTINGS}
-    foreign = sorted(n for n, v in overrides.items() if v is not None and n not in fields)
-    if foreign:
-        flags = ", ".join("--" + n.replace("_", "-") for n in foreign)
-        raise DiffcontrolError(
-            f"{flags} do{'es' if len(foreign) == 1 else ''} not apply to {task.name!r} (trained "
-            f"with a {config_cls.__name__}); see `diffcontrol train --help` for the settings of "
-            "each kind of task"
-        )
-    overrides = {n: v for n, v in overrides.items() if n in fields}
-    fitted_params, real, model_info = (), None, None
-    if args.model:
-        task, fitted_params, real, model_info = fitted_training(task, args.model, args.params)
-        print(model_info.pop("note"))
-    if fitted_params or args.params:
-        overrides["params"] = (*fitted_params, *(args.params or ()))  # --param wins
-    out = Path(args.out)
-    explicit = args.recipe is not None or any(v is not None for v in overrides.values())
-    if args.resume and not explicit and (out / io.RUN_FILE).exists():
-        config = config_cls.from_json(io.read_json(out / io.RUN_FILE, "run file")["config"])
-    else:
-        config = resolve_config(task, args.recipe, **overrides)
-
-    cache_dir = None
-    if not (args.no_compile_cache or os.environ.get("DIFFCONTROL_NO_COMPILE_CACHE")):
-        cache_dir = _jax_setup.enable_compile_cache()
     say = (lambda line: None) if args.quiet else (lambda line: print(line, flush=True))
     if not args.quiet:  # training warnings come as progress lines; not twice
         import warnings
@@ -216,75 +149,25 @@ def cmd_train(args: argparse.Namespace) -> int:
         from ..errors import TrainingWarning
 
         warnings.simplefilter("ignore", TrainingWarning)
-    say(describe(task, config, out))
-    if getattr(config, "gradient", None) == "backsolve":
-        print(
-            "note: --gradient backsolve is the continuous adjoint: its gradient is "
-            "approximate (the backward solve re-creates the state with the solver's error); "
-            "checkpoint is exact for the computed solve",
-            file=sys.stderr,
-        )
-    invocation = {
-        "task": args.task,
-        "model": args.model,
-        "final_eval": args.final_eval,
-        "animation": not args.no_animation,
-    }
-    named = "" if args.task in _builtin_names() else f" {args.task}"
     try:
-        result = train(
-            task, config, out_dir=out, resume=args.resume, progress=say, invocation=invocation
-        )
-    except BaseException as e:
-        kept = args.resume or not release_claim(out)  # nothing to resume: give the dir back
-        if not isinstance(e, KeyboardInterrupt):
-            raise
-        if kept:
-            print(
-                f"\ninterrupted; the last checkpoint is in {out}. Continue with: "
-                f"diffcontrol train{named} --out {out} --resume",
-                file=sys.stderr,
-            )
-        else:
-            print("\ninterrupted before the first checkpoint; nothing was kept", file=sys.stderr)
-        return 130
-    metrics = result.metrics
-    metrics["compile_cache"] = {
-        "dir": str(cache_dir) if cache_dir else None,
-        **_jax_setup.cache_events(),
-    }
-    metrics["command"] = " ".join(["diffcontrol", *sys.argv[1:]])
-    metrics["created"] = io.now_iso()
-    if model_info:
-        metrics["model"] = model_info
-    try:
-        run, files = save_run(
-            result,
-            out,
+        outcome = train_run(
+            args.out,
+            args.task,
+            recipe=args.recipe,
+            settings={name: getattr(args, name) for name in _SETTINGS},
+            params=tuple(args.params or ()),
+            model=args.model,
+            resume=args.resume,
             final_eval=args.final_eval,
             animation=not args.no_animation,
-            real=real,
+            compile_cache=not args.no_compile_cache,
             progress=say,
+            command=" ".join(["diffcontrol", *sys.argv[1:]]),
         )
-    except KeyboardInterrupt:
-        print(
-            f"\ninterrupted while writing the run's files; finish them with: "
-            f"diffcontrol train{named} --out {out} --resume",
-            file=sys.stderr,
-        )
+    except RunInterrupted as e:
+        print(f"\n{e}", file=sys.stderr)
         return 130
-    mark_complete(out)
-    headline = run.metrics.get("headline")
-    print(
-        f"done in {metrics['train_seconds']:.1f} s (compile {metrics['compile_seconds']:.1f} s): "
-        f"{metrics['simulated_episodes']:.4g} simulated episodes ({metrics['simulated_steps']} "
-        f"steps)" + (f"; {headline}" if headline else "") + (" on the real system" if real else "")
-    )
-    print(f"wrote {', '.join(str(out / f) for f in files)}")
+    print(outcome.summary)
+    if outcome.files:
+        print(f"wrote {', '.join(str(Path(args.out) / f) for f in outcome.files)}")
     return 0
-
-
-def _builtin_names() -> set[str]:
-    from .. import tasks
-
-    return {n for n in tasks.names() if not getattr(tasks.make(n), "source", None)}

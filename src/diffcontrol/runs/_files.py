@@ -1,12 +1,4 @@
-"""Run directories: a trained controller saved with its settings, its evaluation and its
-pictures, and read back, for any task (built-in, or the user's own).
-
-A run directory holds ``run.json`` (the task and the settings, written when training starts),
-``checkpoint.npz`` (for resuming), ``model.json`` (the controller, runnable with NumPy alone),
-``metrics.json`` (what was measured) and whatever pictures the task draws (its
-``write_figures`` hook). ``save_run`` writes the last three from a ``TrainResult``;
-``open_run`` reads a directory back into a ``Run``, which the task's hooks judge and draw.
-"""
+"""Run directories written and read back: ``save_run``, ``open_run`` and ``run.json``."""
 
 from __future__ import annotations
 
@@ -17,9 +9,9 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from . import io
-from .errors import ModelFileError, UnknownTaskError
-from .tasks import AnyTask, resolve
+from .. import io
+from ..errors import ModelFileError, UnknownTaskError
+from ..tasks import AnyTask, resolve
 
 MODEL_FILE = "model.json"
 METRICS_FILE = "metrics.json"
@@ -69,7 +61,7 @@ def _judged(task: AnyTask, params: Any, real: dict | None) -> tuple[AnyTask, Any
     judged on the system the model stands for (``task.base``) with the real parameters where
     its data gives them, else on what it was trained on."""
     if real and "params" in real:
-        from .identify.fitted import real_params
+        from ..identify.fitted import real_params
 
         base = getattr(task, "base", task)
         return base, real_params(base, real)
@@ -118,7 +110,7 @@ def save_run(
             say(f"final evaluation{where}: {ev.summary()}")
             run.metrics["headline"] = ev.headline()
     io.write_json(out / METRICS_FILE, {k: v for k, v in metrics.items() if k != "headline"})
-    from . import plots
+    from .. import plots
 
     plots.learning_curve(
         metrics, out / "learning_curve.png", getattr(task, "reward_threshold", None)
@@ -171,10 +163,10 @@ def open_run(
         model = metrics.get("model")
         real = model.get("real_system") if isinstance(model, dict) else None
         if real and "env_id" in real:  # read from a file: used only if it imports nothing
-            from .identify.fitted import checked_env_id
+            from ..identify.fitted import checked_env_id
 
             checked_env_id(real["env_id"], str(directory / METRICS_FILE))
-    from .training import task_params
+    from ..training import task_params
 
     task, params = _judged(task, task_params(task, config.params), real or None)
     return Run(task, io.controller_from_dict(doc), config, params, doc, metrics, real or None)
@@ -182,7 +174,7 @@ def open_run(
 
 def _task_of(doc: dict) -> AnyTask:
     """The registered task a ``model.json`` names (never imported because a file says so)."""
-    from . import tasks
+    from .. import tasks
 
     name = doc["task"]
     if name in tasks.names():
@@ -194,62 +186,6 @@ def _task_of(doc: dict) -> AnyTask:
         "with --task module:Class (in Python: open_run(dir, task=...)) — diffcontrol never "
         "imports code because a file names it"
     )
-
-
-def describe(task: AnyTask, config: Any, out: Path | str) -> str:
-    """The line ``diffcontrol train`` starts with: what will be trained, how, and where."""
-    if hasattr(config, "horizon_s"):  # an ODETrainConfig
-        return (
-            f"training {task.name}: {config.updates} updates of {config.population} closed-loop "
-            f"solve(s) over {config.horizon_s:g} s ({config.solver}, rtol {config.rtol:g}, atol "
-            f"{config.atol:g}, gradient {config.gradient}; seed {config.seed}) -> {out}"
-        )
-    return (
-        f"training {task.name}: {config.updates} updates x window {config.window} x batch "
-        f"{config.batch} (seed {config.seed}) -> {out}"
-    )
-
-
-def fitted_training(
-    task: AnyTask, fit_dir: str | Path, params: Any = None
-) -> tuple[AnyTask, tuple, dict | None, dict]:
-    """What training through the model that ``diffcontrol fit`` wrote in ``fit_dir`` needs.
-
-    Returns:
-        The task to train (a hybrid or neural model's own; ``task`` for a grey box), the
-        fitted physical parameters as ``(name, value)`` overrides (grey box), the real system
-        the data came from (``identify.real_system``; ``None`` where the data does not say) and
-        ``metrics["model"]`` with a printable ``"note"``.
-
-    Raises:
-        ConfigError: ``params`` would change the physics of a hybrid or neural model.
-        ModelFileError: the fitted file is missing, corrupt or of another task.
-    """
-    import numpy as np
-
-    from .errors import ConfigError
-    from .identify.fitted import fitted_physics, read_fitted, real_system
-
-    doc = read_fitted(fit_dir)
-    fitted_physics(task, doc)  # refuses a model of another task
-    real = real_system(doc)
-    info = {"dir": str(fit_dir), "kind": doc["model"], "real_system": real}
-    if doc["model"] == "params":
-        info["note"] = f"training through the fitted parameters in {fit_dir}"
-        return task, tuple(sorted(doc["all_parameters"].items())), real, info
-    if params:
-        raise ConfigError(
-            f"--param cannot change the physics of the {doc['model']} model in {fit_dir}; "
-            "refit it, or train with a grey-box (--model params) fit"
-        )
-    fitted = task.fitted_task(doc)
-    weights = sum(
-        np.asarray(l["weight"]).size + len(l["bias"]) for l in doc["network"].get("layers", [])
-    )
-    info["note"] = (
-        f"training through the {doc['model']} model in {fit_dir} ({weights} network weights)"
-    )
-    return fitted, (), real, info
 
 
 def read_run_file(run_dir: str | Path) -> dict | None:
