@@ -1,0 +1,36 @@
+"""Run directories: a trained controller saved with its settings, its evaluation and its
+pictures, read back, and trained into, for any task (built-in, or the user's own).
+
+A run directory holds ``run.json`` (the task, the settings and how the run was started,
+written when training starts; ``"complete"`` once its files are written), ``checkpoint.npz``
+(for resuming), ``model.json`` (the controller, runnable with NumPy alone), ``metrics.json``
+(what was measured) and whatever pictures the task draws (its ``write_figures`` hook).
+"""
+
+from ._files import (
+    METRICS_FILE,
+    MODEL_FILE,
+    Run,
+    mark_complete,
+    open_run,
+    read_run_file,
+    release_claim,
+    save_run,
+)
+from ._train import RunInterrupted, RunOutcome, describe, fitted_training, train_run
+
+__all__ = [
+    "METRICS_FILE",
+    "MODEL_FILE",
+    "Run",
+    "RunInterrupted",
+    "RunOutcome",
+    "describe",
+    "fitted_training",
+    "mark_complete",
+    "open_run",
+    "read_run_file",
+    "release_claim",
+    "save_run",
+    "train_run",
+]

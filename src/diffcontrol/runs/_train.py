@@ -1,0 +1,241 @@
+"""Training into a run directory: what ``diffcontrol train`` does, as one library call.
+
+``train_run`` resolves the task and the settings (from the arguments, or from the run's own
+``run.json`` when resuming), trains (``diffcontrol.train``), writes the run's files
+(``save_run``) and marks the run complete. Interrupted, it raises ``RunInterrupted`` with the
+command that continues it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from .. import io
+from ..errors import ConfigError
+from ..tasks import AnyTask, names, resolve
+from ._files import Run, mark_complete, read_run_file, release_claim, save_run
+
+
+class RunInterrupted(KeyboardInterrupt):
+    """Training or writing was interrupted (Ctrl-C); the message says what was kept and the
+    command that continues the run, if anything can be continued."""
+
+
+@dataclasses.dataclass
+class RunOutcome:
+    """What ``train_run`` did: the run (``None`` if it was finished before), the files it
+    wrote, and the one-line summary of ``diffcontrol train``."""
+
+    run: Run | None
+    files: list[str]
+    summary: str
+
+
+def train_run(
+    out_dir: str | Path,
+    task: str | None = None,
+    *,
+    recipe: str | None = None,
+    settings: dict[str, Any] | None = None,
+    params: tuple[tuple[str, float], ...] = (),
+    model: str | Path | None = None,
+    resume: bool = False,
+    final_eval: int | None = None,
+    animation: bool = True,
+    compile_cache: bool = True,
+    progress: Callable[[str], None] | None = None,
+    note: Callable[[str], None] | None = None,
+    inform: Callable[[str], None] | None = None,
+    command: str | None = None,
+) -> RunOutcome:
+    """Train a controller into ``out_dir`` and write its files, as ``diffcontrol train``.
+
+    Args:
+        out_dir: the run directory (new or empty; with ``resume``, the run to continue).
+        task: a task name or import path (``module:Class``); with ``resume`` it may be left
+            out, and the run's own is taken (if it is registered: nothing is imported because
+            a file names it).
+        recipe, settings: a named recipe and config field overrides (``None`` values skipped).
+        params: physical parameter overrides ``(name, value)`` (they win over a grey box's).
+        model: a directory written by ``diffcontrol fit``: train through that model, judge on
+            the system its data came from.
+        resume: continue the run in ``out_dir``; everything not given comes from its
+            ``run.json``; a finished run is left untouched.
+        final_eval, animation: the final evaluation's size (``None``: the task's default, 0
+            skips) and whether to write the animation.
+        compile_cache: use JAX's persistent compilation cache.
+        progress: called with each progress line (silence it and still get ``inform``'s
+            lines: what is trained through); ``note`` with warnings for stderr.
+        command: the command line to record in ``metrics.json``.
+
+    Raises:
+        ConfigError, RunDirectoryError, ModelFileError, TrainingDiverged, SolverFailed: bad
+            settings or files, or a failed run (its directory is given back if nothing could
+            be kept).
+        RunInterrupted: Ctrl-C; the message says how to continue.
+    """
+    from .. import _jax_setup
+    from ..training import resolve_config, train
+
+    say = progress or (lambda line: None)
+    note = note or (lambda line: print(line, file=sys.stderr))
+    out = Path(out_dir)
+    stored = read_run_file(out) if resume else None
+    invocation = (stored or {}).get("invocation") or {}
+    if task is None:
+        task = invocation.get("task") or (stored or {}).get("task")
+        if stored is None:
+            raise ConfigError("name the TASK to train (or --resume the run in --out)")
+        if task not in names():  # never import a module because a file names it
+            raise ConfigError(
+                f"{out} was trained on the task {task!r}, which is not registered; name it: "
+                f"diffcontrol train {task} --out {out} --resume"
+            )
+    model = model or invocation.get("model")
+    final_eval = invocation.get("final_eval") if final_eval is None else final_eval
+    animation = animation and invocation.get("animation") is not False
+    spec, the_task = task, resolve(task)
+
+    config_cls = type(the_task.default_config())
+    fields = {f.name for f in dataclasses.fields(config_cls)}
+    overrides = {n: v for n, v in (settings or {}).items() if v is not None}
+    foreign = sorted(n for n in overrides if n not in fields)
+    if foreign:
+        flags = ", ".join("--" + n.replace("_", "-") for n in foreign)
+        raise ConfigError(
+            f"{flags} do{'es' if len(foreign) == 1 else ''} not apply to {the_task.name!r} "
+            f"(trained with a {config_cls.__name__}); see `diffcontrol train --help` for the "
+            "settings of each kind of task"
+        )
+    fitted_params, real, model_info = (), None, None
+    if model:
+        the_task, fitted_params, real, model_info = fitted_training(the_task, model, params)
+        (inform or print)(model_info.pop("note"))
+    if fitted_params or params:
+        overrides["params"] = (*fitted_params, *params)  # params win
+    if stored is not None and recipe is None and not overrides:
+        config = config_cls.from_json(stored["config"])
+    else:
+        config = resolve_config(the_task, recipe, **overrides)
+
+    if stored is not None and stored.get("complete"):
+        io.check_same_run(out, stored, {"task": the_task.name, "config": config.to_json()})
+        return RunOutcome(None, [], f"{out} holds a finished run; nothing to resume")
+
+    cache_dir = None
+    if compile_cache and not os.environ.get("DIFFCONTROL_NO_COMPILE_CACHE"):
+        cache_dir = _jax_setup.enable_compile_cache()
+    say(describe(the_task, config, out))
+    if getattr(config, "gradient", None) == "backsolve":
+        note(
+            "note: --gradient backsolve is the continuous adjoint: its gradient is "
+            "approximate (the backward solve re-creates the state with the solver's error); "
+            "checkpoint is exact for the computed solve"
+        )
+    invocation = {"task": spec, "model": model, "final_eval": final_eval, "animation": animation}
+    named = "" if spec in _builtin_names() else f" {spec}"
+    try:
+        result = train(
+            the_task, config, out_dir=out, resume=resume, progress=say, invocation=invocation
+        )
+    except BaseException as e:
+        kept = resume or not release_claim(out)  # nothing to resume: give the dir back
+        if not isinstance(e, KeyboardInterrupt):
+            raise
+        if not kept:
+            raise RunInterrupted("interrupted before the first checkpoint; nothing was kept") from None
+        raise RunInterrupted(
+            f"interrupted; the last checkpoint is in {out}. Continue with: "
+            f"diffcontrol train{named} --out {out} --resume"
+        ) from None
+    metrics = result.metrics
+    metrics["compile_cache"] = {"dir": str(cache_dir) if cache_dir else None, **_jax_setup.cache_events()}
+    metrics["command"] = command
+    metrics["created"] = io.now_iso()
+    if model_info:
+        metrics["model"] = model_info
+    try:
+        run, files = save_run(
+            result, out, final_eval=final_eval, animation=animation, real=real, progress=say
+        )
+    except KeyboardInterrupt:
+        raise RunInterrupted(
+            f"interrupted while writing the run's files; finish them with: "
+            f"diffcontrol train{named} --out {out} --resume"
+        ) from None
+    mark_complete(out)
+    headline = run.metrics.get("headline")
+    summary = (
+        f"done in {metrics['train_seconds']:.1f} s (compile {metrics['compile_seconds']:.1f} s): "
+        f"{metrics['simulated_episodes']:.4g} simulated episodes ({metrics['simulated_steps']} "
+        f"steps)" + (f"; {headline}" if headline else "") + (" on the real system" if real else "")
+    )
+    return RunOutcome(run, files, summary)
+
+
+def _builtin_names() -> set[str]:
+    from .. import tasks
+
+    return {n for n in tasks.names() if not getattr(tasks.make(n), "source", None)}
+
+
+def describe(task: AnyTask, config: Any, out: Path | str) -> str:
+    """The line ``diffcontrol train`` starts with: what will be trained, how, and where."""
+    if hasattr(config, "horizon_s"):  # an ODETrainConfig
+        return (
+            f"training {task.name}: {config.updates} updates of {config.population} closed-loop "
+            f"solve(s) over {config.horizon_s:g} s ({config.solver}, rtol {config.rtol:g}, atol "
+            f"{config.atol:g}, gradient {config.gradient}; seed {config.seed}) -> {out}"
+        )
+    return (
+        f"training {task.name}: {config.updates} updates x window {config.window} x batch "
+        f"{config.batch} (seed {config.seed}) -> {out}"
+    )
+
+
+def fitted_training(
+    task: AnyTask, fit_dir: str | Path, params: Any = None
+) -> tuple[AnyTask, tuple, dict | None, dict]:
+    """What training through the model that ``diffcontrol fit`` wrote in ``fit_dir`` needs.
+
+    Returns:
+        The task to train (a hybrid or neural model's own; ``task`` for a grey box), the
+        fitted physical parameters as ``(name, value)`` overrides (grey box), the real system
+        the data came from (``identify.real_system``; ``None`` where the data does not say) and
+        ``metrics["model"]`` with a printable ``"note"``.
+
+    Raises:
+        ConfigError: ``params`` would change the physics of a hybrid or neural model.
+        ModelFileError: the fitted file is missing, corrupt or of another task.
+    """
+    import numpy as np
+
+    from ..identify.fitted import fitted_physics, read_fitted, real_system
+
+    doc = read_fitted(fit_dir)
+    fitted_physics(task, doc)  # refuses a model of another task
+    real = real_system(doc)
+    info = {"dir": str(fit_dir), "kind": doc["model"], "real_system": real}
+    if doc["model"] == "params":
+        info["note"] = f"training through the fitted parameters in {fit_dir}"
+        return task, tuple(sorted(doc["all_parameters"].items())), real, info
+    if params:
+        raise ConfigError(
+            f"--param cannot change the physics of the {doc['model']} model in {fit_dir}; "
+            "refit it, or train with a grey-box (--model params) fit"
+        )
+    fitted = task.fitted_task(doc)
+    weights = sum(
+        np.asarray(l["weight"]).size + len(l["bias"]) for l in doc["network"].get("layers", [])
+    )
+    info["note"] = (
+        f"training through the {doc['model']} model in {fit_dir} ({weights} network weights)"
+    )
+    return fitted, (), real, info
+
+
