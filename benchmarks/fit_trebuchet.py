@@ -85,7 +85,7 @@ def train_and_aim(task, config, params: dict, seed: int) -> dict:
     result = diffcontrol.train(task, cfg)
     seconds = time.perf_counter() - t0
     policy = io.AimingPolicy(io.controller_to_dict(result.controller, task))
-    ev = diffcontrol.evaluate_aiming(policy, task, targets=1000, seed=0, params=REAL)
+    ev = diffcontrol.evaluation.evaluate_aiming(policy, task, targets=1000, seed=0, params=REAL)
     return {"train_seconds": seconds, **ev.stats}
 
 

@@ -72,7 +72,7 @@ def test_a_diverged_member_is_dropped_not_fatal():
         ts,
         jnp.full_like(ts.members.controller.layers[0].weight, jnp.nan),
     )
-    with pytest.raises(diffcontrol.TrainingDiverged):
+    with pytest.raises(diffcontrol.errors.TrainingDiverged):
         trainer.check(ts, both, np.array([np.nan]))
 
 

@@ -176,7 +176,7 @@ def test_corrupt_checkpoint_is_a_clear_error(tmp_path):
     out = tmp_path / "run"
     train(task, cfg, out_dir=out)
     (out / "checkpoint.npz").write_bytes(b"garbage")
-    with pytest.raises(diffcontrol.ModelFileError, match="corrupt"):
+    with pytest.raises(diffcontrol.errors.ModelFileError, match="corrupt"):
         train(task, cfg, out_dir=out, resume=True)
 
 

@@ -91,7 +91,7 @@ def test_cli_train_writes_everything_and_load_aims(trebuchet_run):
     assert metrics["simulated_episodes"] == 20 * resolve_config(diffcontrol.make("trebuchet")).batch
 
     policy = diffcontrol.load(trebuchet_run)
-    assert isinstance(policy, diffcontrol.AimingPolicy)
+    assert isinstance(policy, diffcontrol.io.AimingPolicy)
     angle, weight = policy(80.0, -3.0)
     assert isinstance(angle, float) and 5 <= angle <= 85 and 30 <= weight <= 450
     angles, weights = policy(np.array([30.0, 60.0, 90.0]), np.array([0.0, 2.0, -2.0]))

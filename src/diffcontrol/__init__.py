@@ -1,11 +1,15 @@
 """diffcontrol: train controllers by differentiating through simulators.
 
-The public API::
+The public API, about twenty names (everything else lives in its module: ``diffcontrol.tasks``,
+``diffcontrol.identify``, ``diffcontrol.errors``, ...)::
 
     import diffcontrol
-    task = diffcontrol.make("pendulum")              # a registered task
+    task = diffcontrol.make("pendulum")              # a task, or "my_module:MyTask"
     result = diffcontrol.train(task)                 # BPTT through its simulator
+    result.save("runs/pendulum")                     # model.json, metrics, pictures
     policy = diffcontrol.load("runs/pendulum")       # obs (NumPy) -> Gymnasium action
+    diffcontrol.evaluate(policy, task)               # in Gymnasium's own environment
+    diffcontrol.fit(task, data, model="hybrid")      # learn the model from recorded data
 """
 
 from __future__ import annotations
@@ -15,29 +19,17 @@ from pathlib import Path as _Path
 
 __version__ = "0.1.0"
 
-from . import controllers, envs, identify, rollout, runs, systems, tasks, wrappers  # noqa: E402
-from .checks import CheckReport, check_task  # noqa: E402
+from . import envs, wrappers  # noqa: E402
+from .checks import check_task  # noqa: E402
 from .config import ODETrainConfig, TrainConfig  # noqa: E402
-from .controllers import MLPController, straight_through_sign  # noqa: E402, F401
-from .errors import (  # noqa: E402
-    ConfigError,
-    DataFileError,
-    DiffcontrolError,
-    InsufficientDataError,
-    ModelFileError,
-    RunDirectoryError,
-    SolverFailed,
-    TaskCheckError,
-    TrainingDiverged,
-    UnknownTaskError,
-)
-from .evaluation import AimResult, EvalResult, evaluate, evaluate_aiming  # noqa: E402
-from .identify import FitResult, TrajectoryData, fit, read_trajectories, record  # noqa: E402
-from .io import AimingPolicy, NumpyPolicy, StatePolicy  # noqa: E402
-from .rollout import Trajectory  # noqa: E402
+from .controllers import MLPController  # noqa: E402
+from .errors import ConfigError, DiffcontrolError  # noqa: E402
+from .evaluation import evaluate  # noqa: E402
+from .identify import fit, record  # noqa: E402
 from .runs import Run, open_run  # noqa: E402
-from .tasks import ContinuousTask, Task, make, register, resolve  # noqa: E402
-from .training import TrainResult, resolve_config, train  # noqa: E402
+from .tasks import ContinuousTask, Task, register  # noqa: E402
+from .tasks import resolve as make  # noqa: E402
+from .training import TrainResult, train  # noqa: E402
 
 envs.register_all()  # gymnasium.make("diffcontrol/<Name>-v0") for every registered task
 wrappers.register()  # gymnasium.make("diffcontrol/PendulumFriction-v0", g=..., friction=...)
@@ -62,7 +54,8 @@ def load(run_dir: str | _os.PathLike, task: Task | ContinuousTask | str | None =
     Raises:
         ModelFileError: the file is missing, corrupt, or of an unsupported version.
     """
-    from .io import read_model
+    from . import tasks
+    from .io import NumpyPolicy, StatePolicy, read_model
 
     doc = read_model(_Path(run_dir))
     if isinstance(task, str):
@@ -76,56 +69,29 @@ def load(run_dir: str | _os.PathLike, task: Task | ContinuousTask | str | None =
 
 def list_tasks() -> list[str]:
     """Names of the registered tasks."""
+    from . import tasks
+
     return tasks.names()
 
 
 __all__ = [
-    "AimResult",
-    "AimingPolicy",
-    "CheckReport",
     "ConfigError",
     "ContinuousTask",
-    "DataFileError",
     "DiffcontrolError",
-    "EvalResult",
-    "InsufficientDataError",
     "MLPController",
-    "ModelFileError",
-    "NumpyPolicy",
     "ODETrainConfig",
-    "RunDirectoryError",
-    "SolverFailed",
-    "StatePolicy",
+    "Run",
     "Task",
-    "TaskCheckError",
     "TrainConfig",
     "TrainResult",
-    "Trajectory",
-    "TrainingDiverged",
-    "TrajectoryData",
-    "UnknownTaskError",
     "check_task",
-    "controllers",
-    "envs",
     "evaluate",
-    "evaluate_aiming",
     "fit",
-    "FitResult",
-    "identify",
     "list_tasks",
     "load",
     "make",
-    "read_trajectories",
+    "open_run",
     "record",
     "register",
-    "resolve_config",
-    "rollout",
-    "runs",
-    "Run",
-    "open_run",
-    "resolve",
-    "systems",
-    "tasks",
     "train",
-    "wrappers",
 ]

@@ -186,7 +186,8 @@ def check_task(
         states: reset states (the batch of the contract checks, the episodes of parity).
         steps: steps compared from each reset state (fewer if the episode terminates).
         seed: the seed of every key, action and controller of the checks.
-        rtol, atol: the parity tolerances.
+        rtol: the parity's relative tolerance.
+        atol: the parity's absolute tolerance.
 
     Returns:
         A ``CheckReport``: the checks that passed and the largest differences from the twin.

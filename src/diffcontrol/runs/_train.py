@@ -60,17 +60,19 @@ def train_run(
         task: a task name or import path (``module:Class``); with ``resume`` it may be left
             out, and the run's own is taken (if it is registered: nothing is imported because
             a file names it).
-        recipe, settings: a named recipe and config field overrides (``None`` values skipped).
+        recipe: a named set of settings of the task (``--recipe``).
+        settings: config field overrides (``None`` values skipped).
         params: physical parameter overrides ``(name, value)`` (they win over a grey box's).
         model: a directory written by ``diffcontrol fit``: train through that model, judge on
             the system its data came from.
         resume: continue the run in ``out_dir``; everything not given comes from its
             ``run.json``; a finished run is left untouched.
-        final_eval, animation: the final evaluation's size (``None``: the task's default, 0
-            skips) and whether to write the animation.
+        final_eval: the final evaluation's size (``None``: the task's default; 0 skips).
+        animation: whether to write the animation.
         compile_cache: use JAX's persistent compilation cache.
-        progress: called with each progress line (silence it and still get ``inform``'s
-            lines: what is trained through); ``note`` with warnings for stderr.
+        progress: called with each progress line.
+        note: called with warnings meant for stderr.
+        inform: called with what is trained through (even when ``progress`` is silent).
         command: the command line to record in ``metrics.json``.
 
     Raises:
@@ -148,13 +150,18 @@ def train_run(
         if not isinstance(e, KeyboardInterrupt):
             raise
         if not kept:
-            raise RunInterrupted("interrupted before the first checkpoint; nothing was kept") from None
+            raise RunInterrupted(
+                "interrupted before the first checkpoint; nothing was kept"
+            ) from None
         raise RunInterrupted(
             f"interrupted; the last checkpoint is in {out}. Continue with: "
             f"diffcontrol train{named} --out {out} --resume"
         ) from None
     metrics = result.metrics
-    metrics["compile_cache"] = {"dir": str(cache_dir) if cache_dir else None, **_jax_setup.cache_events()}
+    metrics["compile_cache"] = {
+        "dir": str(cache_dir) if cache_dir else None,
+        **_jax_setup.cache_events(),
+    }
     metrics["command"] = command
     metrics["created"] = io.now_iso()
     if model_info:
@@ -237,5 +244,3 @@ def fitted_training(
         f"training through the {doc['model']} model in {fit_dir} ({weights} network weights)"
     )
     return fitted, (), real, info
-
-
