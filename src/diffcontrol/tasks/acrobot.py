@@ -46,9 +46,9 @@ class Acrobot(Task):
     The defaults train a population of 4 controllers side by side (``population=4``): from
     some initialisations the untrained controller rests where the ``pump`` gradient is about
     zero and never starts swinging (training seed 3 alone: -500); the best of four
-    always swings up (Gymnasium, seeds 0-99: -81 to -85 over training seeds 0-4). That still
+    swung up on every training seed 0-4 (Gymnasium, seeds 0-99: -81 to -85). That still
     misses the issue's -80 by 1 to 5 (the hand policy ``sign(theta2_dot - 0.4 theta1_dot)``:
-    -78). Tried without gain (the same -80 to -86 band on seeds 0-4): population 8; goal weight
+    -78). Tried on some or all of seeds 0-4, none at -80 on every seed: population 8; goal weight
     ``w`` 4, 6, 10 or 15 and softness ``s`` 1; 100-step windows; the power with the first
     link's share weighted up, ``-tau (theta2_dot - k theta1_dot)``, ``k`` 0.25 or 0.4; the
     power gated off above 35 J; a lower learning rate over twice the updates. Note that the
