@@ -1,54 +1,65 @@
-"""Benchmark of the Acrobot: `Acrobot-v1` trained with the task's defaults, seeds 0-4.
+"""Benchmark of `acrobot`: BPTT with the task's defaults on five training seeds.
 
-Each seed is trained with `diffcontrol.train(task, config)` (the task's `default_config()`,
-loss `pump`), written out as `model.json` (`io.controller_to_dict`), run with NumPy alone
-(`io.NumpyPolicy`) and evaluated in Gymnasium's own `Acrobot-v1` on reset seeds 0-99
-(`diffcontrol.evaluate`). The issue's bar: a mean return >= -80 for every training seed
-(rl-zoo's DQN: -76.6), each training in < 60 s on one core. Run it pinned to one core:
+Each run is the real command line, `diffcontrol train acrobot --out DIR --seed S
+--no-compile-cache`, in a fresh process pinned to one core (`taskset -c 0`), so
+`train_seconds` includes compiling everything from scratch. Each trained controller is then
+evaluated in Gymnasium's own `Acrobot-v1` on reset seeds 0-99 (the CLI's final evaluation,
+`diffcontrol.evaluate`, run with NumPy alone on the written `model.json`).
+
+The bar (the issue's): a mean return >= -80 for every training seed, each trained in under
+60 s on one core. For scale: Gymnasium's `reward_threshold` is -100, rl-zoo's DQN scores -76.6.
 
     taskset -c 0 python benchmarks/acrobot.py
-    taskset -c 0 python benchmarks/acrobot.py --seeds 2
+    taskset -c 0 python benchmarks/acrobot.py --seeds 10
 
-`train s` is `train_seconds` of `metrics` (wall clock, compilation and the in-simulator
-evaluation points included; every seed compiles afresh, since the seed is part of the
-compiled configuration); `compile s` is the part spent compiling. Prints a table and writes
-benchmarks/results/acrobot.json (machine, date, every figure).
+Prints a table and writes benchmarks/results/acrobot.json (machine, date, every figure).
+Other processes may share the machine, which inflates the seconds, never the returns.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import statistics
 import sys
+import tempfile
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from _common import machine  # noqa: E402
+from _common import machine, train_cli  # noqa: E402
 
-import diffcontrol  # noqa: E402
-from diffcontrol import io  # noqa: E402
-
-TARGET = -80.0
+TASK = "acrobot"
+TARGET_RETURN = -80.0
+TARGET_SECONDS = 60.0
 DQN_RL_ZOO = -76.6
 
 
-def run(seed: int, episodes: int) -> dict:
-    task = diffcontrol.make("acrobot")
-    config = task.default_config().replace(seed=seed)
-    result = diffcontrol.train(task, config)
-    policy = io.NumpyPolicy(io.controller_to_dict(result.controller, task))
-    ev = diffcontrol.evaluate(policy, task, episodes=episodes, seed=0)
-    m = result.metrics
+def run(seed: int, workdir: Path) -> dict:
+    """Train one seed with the defaults and evaluate it on Gymnasium's seeds 0-99."""
+    out = workdir / f"{TASK}-{seed}"
+    extra = ["--no-compile-cache", "--no-animation", "--final-eval", "100"]
+    metrics, process_seconds = train_cli(TASK, seed, out, extra)
+    ev = metrics["gym_eval"]
+    chosen = metrics["returned_update"]
     return {
         "seed": seed,
-        "train_seconds": m["train_seconds"],
-        "compile_seconds": m["compile_seconds"],
-        "simulated_steps": m["simulated_steps"],
-        "simulated_episodes": m["simulated_episodes"],
-        "returned_update": m.get("returned_update"),
-        "config": config.to_json(),
-        "gym_eval": ev.to_json(),
+        "train_seconds": metrics["train_seconds"],
+        "compile_seconds": metrics["compile_seconds"],
+        "process_seconds": process_seconds,
+        "simulated_episodes": metrics["simulated_episodes"],
+        "simulated_steps": metrics["simulated_steps"],
+        "returned_update": metrics["returned_update"],
+        "returned_member": next(
+            (c.get("best_member") for c in metrics["curve"] if c["update"] == chosen), None
+        ),
+        "gym_env": ev["env_id"],
+        "eval_episodes": ev["episodes"],
+        "eval_mean": ev["mean_return"],
+        "eval_std": ev["std_return"],
+        "eval_min": ev["min_return"],
+        "eval_mean_length": ev["mean_length"],
+        "eval_returns": ev["returns"],
     }
 
 
@@ -57,43 +68,56 @@ def main() -> None:
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("--seeds", type=int, default=5, help="training seeds 0..N-1 (default 5)")
-    parser.add_argument("--episodes", type=int, default=100, help="Gymnasium seeds 0..N-1")
     parser.add_argument("--out", type=Path, default=HERE / "results" / "acrobot.json")
     args = parser.parse_args()
 
-    header = f"{'seed':>4} {'train s':>8} {'compile s':>9}  {'Gymnasium return (seeds 0-99)':<30}"
+    header = (
+        f"{'seed':>4} {'train s':>8} {'compile s':>9} {'process s':>9} {'update':>6} "
+        f"{'Gymnasium return (seeds 0-99)':>30} {'min':>6} {'steps':>6}"
+    )
     print(header)
     print("-" * len(header))
     rows = []
-    for seed in range(args.seeds):
-        r = run(seed, args.episodes)
-        rows.append(r)
-        ev = r["gym_eval"]
-        print(
-            f"{seed:>4} {r['train_seconds']:>8.1f} {r['compile_seconds']:>9.1f}  "
-            f"{ev['mean_return']:>7.1f} ± {ev['std_return']:<6.1f}",
-            flush=True,
-        )
-    means = [r["gym_eval"]["mean_return"] for r in rows]
+    with tempfile.TemporaryDirectory() as tmp:
+        for seed in range(args.seeds):
+            r = run(seed, Path(tmp))
+            rows.append(r)
+            print(
+                f"{seed:>4} {r['train_seconds']:>8.1f} {r['compile_seconds']:>9.1f} "
+                f"{r['process_seconds']:>9.1f} {r['returned_update']:>6} "
+                f"{r['eval_mean']:>21.2f} ± {r['eval_std']:<6.2f} {r['eval_min']:>6.1f} "
+                f"{r['eval_mean_length']:>6.1f}",
+                flush=True,
+            )
+    means = [r["eval_mean"] for r in rows]
+    seconds = [r["train_seconds"] for r in rows]
     summary = {
-        "target": TARGET,
+        "task": TASK,
+        "seeds": len(rows),
+        "median_eval_mean": statistics.median(means),
+        "worst_eval_mean": min(means),
+        "best_eval_mean": max(means),
+        "median_train_seconds": statistics.median(seconds),
+        "max_train_seconds": max(seconds),
+        "target_return": TARGET_RETURN,
+        "target_seconds": TARGET_SECONDS,
         "dqn_rl_zoo": DQN_RL_ZOO,
-        "worst_mean_return": min(means),
-        "best_mean_return": max(means),
-        "seeds_at_target": sum(m >= TARGET for m in means),
-        "max_train_seconds": max(r["train_seconds"] for r in rows),
+        "seeds_meeting_target": sum(
+            m >= TARGET_RETURN and s < TARGET_SECONDS for m, s in zip(means, seconds)
+        ),
     }
     print(
-        f"\nworst {summary['worst_mean_return']:.1f}, best {summary['best_mean_return']:.1f}; "
-        f"{summary['seeds_at_target']}/{len(rows)} seeds >= {TARGET:g} (DQN, rl-zoo: "
-        f"{DQN_RL_ZOO}); slowest training {summary['max_train_seconds']:.1f} s"
+        f"\nworst {summary['worst_eval_mean']:.2f}, median {summary['median_eval_mean']:.2f}; "
+        f"train s median {summary['median_train_seconds']:.1f}, max "
+        f"{summary['max_train_seconds']:.1f}; {summary['seeds_meeting_target']}/{len(rows)} "
+        f"seeds meet >= {TARGET_RETURN:g} in < {TARGET_SECONDS:g} s (DQN, rl-zoo: {DQN_RL_ZOO})"
     )
     args.out.parent.mkdir(parents=True, exist_ok=True)
     note = (
-        "run pinned with `taskset -c 0`; the machine's cores are shared with other processes, "
-        "so seconds (compilation most) vary with their load"
+        "run pinned with `taskset -c 0`; the machine's 2 cores are shared with other processes, "
+        "so seconds (compilation most) are inflated by their load"
     )
-    doc = {"machine": machine(), "note": note, "task": "acrobot", "runs": rows, "summary": summary}
+    doc = {"machine": machine(), "note": note, "runs": rows, "summary": summary}
     args.out.write_text(json.dumps(doc, indent=1) + "\n")
     print(f"wrote {args.out}")
 

@@ -210,9 +210,11 @@ def test_frames_draw_a_recording(task):
 
 @pytest.mark.slow
 def test_learns_to_swing_up(task):
-    """A short run (a third of the default updates) beats Gymnasium's reward threshold (-100)
-    in Gymnasium's own environment; the full default run is in benchmarks/acrobot.py."""
-    config = task.default_config().replace(updates=60, eval_every=15, eval_episodes=64)
+    """A shorter run (60 % of the default updates, the default population of 4) beats
+    Gymnasium's reward threshold (-100) in Gymnasium's own environment; the full default run
+    is in benchmarks/acrobot.py. (60 updates with 64 evaluation episodes kept a member that
+    stalls on some starts: -148.)"""
+    config = task.default_config().replace(updates=90, eval_every=15, eval_episodes=128)
     result = diffcontrol.train(task, config)
     policy = io.NumpyPolicy(io.controller_to_dict(result.controller, task))
     ev = diffcontrol.evaluate(policy, task, episodes=20, seed=0)
