@@ -68,7 +68,9 @@ def rollout(recording: Recording, task: Task, path: str | Path) -> Path:
     states, actions = recording.states, recording.actions
     t = np.arange(states.shape[0]) * recording.dt
     labels = list(task.state_labels) or [f"state {i}" for i in range(states.shape[1])]
-    alabels = list(task.action_labels) or [f"action {i}" for i in range(actions.shape[1])]
+    alabels = list(task.action_labels)
+    if len(alabels) != actions.shape[1]:  # e.g. the one-hot choices of a discrete head
+        alabels = [f"action {i}" for i in range(actions.shape[1])]
     n = states.shape[1] + actions.shape[1]
     fig, axes = plt.subplots(n, 1, figsize=(7, 1.6 * n + 0.6), sharex=True)
     for i, ax in enumerate(axes[: states.shape[1]]):

@@ -21,7 +21,7 @@ from ..errors import ConfigError, InsufficientDataError
 from ..tasks._base import Task
 from ._shooting import NETWORK_MODELS, FitResult, adam_fit, check_settings
 from .network import Correction
-from .steps import _windows, check_data, predict
+from .steps import _windows, check_data, predict, task_actions
 
 MIN_TRANSITIONS = {"hybrid": 200, "neural": 1000}
 """The fewest recorded transitions a network model is fitted to (a Pendulum-v1 episode has
@@ -173,6 +173,7 @@ def _fit_model(task, data, model_type, params, window, steps, learning_rate, hid
     f64 = lambda tree: jax.tree.map(lambda x: jnp.asarray(x, jnp.float64), tree)  # noqa: E731
     physics = f64(task.default_params() if params is None else params)
     obs, actions, next_obs = (np.asarray(a, np.float64) for a in data.transitions())
+    actions = np.asarray(task_actions(task, actions), np.float64)  # a Discrete index: the task's
     to_state = jax.jit(jax.vmap(task.state_from_observation))
     states, next_states = np.asarray(to_state(obs)), np.asarray(to_state(next_obs))
     if model_type == "hybrid":

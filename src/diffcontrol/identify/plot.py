@@ -18,7 +18,7 @@ import numpy as np  # noqa: E402
 
 from ..io import write_figure  # noqa: E402
 from .data import TrajectoryData  # noqa: E402
-from .steps import predict  # noqa: E402
+from .steps import predict, task_actions  # noqa: E402
 
 Predictor = Callable[[np.ndarray, np.ndarray], np.ndarray]
 """``(first observation [k], actions [T, m]) -> predicted observations [T, k]``, open loop."""
@@ -35,7 +35,8 @@ def task_predictor(task: Any, params: Any) -> Predictor:
     def run(obs0: np.ndarray, actions: np.ndarray) -> np.ndarray:
         with jax.enable_x64(True):
             p = jax.tree.map(lambda x: jnp.asarray(x, jnp.float64), params)
-            return np.asarray(open_loop(p, jnp.asarray(obs0), jnp.asarray(actions)))
+            acts = jnp.asarray(task_actions(task, actions))
+            return np.asarray(open_loop(p, jnp.asarray(obs0), acts))
 
     return run
 

@@ -98,15 +98,29 @@ def check_data(task: Any, data: TrajectoryData) -> None:
         )
 
 
+def task_actions(task: Any, actions: np.ndarray) -> np.ndarray:
+    """Recorded actions [T, m] as the task's own action vectors: a Gymnasium ``Discrete``
+    index becomes what the task's step takes (``task.action_from_gym``: the push ``±1`` of a
+    sign head, the one-hot choice of an argmax head); other actions are kept as recorded."""
+    from gymnasium import spaces
+
+    if not isinstance(task.action_space(), spaces.Discrete):
+        return actions
+    vectors = [task.action_from_gym(int(a[0])) for a in np.asarray(actions)]
+    return np.stack(vectors) if vectors else np.zeros((0, task.action_size))
+
+
 def _windows(task, data: TrajectoryData, window: int):
     """Every start of every episode with ``window`` recorded steps after it: the start
-    states [N, n], actions [N, window, m] and recorded observations [N, window, k]."""
+    states [N, n], actions [N, window, m] (the task's own action vectors) and recorded
+    observations [N, window, k]."""
     starts, actions, targets = [], [], []
     for ep in data.episodes():
         n = len(ep.actions)
+        acts = task_actions(task, ep.actions)
         for t in range(n - window + 1):
             starts.append(ep.observations[t])
-            actions.append(ep.actions[t : t + window])
+            actions.append(acts[t : t + window])
             targets.append(ep.observations[t + 1 : t + window + 1])
     if not starts:
         return None
