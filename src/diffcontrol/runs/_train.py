@@ -16,12 +16,12 @@ from pathlib import Path
 from typing import Any
 
 from .. import io
-from ..errors import ConfigError
+from ..errors import ConfigError, Interrupted
 from ..tasks import AnyTask, names, resolve
 from ._files import Run, mark_complete, read_run_file, release_claim, save_run
 
 
-class RunInterrupted(KeyboardInterrupt):
+class RunInterrupted(Interrupted):
     """Training or writing was interrupted (Ctrl-C); the message says what was kept and the
     command that continues the run, if anything can be continued."""
 
@@ -148,13 +148,18 @@ def train_run(
         if not isinstance(e, KeyboardInterrupt):
             raise
         if not kept:
-            raise RunInterrupted("interrupted before the first checkpoint; nothing was kept") from None
+            raise RunInterrupted(
+                "interrupted before the first checkpoint; nothing was kept"
+            ) from None
         raise RunInterrupted(
             f"interrupted; the last checkpoint is in {out}. Continue with: "
             f"diffcontrol train{named} --out {out} --resume"
         ) from None
     metrics = result.metrics
-    metrics["compile_cache"] = {"dir": str(cache_dir) if cache_dir else None, **_jax_setup.cache_events()}
+    metrics["compile_cache"] = {
+        "dir": str(cache_dir) if cache_dir else None,
+        **_jax_setup.cache_events(),
+    }
     metrics["command"] = command
     metrics["created"] = io.now_iso()
     if model_info:
@@ -237,5 +242,3 @@ def fitted_training(
         f"training through the {doc['model']} model in {fit_dir} ({weights} network weights)"
     )
     return fitted, (), real, info
-
-
