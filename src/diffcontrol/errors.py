@@ -58,3 +58,8 @@ class TrainingWarning(UserWarning):
     """A training run that finished but likely did not do what was meant: a loss that does
     not depend on the controller, a loss that never moves, or ``keep_best`` returning the
     untrained controller. Also listed in ``TrainResult.metrics["warnings"]``."""
+
+
+class Interrupted(KeyboardInterrupt):
+    """A long command (a training run, a comparison) was interrupted (Ctrl-C); the message
+    says what was kept and the command that continues it. The CLI prints it and exits 130."""

@@ -1,8 +1,9 @@
 """The ``diffcontrol`` command line. It sits on top of everything; nothing imports it.
 
-One module a group of commands: ``_train`` (train), ``_runs`` (list, evaluate, animate, aim),
-``_compare`` (compare), ``_data`` (record), ``_fit`` (fit); ``_args`` holds the argument types
-and the one-line-error parser.
+Each command parses its options, makes one library call and prints what it returns. One module
+a group of commands: ``_train`` (train), ``_runs`` (list, evaluate, animate, aim), ``_compare``
+(compare), ``_data`` (record), ``_fit`` (fit, loop); ``_args`` holds the option specs, the
+argument types and the one-line-error parser.
 """
 
 from __future__ import annotations
@@ -11,8 +12,8 @@ import argparse
 import errno
 import sys
 
-from ..errors import DiffcontrolError
-from . import _compare, _data, _fit, _loop, _runs, _train
+from ..errors import DiffcontrolError, Interrupted
+from . import _compare, _data, _fit, _runs, _train
 from ._args import EXIT_USAGE, Parser
 
 
@@ -26,13 +27,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
     sub.required = True
-
-    _runs.add_parsers(sub)
-    _train.add_parser(sub)
-    _compare.add_parser(sub)
-    _data.add_parser(sub)
-    _fit.add_parser(sub)
-    _loop.add_parser(sub)
+    for module in (_runs, _train, _compare, _data, _fit):
+        module.add_parsers(sub)
     return parser
 
 
@@ -45,16 +41,20 @@ COMMANDS = {
     "compare": _compare.cmd_compare,
     "record": _data.cmd_record,
     "fit": _fit.cmd_fit,
-    "loop": _loop.cmd_loop,
+    "loop": _fit.cmd_loop,
 }
 
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``diffcontrol`` command; returns the exit status."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    argv = sys.argv[1:] if argv is None else list(argv)
+    args = build_parser().parse_args(argv)
+    args.command_line = " ".join(["diffcontrol", *argv])  # to continue a long command
     try:
         return COMMANDS[args.command](args)
+    except Interrupted as e:
+        print(f"\n{e}", file=sys.stderr)
+        return 130
     except DiffcontrolError as e:
         print(f"diffcontrol {args.command}: error: {e}", file=sys.stderr)
         return EXIT_USAGE

@@ -1,13 +1,24 @@
-"""Argument types and the parser class shared by every subcommand."""
+"""The parser class, the argument types, and ``add``: options from compact specs.
+
+A spec is ``(flag, kind, default, metavar, help)``: ``flag`` is ``--name`` (its ``dest`` is
+``name`` with ``_``) or a positional's ``dest``; ``kind`` is a type function (``str``,
+``positive_int``, ...), ``FLAG`` (``store_true``), ``[type]`` (repeatable: a list) or a tuple of
+choices; ``default`` is the value, or ``REQUIRED``; a positional whose default is not
+``REQUIRED`` is optional. The options several commands share are specs here. The commands
+list their specs as tables, with ruff's formatter off, so that an option is a line or two.
+"""
 
 from __future__ import annotations
 
 import argparse
 import math
 import sys
-from typing import NoReturn
+from collections.abc import Callable
+from typing import Any, NoReturn
 
 EXIT_USAGE = 2
+FLAG = "store_true"
+REQUIRED = object()
 
 
 class Parser(argparse.ArgumentParser):
@@ -18,34 +29,45 @@ class Parser(argparse.ArgumentParser):
         raise SystemExit(EXIT_USAGE)
 
 
-def positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if value <= 0:
-        raise argparse.ArgumentTypeError(f"must be a positive integer, got {value}")
-    return value
+def add(parser: Any, *specs: tuple) -> None:
+    """Add one argument to ``parser`` (or an argument group) per spec (see the module doc)."""
+    for flag, kind, default, metavar, help in specs:
+        if kind == FLAG:
+            kw: dict[str, Any] = {"action": FLAG}
+        elif isinstance(kind, list):
+            kw = {"action": "append", "type": kind[0], "metavar": metavar}
+        else:
+            kw = {"choices" if isinstance(kind, tuple) else "type": kind, "metavar": metavar}
+        if default is not REQUIRED:
+            kw.update(default=default, **({} if flag.startswith("-") else {"nargs": "?"}))
+        elif flag.startswith("-"):
+            kw["required"] = True
+        parser.add_argument(flag, help=help, **kw)
 
 
-def nonneg_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0, got {value}")
-    return value
+def _number(cast: Callable, expected: str, ok: Callable, must: str) -> Callable[[str], Any]:
+    """A type function: ``cast`` the text, refuse what is not ``ok``, with messages that say
+    what was expected."""
+
+    def parse(text: str) -> Any:
+        try:
+            value = cast(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {expected}, got {text!r}") from None
+        if not ok(value):
+            got = value if cast is int else repr(text)
+            raise argparse.ArgumentTypeError(f"must be {must}, got {got}")
+        return value
+
+    return parse
 
 
-def finite_float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"must be a finite number, got {text!r}")
-    return value
+positive_int = _number(int, "a positive integer", lambda v: v > 0, "a positive integer")
+nonneg_int = _number(int, "an integer >= 0", lambda v: v >= 0, ">= 0")
+finite_float = _number(float, "a number", math.isfinite, "a finite number")
+positive_float = _number(float, "a number", lambda v: 0 < v < math.inf, "a finite positive number")
+nonneg_float = _number(float, "a number", lambda v: 0 <= v < math.inf, "a finite number >= 0")
+fraction = _number(float, "a number", lambda v: 0 <= v < 1, "a fraction in [0, 1)")
 
 
 def widths(text: str) -> tuple[int, ...]:
@@ -62,18 +84,9 @@ def widths(text: str) -> tuple[int, ...]:
 
 def yes_no(text: str) -> bool:
     value = text.strip().lower()
-    if value in ("yes", "true", "1", "on"):
-        return True
-    if value in ("no", "false", "0", "off"):
-        return False
+    if value in ("yes", "true", "1", "on", "no", "false", "0", "off"):
+        return value in ("yes", "true", "1", "on")
     raise argparse.ArgumentTypeError(f"expected yes or no, got {text!r}")
-
-
-def positive_float(text: str) -> float:
-    value = finite_float(text)
-    if value <= 0:
-        raise argparse.ArgumentTypeError(f"must be a positive number, got {text!r}")
-    return value
 
 
 def param(text: str) -> tuple[str, float]:
@@ -90,10 +103,32 @@ def names(text: str) -> list[str]:
     return names
 
 
-def add_common(p: argparse.ArgumentParser) -> None:
-    p.add_argument(
-        "--no-compile-cache",
-        action="store_true",
-        help="do not use JAX's persistent compilation cache (also: DIFFCONTROL_NO_COMPILE_CACHE=1)",
-    )
-    p.add_argument("--quiet", action="store_true", help="print only the final summary")
+def pick(args: argparse.Namespace, names: str) -> dict[str, Any]:
+    """The options ``names`` (space-separated) as keyword arguments of the library call."""
+    return {name: getattr(args, name) for name in names.split()}
+
+
+def say(args: argparse.Namespace) -> Callable[[str], None] | None:
+    """The progress printer of a command: ``None`` with ``--quiet``."""
+    return None if args.quiet else (lambda line: print(line, flush=True))
+
+
+# Options shared by several commands.
+# fmt: off
+TASK_HELP = ("a task name (`diffcontrol list`), or your own task as module:Class (from the "
+             "current directory) or an entry point of the diffcontrol.tasks group")
+TASK = ("task", str, REQUIRED, "TASK", TASK_HELP)
+RUN_DIR = ("run_dir", str, REQUIRED, "DIR", "a directory written by `diffcontrol train`")
+RUN_TASK = ("--task", str, None, "TASK", "the run's task when it is not a built-in one: its "
+            "import path (module:Class) or entry-point name; diffcontrol never imports code "
+            "because a file names it")
+JSON = ("--json", FLAG, False, None, "print the result as JSON")
+QUIET = ("--quiet", FLAG, False, None, "print only the final summary")
+NO_COMPILE_CACHE = ("--no-compile-cache", FLAG, False, None, "do not use JAX's persistent "
+                    "compilation cache (also: DIFFCONTROL_NO_COMPILE_CACHE=1)")
+# fmt: on
+
+
+def env_arg(help: str) -> tuple:
+    """``--env-arg NAME=VALUE`` (repeatable), with the command's own help."""
+    return ("--env-arg", [param], [], "NAME=VALUE", help)

@@ -6,17 +6,11 @@ import argparse
 import time
 from typing import Any
 
-from ._args import finite_float, param, positive_int
+from . import _args as a
+from ._args import FLAG, REQUIRED, add
 
 
-def nonneg_float(text: str) -> float:
-    value = finite_float(text)
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be a number >= 0, got {text!r}")
-    return value
-
-
-def add_parser(sub: Any) -> None:
+def add_parsers(sub: Any) -> None:
     p = sub.add_parser(
         "record",
         help="record trajectories from a Gymnasium environment (CSV or NPZ)",
@@ -33,60 +27,38 @@ def add_parser(sub: Any) -> None:
             "must match the task's and the columns are named by the task."
         ),
     )
-    p.add_argument("env_id", metavar="ENV_ID", help="a Gymnasium environment id or a task name")
-    p.add_argument("--task", default=None, help="the task whose real system ENV_ID is")
-    p.add_argument(
-        "--episodes", type=positive_int, required=True, metavar="N", help="episodes (throws)"
+    # fmt: off
+    add(p,
+        ("env_id", str, REQUIRED, "ENV_ID", "a Gymnasium environment id or a task name"),
+        ("--task", str, None, "TASK", "the task whose real system ENV_ID is"),
+        ("--episodes", a.positive_int, REQUIRED, "N", "episodes (throws)"),
+        ("--controller", str, None, "DIR",
+         "a run directory (or model.json) of `diffcontrol train`; random actions if omitted"),
+        ("--seed", int, 0, "S", "first reset seed (0)"),
+        a.env_arg("a numeric keyword argument of gymnasium.make (e.g. g=9.0), or a parameter of "
+                  "a task's own system (e.g. drag_coefficient=1.5); repeatable"),
+        ("--noise-m", a.nonneg_float, None, "SD",
+         "trebuchet only: Gaussian noise (m) on the recorded distances (0)"),
+        ("--max-steps", a.positive_int, None, "N", "cut episodes at N"),
+        ("--out", str, None, "FILE", "a .csv or .npz file"),
+        ("--force", FLAG, False, None, "overwrite FILE if it exists"),
+        a.QUIET,
     )
-    p.add_argument(
-        "--controller",
-        metavar="DIR",
-        default=None,
-        help="a run directory (or model.json) of `diffcontrol train`; random actions if omitted",
-    )
-    p.add_argument("--seed", type=int, default=0, metavar="S", help="first reset seed (0)")
-    p.add_argument(
-        "--env-arg",
-        type=param,
-        action="append",
-        default=[],
-        metavar="NAME=VALUE",
-        help="a numeric keyword argument of gymnasium.make (e.g. g=9.0), or a parameter of a "
-        "task's own system (e.g. drag_coefficient=1.5); repeatable",
-    )
-    p.add_argument(
-        "--noise-m",
-        type=nonneg_float,
-        default=None,
-        metavar="SD",
-        help="trebuchet only: Gaussian noise (m) on the recorded distances (0)",
-    )
-    p.add_argument(
-        "--max-steps", type=positive_int, default=None, metavar="N", help="cut episodes at N"
-    )
-    p.add_argument("--out", metavar="FILE", default=None, help="a .csv or .npz file")
-    p.add_argument("--force", action="store_true", help="overwrite FILE if it exists")
-    p.add_argument("--quiet", action="store_true", help="print only the final summary")
+    # fmt: on
 
 
 def cmd_record(args: argparse.Namespace) -> int:
     from .. import identify, tasks
 
-    task = tasks.resolve(args.task) if args.task else None
-    say = (lambda line: None) if args.quiet else print
     t0 = time.perf_counter()
     data, out = identify.record_data(
         args.env_id,
         args.episodes,
         args.out,
-        task=task,
-        force=args.force,
+        task=tasks.resolve(args.task) if args.task else None,
         env_kwargs=dict(args.env_arg),
-        controller=args.controller,
-        seed=args.seed,
-        max_steps=args.max_steps,
-        noise_m=args.noise_m,
-        progress=say,
+        progress=a.say(args),
+        **a.pick(args, "force controller seed max_steps noise_m"),
     )
     print(f"wrote {out}: {identify.describe(data)} ({time.perf_counter() - t0:.1f} s)")
     return 0

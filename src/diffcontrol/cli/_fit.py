@@ -1,29 +1,18 @@
-"""``diffcontrol fit``: fit a model of a task's system to recorded data (``identify.fit_dir``)."""
+"""``diffcontrol fit`` and ``diffcontrol loop``: a model of a task's system learnt from data
+(``identify.fit_dir``), and record -> fit -> train on a real system (``identify.loop``)."""
 
 from __future__ import annotations
 
 import argparse
 from typing import Any
 
-from ._args import finite_float, names, nonneg_int, positive_float, positive_int, widths
+from . import _args as a
+from ._args import FLAG, REQUIRED, add
 
 MODELS = ("params", "hybrid", "neural")
 
 
-def holdout_fraction(text: str) -> float:
-    value = finite_float(text)
-    if not 0 <= value < 1:
-        raise argparse.ArgumentTypeError(f"must be a fraction in [0, 1), got {text!r}")
-    return value
-
-
-TASK_HELP = (
-    "a task name (`diffcontrol list`), or your own task as module:Class (from the current "
-    "directory) or an entry point of the diffcontrol.tasks group"
-)
-
-
-def add_parser(sub: Any) -> None:
+def add_parsers(sub: Any) -> None:
     p = sub.add_parser(
         "fit",
         help="fit a model of the task's system to recorded trajectories (or throws)",
@@ -39,34 +28,55 @@ def add_parser(sub: Any) -> None:
             "holds recorded throws and the distances are fitted."
         ),
     )
-    p.add_argument("task", metavar="TASK", help=TASK_HELP)
-    p.add_argument("--data", required=True, metavar="FILE", help="recorded trajectories/throws")
-    p.add_argument("--model", required=True, choices=MODELS, help="grey box, hybrid or neural")
-    p.add_argument("--out", required=True, metavar="DIR", help="output directory")
-    p.add_argument(
-        "--params",
-        type=names,
-        default=None,
-        metavar="NAMES",
-        help="--model params: the parameters to fit (default: the task's, e.g. g,friction)",
+    # fmt: off
+    add(p,
+        a.TASK,
+        ("--data", str, REQUIRED, "FILE", "recorded trajectories/throws"),
+        ("--model", MODELS, REQUIRED, None, "grey box, hybrid or neural"),
+        ("--out", str, REQUIRED, "DIR", "output directory"),
+        ("--params", a.names, None, "NAMES",
+         "--model params: the parameters to fit (default: the task's, e.g. g,friction)"),
+        ("--hidden", a.widths, (32, 32), "W,W", "(32,32)"),
+        ("--seed", a.nonneg_int, 0, "S", "the network's initial weights (0)"),
+        ("--window", a.positive_int, 10, "N", "steps (10)"),
+        ("--steps", a.nonneg_int, None, "N", "Adam steps"),
+        ("--lm-steps", a.nonneg_int, 20, "N", "Levenberg-Marquardt (20)"),
+        ("--learning-rate", a.positive_float, None, "LR", "Adam learning rate"),
+        ("--holdout", a.fraction, 0.2, "F",
+         "fraction of the episodes (throws) held out, the last ones (0.2; 0 for none)"),
+        ("--force", FLAG, False, None, "replace DIR/fitted.json if it exists"),
+        a.QUIET,
     )
-    p.add_argument("--hidden", type=widths, default=(32, 32), metavar="W,W", help="(32,32)")
-    p.add_argument("--seed", type=nonneg_int, default=0, help="the network's initial weights (0)")
-    p.add_argument("--window", type=positive_int, default=10, metavar="N", help="steps (10)")
-    p.add_argument("--steps", type=nonneg_int, default=None, metavar="N", help="Adam steps")
-    p.add_argument(
-        "--lm-steps", type=nonneg_int, default=20, metavar="N", help="Levenberg-Marquardt (20)"
+    # fmt: on
+    p = sub.add_parser(
+        "loop",
+        help="alternate record -> fit -> train on a real system for a few rounds",
+        description=(
+            "Learn a controller for a system you can only run: record N episodes of the real "
+            "environment ENV_ID (random actions at first), fit a model of TASK's system to all "
+            "data so far, train a controller through it, evaluate it on the real environment, "
+            "record N more episodes with it, and repeat for R rounds. Writes DIR/data.csv, "
+            "DIR/round_K/{fit,run}/, DIR/loop.json and DIR/loop.png; the last round's "
+            "controller is DIR/round_R/run/model.json."
+        ),
     )
-    p.add_argument("--learning-rate", type=positive_float, default=None, metavar="LR")
-    p.add_argument(
-        "--holdout",
-        type=holdout_fraction,
-        default=0.2,
-        metavar="F",
-        help="fraction of the episodes (throws) held out, the last ones (0.2; 0 for none)",
+    # fmt: off
+    add(p,
+        a.TASK,
+        ("--out", str, REQUIRED, "DIR", "output directory"),
+        ("--env", str, None, "ENV_ID", "the real system (task's own)"),
+        a.env_arg("a numeric argument of the real environment (repeatable), e.g. g=12"),
+        ("--model", MODELS, "params", None, "what to fit (params)"),
+        ("--params", a.names, None, "NAMES", "to fit"),
+        ("--rounds", a.positive_int, 3, "R", "rounds (3)"),
+        ("--episodes", a.positive_int, 2, "N", "per round (2)"),
+        ("--updates", a.positive_int, None, "N", "per round"),
+        ("--seed", int, 0, "S", "seed of training and recording (0)"),
+        ("--eval-episodes", a.positive_int, 20, "N", "(20)"),
+        ("--resume", FLAG, False, None, "continue an interrupted loop in DIR"),
+        ("--quiet", FLAG, False, None, "print only each round's summary"),
     )
-    p.add_argument("--force", action="store_true", help="replace DIR/fitted.json if it exists")
-    p.add_argument("--quiet", action="store_true", help="print only the final summary")
+    # fmt: on
 
 
 def cmd_fit(args: argparse.Namespace) -> int:
@@ -77,16 +87,24 @@ def cmd_fit(args: argparse.Namespace) -> int:
         args.data,
         args.model,
         args.out,
-        holdout=args.holdout,
-        force=args.force,
-        progress=None if args.quiet else print,
         names=args.params,
-        window=args.window,
-        steps=args.steps,
-        learning_rate=args.learning_rate,
-        lm_steps=args.lm_steps,
-        hidden=args.hidden,
-        seed=args.seed,
+        progress=a.say(args),
+        **a.pick(args, "holdout force window steps learning_rate lm_steps hidden seed"),
     )
     print("\n".join(done.lines))
+    return 0
+
+
+def cmd_loop(args: argparse.Namespace) -> int:
+    from .. import identify, tasks
+
+    identify.loop(
+        tasks.resolve(args.task),
+        args.out,
+        env_id=args.env,
+        env_kwargs=dict(args.env_arg),
+        names=args.params,
+        progress=a.say(args),
+        **a.pick(args, "model rounds episodes updates seed eval_episodes resume"),
+    )
     return 0

@@ -13,14 +13,15 @@ protocol (``diffcontrol.compare.run``), and writes to its output directory:
 
 from __future__ import annotations
 
+import os
 import platform
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 from .. import envs, io
-from ..errors import ConfigError, RunDirectoryError
-from ..tasks import Task
+from ..errors import ConfigError, Interrupted, RunDirectoryError
+from ..tasks import Task, resolve
 from .baselines import BASELINES, INSTALL_HINT, Baseline, require_rl
 from .report import plot, summarize, table
 from .run import (
@@ -36,8 +37,8 @@ SETTINGS_FILE = "compare.json"
 
 
 def run_comparison(
-    task: Task,
-    out_dir: str | Path,
+    task: Task | str,
+    out_dir: str | Path | None = None,
     *,
     seeds: int = 3,
     methods: list[str] | None = None,
@@ -50,12 +51,16 @@ def run_comparison(
     torch_threads: int | None = 1,
     resume: bool = False,
     progress: Callable[[str], None] | None = None,
+    compile_cache: bool = True,
+    command: str | None = None,
 ) -> dict[str, Any]:
     """Run the comparison on ``task``; returns what ``comparison.json`` holds.
 
     Args:
-        task: ``pendulum``, ``cartpole`` or ``trebuchet`` (the tasks with baselines).
-        out_dir: output directory (new or empty, or a previous comparison with ``resume``).
+        task: ``pendulum``, ``cartpole`` or ``trebuchet`` (the tasks with baselines), or its
+            name.
+        out_dir: output directory (new or empty, or a previous comparison with ``resume``);
+            default ``runs/compare-TASK``.
         seeds: training seeds ``0 ... seeds-1`` for every method.
         methods: a subset of ``methods_for(task)``; all of them when omitted.
         rl_steps: RL budget in environment steps; each baseline's zoo budget when omitted.
@@ -67,12 +72,66 @@ def run_comparison(
         torch_threads: PyTorch threads for the RL baselines (``None``: PyTorch's default).
         resume: keep the finished runs already in ``out_dir`` and run only the others.
         progress: called with one line per evaluation point and per finished run.
+        compile_cache: use JAX's persistent compilation cache (unless
+            ``DIFFCONTROL_NO_COMPILE_CACHE`` is set).
+        command: the command line that started it, for the message of an interruption.
+
+    Returns:
+        ``comparison.json``'s document, with ``"table"`` (``comparison.md``'s text) and
+        ``"files"`` (the paths written) added.
 
     Raises:
         ConfigError: a bad setting, an unknown method, or a task without baselines.
         RunDirectoryError: ``out_dir`` holds other files or a comparison with other settings.
         DiffcontrolError: an RL method is asked for and the ``rl`` extra is not installed.
+        Interrupted: Ctrl-C; the message says where the finished runs are and how to continue.
     """
+    task = resolve(task) if isinstance(task, str) else task
+    out = Path(out_dir or f"runs/compare-{task.name}")
+    if compile_cache and not os.environ.get("DIFFCONTROL_NO_COMPILE_CACHE"):
+        from .. import _jax_setup
+
+        _jax_setup.enable_compile_cache()
+    try:
+        return _compare(
+            task,
+            out,
+            seeds=seeds,
+            methods=methods,
+            rl_steps=rl_steps,
+            updates=updates,
+            eval_every=eval_every,
+            eval_episodes=eval_episodes,
+            final_episodes=final_episodes,
+            eval_seed=eval_seed,
+            torch_threads=torch_threads,
+            resume=resume,
+            progress=progress,
+        )
+    except KeyboardInterrupt:
+        again = command or f"diffcontrol compare {task.name}"
+        raise Interrupted(
+            f"interrupted; the finished runs are in {out / 'runs'}. Continue with the same "
+            f"options and --resume: {again}" + ("" if resume else " --resume")
+        ) from None
+
+
+def _compare(
+    task: Task,
+    out_dir: Path,
+    *,
+    seeds: int,
+    methods: list[str] | None,
+    rl_steps: int | None,
+    updates: int | None,
+    eval_every: int | None,
+    eval_episodes: int,
+    final_episodes: int,
+    eval_seed: int,
+    torch_threads: int | None,
+    resume: bool,
+    progress: Callable[[str], None] | None,
+) -> dict[str, Any]:
     say = progress or (lambda line: None)
     known = methods_for(task)
     methods = list(methods or known)
@@ -107,7 +166,7 @@ def run_comparison(
         "eval_seed": eval_seed,
         "eval_env": task.gym_label if task.gym_id else envs.env_id(task),
     }
-    out = _prepare(Path(out_dir), settings, resume)
+    out = _prepare(out_dir, settings, resume)
     runs_dir = out / "runs"
     results = []
     for method in methods:
@@ -159,6 +218,7 @@ def run_comparison(
     io.write_bytes(out / "comparison.md", (text + "\n").encode())
     plot(task.name, results, thresholds, out / "comparison.png")
     doc["table"] = text
+    doc["files"] = [str(out / f) for f in ("comparison.json", "comparison.md", "comparison.png")]
     return doc
 
 
@@ -197,7 +257,6 @@ def _prepare(out: Path, settings: dict, resume: bool) -> Path:
 
 def machine() -> dict[str, Any]:
     """The CPU, cores this process may use, and the versions that shape the timings."""
-    import os
 
     import jax
 

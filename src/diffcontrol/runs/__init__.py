@@ -18,6 +18,7 @@ from ._files import (
     save_run,
 )
 from ._train import RunInterrupted, RunOutcome, describe, fitted_training, train_run
+from ._use import aim_dir, animate_dir, evaluate_dir
 
 __all__ = [
     "METRICS_FILE",
@@ -25,7 +26,10 @@ __all__ = [
     "Run",
     "RunInterrupted",
     "RunOutcome",
+    "aim_dir",
+    "animate_dir",
     "describe",
+    "evaluate_dir",
     "fitted_training",
     "mark_complete",
     "open_run",

@@ -16,12 +16,12 @@ from pathlib import Path
 from typing import Any
 
 from .. import io
-from ..errors import ConfigError
+from ..errors import ConfigError, Interrupted
 from ..tasks import AnyTask, names, resolve
 from ._files import Run, mark_complete, read_run_file, release_claim, save_run
 
 
-class RunInterrupted(KeyboardInterrupt):
+class RunInterrupted(Interrupted):
     """Training or writing was interrupted (Ctrl-C); the message says what was kept and the
     command that continues the run, if anything can be continued."""
 
