@@ -13,8 +13,9 @@ import numpy as np
 import pytest
 
 import diffcontrol
-from diffcontrol import ConfigError, TaskCheckError, check_task
+from diffcontrol import ConfigError, check_task
 from diffcontrol.checks import RTOL, validate_task
+from diffcontrol.errors import TaskCheckError
 from diffcontrol.tasks import CartPole, Pendulum
 
 GYM_TASKS = [name for name in diffcontrol.tasks.names() if diffcontrol.make(name).gym_id]
