@@ -132,6 +132,7 @@ def test_gym_action_and_reset_distribution(task):
     assert float(jnp.min(s)) < -0.09 and float(jnp.max(s)) > 0.09
 
 
+@pytest.mark.slow
 def test_step_gradient_matches_finite_differences(task):
     """d(next state) / d(state, torque) against central differences, float64, away from the
     speed clips and the wrap (where the derivative is documented as non-smooth)."""
@@ -169,6 +170,7 @@ def test_step_gradient_matches_finite_differences(task):
         assert checked >= 10
 
 
+@pytest.mark.slow
 def test_action_gradient_reaches_the_logits(task):
     """Through the task's step, the argmax head passes a non-zero gradient to its logits."""
     from diffcontrol.controllers import straight_through_argmax

@@ -21,6 +21,7 @@ from diffcontrol.tasks import CartPole, Pendulum
 GYM_TASKS = [name for name in diffcontrol.tasks.names() if diffcontrol.make(name).gym_id]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", GYM_TASKS)
 def test_builtin_tasks_pass_with_parity(name):
     task = diffcontrol.make(name)
@@ -208,6 +209,7 @@ class EndlessCartPole(CartPole):
         return next_state, reward, jnp.asarray(False)
 
 
+@pytest.mark.slow
 def test_parity_failure_names_the_state():
     message = _one_line_error(HeavyPendulum())
     pattern = (
@@ -246,11 +248,13 @@ class SwappedPendulum(Pendulum):
         env.unwrapped.state = np.asarray(state[::-1], np.float64)
 
 
+@pytest.mark.slow
 def test_set_gym_state_hook_and_env_id():
     report = check_task(SwappedPendulum(), env_id="Pendulum-v1", states=8, steps=10)
     assert report.env_id == "Pendulum-v1" and report.compared_steps == 80
 
 
+@pytest.mark.slow
 def test_a_continuous_task_is_checked_without_parity():
     report = check_task(diffcontrol.make("cartpole-swingup"), states=4)
     assert report.passed[-1] == "action reaches the outputs"
@@ -290,6 +294,7 @@ class LosslessRail(Rail):
     step_loss = diffcontrol.Task.step_loss
 
 
+@pytest.mark.slow
 def test_a_task_without_builtin_losses_trains_on_a_loss_passed_in():
     task = LosslessRail()
     assert LosslessRail.losses == () and "step_loss" not in diffcontrol.Task.__abstractmethods__

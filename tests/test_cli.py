@@ -44,6 +44,7 @@ def test_help_explains_each_command(capsys):
         assert option in out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("run", ["cartpole_run", "pendulum_run"])
 def test_train_writes_every_output(run, request):
     out = request.getfixturevalue(run)
@@ -70,6 +71,7 @@ def test_train_writes_every_output(run, request):
     assert (out / "rollout.gif").read_bytes()[:6] == b"GIF89a"
 
 
+@pytest.mark.slow
 def test_evaluate_prints_json_on_gymnasium_seeds(cartpole_run, capsys):
     assert main(["evaluate", str(cartpole_run), "--episodes", "3", "--seed", "5", "--json"]) == 0
     result = json.loads(capsys.readouterr().out)
@@ -89,6 +91,7 @@ def test_evaluate_prints_json_on_gymnasium_seeds(cartpole_run, capsys):
     assert result["mean_return"] == pytest.approx(np.mean(result["returns"]))
 
 
+@pytest.mark.slow
 def test_evaluate_human_readable(pendulum_run, capsys):
     assert main(["evaluate", str(pendulum_run), "--episodes", "2"]) == 0
     out = capsys.readouterr().out

@@ -79,6 +79,7 @@ def test_on_point_sees_every_evaluation_point():
     assert result.metrics["callback_seconds"] >= 0
 
 
+@pytest.mark.slow
 def test_compare_diffcontrol_alone_works_without_the_rl_extra(tmp_path, capsys, monkeypatch):
     monkeypatch.setitem(sys.modules, "stable_baselines3", None)  # as if not installed
     out = tmp_path / "cmp"
@@ -93,6 +94,7 @@ def test_compare_diffcontrol_alone_works_without_the_rl_extra(tmp_path, capsys, 
     assert code == 2 and "pip install 'diffcontrol[rl]'" in err and len(err.splitlines()) == 1
 
 
+@pytest.mark.slow
 def test_compare_end_to_end_and_resume(tmp_path, capsys):
     pytest.importorskip("stable_baselines3")
     out = tmp_path / "cmp"
@@ -125,6 +127,7 @@ def test_compare_end_to_end_and_resume(tmp_path, capsys):
     assert "--resume" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_compare_pendulum_td3_tiny(tmp_path, capsys):
     pytest.importorskip("stable_baselines3")
     out = tmp_path / "p"

@@ -83,6 +83,7 @@ def test_shapes_and_dtypes(task):
         assert state.ndim == 1
 
 
+@pytest.mark.slow
 def test_jit_vmap_grad_finite_same_key(task):
     """One compiled program a task: reset/step/observe (or the vector field) batched, their
     gradients, finiteness, the action's reach, and the same key giving the same state."""

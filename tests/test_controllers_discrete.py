@@ -77,6 +77,7 @@ def test_gradient_is_softmax_jvp(temperature):
         np.testing.assert_allclose(np.asarray(g_got), np.asarray(g_want), rtol=1e-12, atol=1e-12)
 
 
+@pytest.mark.slow
 def test_controller_head_gradient_reaches_the_weights():
     ctrl = _controller()
     obs = jnp.asarray(np.random.default_rng(2).normal(size=(32, OBS)), jnp.float32)

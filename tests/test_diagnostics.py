@@ -131,6 +131,7 @@ def _config(**changes):
     return cfg.replace(**changes)
 
 
+@pytest.mark.slow
 def test_train_warns_when_the_loss_ignores_the_action(tmp_path):
     """A loss of the state a step starts from: over one-step windows, no action reaches it."""
     lines = []
@@ -155,6 +156,7 @@ def test_train_warns_when_the_loss_ignores_the_action(tmp_path):
     assert again.metrics["warnings"] == [message]
 
 
+@pytest.mark.slow
 def test_train_warns_when_the_loss_never_moves():
     cfg = _config(updates=STALL_UPDATES, eval_every=STALL_UPDATES, window=20, learning_rate=1e-30)
     cfg = cfg.replace(keep_best=False)
@@ -163,6 +165,7 @@ def test_train_warns_when_the_loss_never_moves():
     assert result.metrics["warnings"][0].startswith(STALLED)
 
 
+@pytest.mark.slow
 def test_train_warns_when_keep_best_returns_the_untrained_controller():
     """Trained to maximise the cost: every later evaluation point is worse than the first."""
 
@@ -178,6 +181,7 @@ def test_train_warns_when_keep_best_returns_the_untrained_controller():
     assert returns[0] > max(returns[1:])
 
 
+@pytest.mark.slow
 def test_a_healthy_run_has_no_warnings(recwarn):
     result = diffcontrol.train(Rail(), _config(keep_best=False, learning_rate=0.05))
     assert result.metrics["warnings"] == []

@@ -86,6 +86,7 @@ def _rollout_side_by_side(name: str, steps: int, seed: int) -> int:
     return n
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(IDS))
 def test_environment_steps_the_differentiable_task(name):
     n = _rollout_side_by_side(name, steps=60, seed=3)

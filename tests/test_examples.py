@@ -6,6 +6,8 @@ import importlib.util
 import sys
 from pathlib import Path
 
+import pytest
+
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
 
@@ -17,12 +19,14 @@ def _load(name: str):
     return module
 
 
+@pytest.mark.slow
 def test_custom_task_example_learns():
     result = _load("custom_task").main(updates=60)
     first, last = result.curve[0]["eval_return"], result.curve[-1]["eval_return"]
     assert last > 0.3 * first  # returns are negative: the cost fell by more than 70 %
 
 
+@pytest.mark.slow
 def test_continuous_task_example_learns():
     result = _load("continuous_task").main(updates=300)
     first, last = result.curve[0]["eval_loss"], result.curve[-1]["eval_loss"]

@@ -125,6 +125,7 @@ def test_malformed_throws_npz_and_paths_are_refused(tmp_path):
         read_throws(tmp_path / "empty.csv")
 
 
+@pytest.mark.slow
 def test_fit_recovers_drag_and_wind_from_noise_free_throws(recorded):
     data = read_throws(recorded)
     assert data.metadata["params"]["wind_factor"] == 1.5 and data.metadata["noise_m"] == 0
@@ -137,6 +138,7 @@ def test_fit_recovers_drag_and_wind_from_noise_free_throws(recorded):
     assert ft.distance_errors(result.params, data)["rmse_m"] < 1e-3
 
 
+@pytest.mark.slow
 def test_a_diverging_fit_keeps_the_best_parameters(recorded):
     data = read_throws(recorded).select(slice(0, 12))
     # a step of 1000 in log space sends the drag to exp(1000) = inf: a non-finite loss
@@ -162,6 +164,7 @@ def test_too_few_throws_or_bad_names_are_refused():
         ft.record_throws(3, inputs=(0.0, 45.0, 900.0))
 
 
+@pytest.mark.slow
 def test_cli_fit_trebuchet_end_to_end(recorded, tmp_path, capsys):
     out = tmp_path / "fit"
     argv = ["fit", "trebuchet", "--data", str(recorded), "--model", "params", "--out", str(out)]

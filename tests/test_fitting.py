@@ -66,6 +66,7 @@ def _relative_errors(result):
     return {n: abs(result.values[n] - TRUTH[n]) / TRUTH[n] for n in TRUTH}
 
 
+@pytest.mark.slow
 def test_recovers_g_and_friction_from_noise_free_data(clean_fit):
     errors = _relative_errors(clean_fit)
     assert all(e < 0.02 for e in errors.values()), errors
@@ -75,6 +76,7 @@ def test_recovers_g_and_friction_from_noise_free_data(clean_fit):
     assert np.all(np.isfinite(clean_fit.loss_history))
 
 
+@pytest.mark.slow
 def test_recovers_with_sensor_noise_and_the_errors_cover_the_truth(noisy_fit):
     errors = _relative_errors(noisy_fit)
     assert all(e < 0.10 for e in errors.values()), errors
@@ -84,6 +86,7 @@ def test_recovers_with_sensor_noise_and_the_errors_cover_the_truth(noisy_fit):
         assert abs(noisy_fit.values[n] - truth) < 3 * se, (n, noisy_fit.values[n], se)
 
 
+@pytest.mark.slow
 def test_fitted_model_predicts_held_out_episodes_better(task, clean, noisy, clean_fit, noisy_fit):
     for (_, held_out), result, factor in ((clean, clean_fit, 0.01), (noisy, noisy_fit, 0.5)):
         nominal = identify.prediction_errors(task, task.default_params(), held_out)
@@ -93,6 +96,7 @@ def test_fitted_model_predicts_held_out_episodes_better(task, clean, noisy, clea
         assert fitted[50]["rmse"] < nominal[50]["rmse"]
 
 
+@pytest.mark.slow
 def test_parameters_the_data_cannot_separate_get_infinite_errors(task, clean):
     # g, m and l enter the Pendulum only as g / l and 1 / (m l^2): one direction is flat
     result = identify.fit_parameters(task, clean[0], ("g", "m", "l"), steps=5, lm_steps=0)
@@ -123,6 +127,7 @@ def test_unknown_names_and_other_systems_are_refused(task, clean):
         identify.fit_parameters(task, cartpole, ("g",))
 
 
+@pytest.mark.slow
 def test_cli_fit_end_to_end(tmp_path, capsys):
     data = tmp_path / "real.csv"
     write_trajectories(data, _record(3, seed=7, max_steps=100))

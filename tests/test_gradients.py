@@ -180,6 +180,7 @@ def _dot(tree_a, tree_b) -> float:
     )
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("task_name", ["pendulum", "pendulum-unclipped"])
 def test_pendulum_rollout_gradients_match_fd(task_name):
     """Total cost of a 30-step closed-loop rollout w.r.t. weights, initial state and g, m, l."""
@@ -283,6 +284,7 @@ def task(request):
     return diffcontrol.tasks.make(request.param)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", _names_of(diffcontrol.tasks.ContinuousTask))
 def test_continuous_task_contract(name):
     """Every continuous-time task: its vector field under jit, vmap and grad, its controller,
@@ -341,6 +343,7 @@ def test_registry_is_not_empty():
     assert {"pendulum", "pendulum-unclipped", "cartpole"} <= set(diffcontrol.tasks.names())
 
 
+@pytest.mark.slow
 def test_task_contract(task):
     params = task.default_params()
     key = jax.random.key(42)

@@ -39,6 +39,7 @@ def user_env(tmp_path, monkeypatch):
     return "user_pend_env:UserPendulum-v0"
 
 
+@pytest.mark.slow
 def test_a_user_env_id_records_as_the_real_system_of_a_task_with_its_columns(user_env, tmp_path):
     task = diffcontrol.make("pendulum")
     data = identify.record(user_env, 2, seed=1, task=task)
@@ -56,6 +57,7 @@ def test_a_user_env_id_records_as_the_real_system_of_a_task_with_its_columns(use
         identify.record("CartPole-v1", 1, task=task)
 
 
+@pytest.mark.slow
 def test_cli_record_fit_with_a_user_env_id(user_env, tmp_path, capsys):
     csv = tmp_path / "user.csv"
     argv = ["record", user_env, "--task", "pendulum", "--episodes", "2", "--out", str(csv)]

@@ -66,6 +66,7 @@ def test_correction_round_trips_through_json_and_refuses_malformed_networks():
         identify.correction_from_dict({"layers": 3})
 
 
+@pytest.mark.slow
 def test_hybrid_and_neural_fits_beat_the_nominal_model_on_held_out_data(task, data, fits):
     held_out = data[1]
     nominal = identify.prediction_errors(task, task.default_params(), held_out)
@@ -83,6 +84,7 @@ def test_hybrid_and_neural_fits_beat_the_nominal_model_on_held_out_data(task, da
     assert fits["neural"].loss_history[0] > hybrid.loss_history[0]
 
 
+@pytest.mark.slow
 def test_model_task_predicts_with_the_model_and_keeps_the_reward(task, fits):
     model = fits["hybrid"].model
     mt = identify.model_task(task, model)
@@ -115,6 +117,7 @@ def test_a_diverging_fit_keeps_the_best_weights_and_no_nan(task, data):
         assert "kept the best weights" in fit.message
 
 
+@pytest.mark.slow
 def test_cli_fit_hybrid_then_train_through_it_and_evaluate_on_the_real_system(
     tmp_path, data, capsys
 ):
@@ -155,6 +158,7 @@ def test_cli_fit_hybrid_then_train_through_it_and_evaluate_on_the_real_system(
     assert "no fitted model at" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_train_with_a_grey_box_fit_uses_its_parameters(tmp_path, data, capsys):
     fit_dir = tmp_path / "fit"
     fit_dir.mkdir()
@@ -195,6 +199,7 @@ def test_concat_renumbers_episodes_and_refuses_other_columns(data):
         concat([a, cartpole])
 
 
+@pytest.mark.slow
 def test_loop_records_fits_trains_and_resumes(tmp_path, capsys):
     out = tmp_path / "loop"
     argv = ["loop", "pendulum", "--env", "diffcontrol/PendulumFriction-v0", "--env-arg", "g=12"]

@@ -66,6 +66,7 @@ def test_generalized_forces_enter_like_the_systems_friction():
         np.testing.assert_allclose(-(q_x * x_dot + q_t * theta_dot), power, rtol=1e-5)
 
 
+@pytest.mark.slow
 def test_hybrid_starts_at_the_nominal_physics(split):
     unfitted = of.fit_swingup_model(split[0], "hybrid", window=2, steps=0, hidden=(8,))
     nominal = of.nominal_model(REAL)
@@ -77,6 +78,7 @@ def test_hybrid_starts_at_the_nominal_physics(split):
     assert unfitted.loss_history.size == 0 and not unfitted.diverged
 
 
+@pytest.mark.slow
 def test_hybrid_fit_beats_the_nominal_model_on_held_out_data(split, hybrid_fit):
     held_out = split[1]
     nominal = of.prediction_errors(of.nominal_model(REAL), held_out, horizons=(1, 10))
@@ -87,6 +89,7 @@ def test_hybrid_fit_beats_the_nominal_model_on_held_out_data(split, hybrid_fit):
         assert np.isfinite(fitted[h]["rmse"])
 
 
+@pytest.mark.slow
 def test_grey_box_recovers_the_friction(split):
     r = of.fit_swingup_model(split[0], "params", window=5, steps=30, lm_steps=10)
     for name, value in r.values.items():
@@ -94,6 +97,7 @@ def test_grey_box_recovers_the_friction(split):
         assert np.isfinite(r.standard_errors[name])
 
 
+@pytest.mark.slow
 def test_training_through_the_fitted_model(hybrid_fit):
     task = diffcontrol.make("cartpole-swingup-friction")
     wrapped = FittedSwingUp(task, hybrid_fit.model)
@@ -140,6 +144,7 @@ def test_bad_data_and_settings_are_refused_by_name(data):
         of.fit_swingup_model(stepped, "hybrid")
 
 
+@pytest.mark.slow
 def test_fitted_model_round_trips_through_json(hybrid_fit):
     doc = json.loads(json.dumps(of.model_to_dict(hybrid_fit.model)))
     back = of.model_from_dict(doc)
@@ -152,6 +157,7 @@ def test_fitted_model_round_trips_through_json(hybrid_fit):
         )
 
 
+@pytest.mark.slow
 def test_cli_fit_swingup_end_to_end(tmp_path, data, capsys):
     from diffcontrol.cli import main
     from diffcontrol.identify.data import write_trajectories

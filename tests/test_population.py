@@ -29,6 +29,7 @@ def test_one_member_is_the_plain_trainer():
     )
 
 
+@pytest.mark.slow
 def test_the_best_member_is_the_runs_controller(population_run):
     config, result = population_run
     trainer = make_trainer(TASK, config)
@@ -44,6 +45,7 @@ def test_the_best_member_is_the_runs_controller(population_run):
     assert result.metrics["simulated_steps"] == steps
 
 
+@pytest.mark.slow
 def test_members_differ_and_the_best_mean_is_reported():
     config = TASK.default_config().replace(**TINY, population=3)
     trainer = make_trainer(TASK, config)
@@ -56,6 +58,7 @@ def test_members_differ_and_the_best_mean_is_reported():
     np.testing.assert_array_equal(np.asarray(picked.layers[0].weight), w[1])
 
 
+@pytest.mark.slow
 def test_a_diverged_member_is_dropped_not_fatal():
     config = TASK.default_config().replace(**TINY, population=2)
     trainer = make_trainer(TASK, config)

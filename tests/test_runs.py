@@ -19,6 +19,7 @@ def _files(d):
     return {p.name: p.read_bytes() for p in d.iterdir()}
 
 
+@pytest.mark.slow
 def test_resume_needs_only_the_directory(tmp_path, monkeypatch, capsys):
     out = tmp_path / "run"
 

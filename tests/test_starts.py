@@ -40,6 +40,7 @@ def test_the_default_reset_is_the_initial_state():
     )
 
 
+@pytest.mark.slow
 def test_several_starts_train_and_evaluate_on_the_reset_distribution():
     config = TASK.default_config().replace(updates=4, eval_every=2, starts=3)
     result = diffcontrol.train(TASK, config)

@@ -189,6 +189,7 @@ def reference_gradient():
 @pytest.mark.parametrize(
     ("gradient", "rtol_fd"), [("checkpoint", 1e-4), ("forward", 1e-4), ("backsolve", 1e-3)]
 )
+@pytest.mark.slow
 def test_gradient_methods_against_finite_differences(gradient, rtol_fd, reference_gradient):
     ref_flat, dirs, fd, ref_value = reference_gradient
     with jax.enable_x64(True):
@@ -209,6 +210,7 @@ def test_gradient_methods_against_finite_differences(gradient, rtol_fd, referenc
 # --- losses, trajectories and the policy file -------------------------------------------------
 
 
+@pytest.mark.slow
 def test_force_read_back_matches_the_controller(swingup_run):
     """The impulse state's read-back is the mean force over each interval (the trapezoid of
     the controller's own output, to O(dt^2)), and the saved force is the NumPy policy's."""
@@ -233,6 +235,7 @@ def test_force_read_back_matches_the_controller(swingup_run):
     assert isinstance(policy(state[0]), float)
 
 
+@pytest.mark.slow
 def test_state_policy_resimulated_by_scipy_matches(swingup_run):
     """Anyone can re-simulate model.json with their own integrator: SciPy + the NumPy policy
     + the post's equations reproduce the reference solve."""
@@ -251,6 +254,7 @@ def test_state_policy_resimulated_by_scipy_matches(swingup_run):
     np.testing.assert_allclose(np.cos(theta), np.cos(data["theta"]), atol=1e-4)
 
 
+@pytest.mark.slow
 def test_custom_loss_from_python_changes_what_is_learned():
     """A user's trajectory loss replaces the task's: here, drive the cart to x = 1 m."""
     cfg = SWINGUP.default_config().replace(updates=100)
@@ -268,6 +272,7 @@ def test_loss_that_is_not_a_scalar_is_refused():
         make_ode_trainer(SWINGUP, SWINGUP.default_config(), lambda tr: tr.theta**2)
 
 
+@pytest.mark.slow
 def test_loss_that_is_nan_is_refused_before_training():
     cfg = SWINGUP.default_config().replace(updates=10, eval_every=10)
     with pytest.raises(ConfigError, match="finite number"):
@@ -296,6 +301,7 @@ def test_bad_settings_name_the_value(change, match):
         SWINGUP.default_config().replace(**change)
 
 
+@pytest.mark.slow
 def test_solver_step_limit_is_a_clear_error_not_a_nan():
     """A budget the untrained loop fits in (6 steps) but the trained one does not (about 11):
     the member is frozen when its solve fails, and the run stops with the fix named."""
@@ -308,6 +314,7 @@ def test_solver_step_limit_is_a_clear_error_not_a_nan():
     assert failed_at > 1  # it trained for a while before the loop outgrew the budget
 
 
+@pytest.mark.slow
 def test_step_limit_on_the_untrained_controller_is_refused_at_once():
     with pytest.raises(ConfigError, match="max-steps"):
         train(SWINGUP, SWINGUP.default_config().replace(max_steps=2, updates=10))
@@ -316,6 +323,7 @@ def test_step_limit_on_the_untrained_controller_is_refused_at_once():
 # --- learning ------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_swingup_defaults_meet_the_bar():
     """The post's recipe: upright (|wrap theta| < 0.1 rad) and |x_dot| < 0.5 m/s at t = 1 s, in
     the float64 reference solve, after the default 1000 updates."""
@@ -328,6 +336,7 @@ def test_swingup_defaults_meet_the_bar():
     assert result.metrics["simulated_episodes"] == 1000
 
 
+@pytest.mark.slow
 def test_population_and_curriculum():
     """Three members from different weights under vmap, with a horizon growing from 0.5 s: the
     curve shows the horizon grow, and the returned controller is the best member's."""
@@ -346,6 +355,7 @@ def test_population_and_curriculum():
     assert chosen["eval_loss"] == min(p["eval_loss"] for p in result.curve)
 
 
+@pytest.mark.slow
 def test_resume_continues_exactly(tmp_path):
     cfg = SWINGUP.default_config().replace(updates=150)
     whole = train(SWINGUP, cfg)
@@ -390,6 +400,7 @@ def test_cli_writes_the_posts_outputs(swingup_run):
     assert isinstance(diffcontrol.load(swingup_run), diffcontrol.io.StatePolicy)
 
 
+@pytest.mark.slow
 def test_cli_evaluate_and_animate(swingup_run, tmp_path, capsys):
     assert main(["evaluate", str(swingup_run), "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
@@ -412,6 +423,7 @@ def test_cli_evaluate_and_animate(swingup_run, tmp_path, capsys):
         (["--max-steps", "2"], "max-steps"),
     ],
 )
+@pytest.mark.slow
 def test_cli_bad_input_is_one_line_and_exit_2(args, match, tmp_path, capsys):
     out = tmp_path / "run"
     try:
@@ -440,6 +452,7 @@ def test_swingup_environments_pass_check_env(name):
     assert env.spec.max_episode_steps == task.default_config().saves - 1
 
 
+@pytest.mark.slow
 def test_swingup_environment_equals_the_differentiable_closed_loop():
     """With a constant force the held action and the controller inside the ODE are the same
     input, so the environment's episode must reproduce the differentiable solve: the same
@@ -470,6 +483,7 @@ def test_swingup_environment_equals_the_differentiable_closed_loop():
     assert abs(info["state"][0]) > 1.0  # the push really moved the cart
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("gradient", ["backsolve", "forward"])
 def test_cli_trains_with_each_gradient_method(gradient, tmp_path, capsys):
     """The trainer runs every gradient method end to end (under vmap and scan), and the

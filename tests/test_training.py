@@ -25,6 +25,7 @@ def _weights(controller):
     return jax.tree.leaves(eqx.filter(controller, eqx.is_inexact_array))
 
 
+@pytest.mark.slow
 def test_cartpole_defaults_learn_to_balance():
     """The default CartPole recipe (<= 10 simulated episodes) balances on Gymnasium seeds."""
     task = diffcontrol.make("cartpole")
@@ -35,6 +36,7 @@ def test_cartpole_defaults_learn_to_balance():
     assert ev.mean >= 475, ev.returns
 
 
+@pytest.mark.slow
 def test_pendulum_learns_on_a_small_budget():
     """600 updates (a fifth of the default budget) take the return from about -1300 to the
     swing-up, and the returned controller is the best evaluation point's (``keep_best``)."""
@@ -61,6 +63,7 @@ def test_pendulum_learns_on_a_small_budget():
     assert evaluate(policy, task, episodes=10, seed=0).mean > -400
 
 
+@pytest.mark.slow
 def test_resume_continues_exactly(tmp_path):
     """A run interrupted after a checkpoint and resumed ends with the same weights."""
     task = diffcontrol.make("cartpole")
@@ -87,6 +90,7 @@ def test_resume_continues_exactly(tmp_path):
     assert resumed.metrics["simulated_steps"] == whole.metrics["simulated_steps"]
 
 
+@pytest.mark.slow
 def test_same_seed_same_run_and_different_seed_differs():
     task = diffcontrol.make("pendulum")
     cfg = resolve_config(task, updates=4, batch=2, window=5, eval_every=2, eval_episodes=2)
@@ -97,6 +101,7 @@ def test_same_seed_same_run_and_different_seed_differs():
     assert not np.allclose(wa, wc)
 
 
+@pytest.mark.slow
 def test_chunks_are_compiled_once():
     """After the first chunk, further chunks compile nothing: one compiled chunk is reused."""
     task = diffcontrol.make("pendulum")
@@ -119,6 +124,7 @@ def test_chunks_are_compiled_once():
     assert at_point[2:] == [at_point[1]] * 3, at_point
 
 
+@pytest.mark.slow
 def test_divergence_is_reported_not_hidden():
     """A non-finite loss stops the run with a message naming the fix."""
     task = diffcontrol.make("pendulum")
@@ -131,6 +137,7 @@ def test_divergence_is_reported_not_hidden():
         train(task, cfg, step_loss=nan_loss)
 
 
+@pytest.mark.slow
 def test_user_loss_changes_what_is_learned():
     """A user-supplied loss from Python replaces the task's (here: push the cart right)."""
     task = diffcontrol.make("cartpole")
@@ -170,6 +177,7 @@ def test_numpy_policy_matches_the_jax_controller(pendulum_run, cartpole_run):
         )
 
 
+@pytest.mark.slow
 def test_corrupt_checkpoint_is_a_clear_error(tmp_path):
     task = diffcontrol.make("cartpole")
     cfg = resolve_config(task, updates=2, eval_every=2, eval_episodes=2)
@@ -180,6 +188,7 @@ def test_corrupt_checkpoint_is_a_clear_error(tmp_path):
         train(task, cfg, out_dir=out, resume=True)
 
 
+@pytest.mark.slow
 def test_persistent_compile_cache_hits_on_a_second_run(tmp_path):
     """A second identical command loads every program from the cache and compiles nothing.
 

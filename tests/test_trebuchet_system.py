@@ -105,6 +105,7 @@ def x64():
 # --- the post's gradient ------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_blog_gradient_float64(x64):
     distance, grad = _shoot(*BLOG_POINT), _grad(*BLOG_POINT)
     print(f"\n(-2, 45, 200) float64: distance {distance:.4f} m, gradient {grad}")
@@ -112,6 +113,7 @@ def test_blog_gradient_float64(x64):
     assert distance == pytest.approx(DISTANCE_AT_BLOG_POINT, abs=1e-3)
 
 
+@pytest.mark.slow
 def test_blog_gradient_float32_matches_float64():
     assert _shoot_jit(*BLOG_POINT, DEFAULT).dtype == jnp.float32
     distance, grad = _shoot(*BLOG_POINT), _grad(*BLOG_POINT)
@@ -123,6 +125,7 @@ def test_blog_gradient_float32_matches_float64():
     assert distance == pytest.approx(DISTANCE_AT_BLOG_POINT, rel=RTOL_F32)
 
 
+@pytest.mark.slow
 def test_tutorial_anchors(x64):
     """The JuliaAcademy notebook's figures for 200 lb without wind: 1 m/s of tail wind adds
     about 4 m at 45 degrees, and the best angle is about 30 degrees for about 90 m."""
@@ -165,6 +168,7 @@ def spread():
     return dict(x=x, rev=rev, fwd=fwd, fd=fd, throws=throws, same_steps=same_steps)
 
 
+@pytest.mark.slow
 def test_gradients_match_finite_differences(spread):
     for i, point in enumerate(spread["x"]):
         throw = spread["throws"][i]
@@ -175,6 +179,7 @@ def test_gradients_match_finite_differences(spread):
         )
 
 
+@pytest.mark.slow
 def test_forward_and_reverse_mode_agree(spread):
     np.testing.assert_allclose(spread["fwd"], spread["rev"], rtol=RTOL_MODES, atol=1e-12)
 
@@ -242,6 +247,7 @@ def test_phases_and_start(x64):
     assert np.degrees(np.arctan2(v[1], v[0])) == pytest.approx(45.0, abs=1e-9)
 
 
+@pytest.mark.slow
 def test_failure_flags(x64):
     """Too light to lift the projectile; not landed within ``max_steps``; Euler blown up."""
     light = _simulate(0.0, 45.0, 10.0)
@@ -361,6 +367,7 @@ BUDGET_CORNERS = [
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("point", BUDGET_CORNERS)
 def test_step_budgets_cover_the_supported_range(point):
     p = DEFAULT
@@ -371,6 +378,7 @@ def test_step_budgets_cover_the_supported_range(point):
     assert ground + hang + flying <= 460 < p.max_steps, (point, ground, hang, flying)
 
 
+@pytest.mark.slow
 def test_spent_budgets_report_not_landed():
     """A phase that runs out of its budget stops the throw there, reported as not landed."""
     on_ground = _simulate(*BLOG_POINT, tb.TrebuchetParams(ground_steps=10))

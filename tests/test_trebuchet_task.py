@@ -39,6 +39,7 @@ def test_reset_draws_the_original_situations():
     assert np.all(np.abs(wind) <= 20) and np.all(distance == 0)
 
 
+@pytest.mark.slow
 def test_reachable_range_brackets_what_the_heads_can_throw():
     winds = np.array([-12.0, -3.0, 0.0, 4.0, 10.0])
     shortest, longest = (np.asarray(x) for x in aim.reachable_range(winds))
@@ -51,6 +52,7 @@ def test_reachable_range_brackets_what_the_heads_can_throw():
     assert np.all(grid.min(axis=(1, 2)) >= shortest - 0.5)
 
 
+@pytest.mark.slow
 def test_direct_aiming_hits_reachable_targets():
     target = np.array([25.0, 50.0, 80.0, 95.0])
     wind = np.array([3.0, -5.0, -2.0, 4.0])
@@ -60,6 +62,7 @@ def test_direct_aiming_hits_reachable_targets():
     np.testing.assert_allclose(np.asarray(shoot(wind, angle, weight)), target, atol=0.01)
 
 
+@pytest.mark.slow
 def test_aiming_network_learns_on_a_small_budget():
     """300 updates of 64 throws (a seventh of the default) take the mean miss over the
     reachable targets from tens of metres to under a metre."""
@@ -71,6 +74,7 @@ def test_aiming_network_learns_on_a_small_budget():
     assert stats["reachable"] > 250 and stats["mean_miss_m"] < 1.0, stats
 
 
+@pytest.mark.slow
 def test_check_target_names_the_reachable_range():
     aim.check_target(60.0, 0.0)
     with pytest.raises(diffcontrol.ConfigError, match=r"out of reach.*reaches"):
@@ -81,6 +85,7 @@ def test_check_target_names_the_reachable_range():
         aim.check_target(60.0, float("nan"))
 
 
+@pytest.mark.slow
 def test_cli_train_writes_everything_and_load_aims(trebuchet_run):
     for name in ("model.json", "metrics.json", "learning_curve.png", "rollout.png", "rollout.gif"):
         assert (trebuchet_run / name).stat().st_size > 0, name
@@ -104,6 +109,7 @@ def test_cli_train_writes_everything_and_load_aims(trebuchet_run):
     )
 
 
+@pytest.mark.slow
 def test_cli_aim_evaluate_animate(trebuchet_run, capsys, tmp_path):
     assert main(["aim", str(trebuchet_run), "--target", "70", "--wind", "2", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
@@ -134,6 +140,7 @@ def test_cli_aim_evaluate_animate(trebuchet_run, capsys, tmp_path):
         (["--target", "nan"], "--target"),
     ],
 )
+@pytest.mark.slow
 def test_cli_aim_bad_targets(trebuchet_run, capsys, argv, needle):
     try:
         status = main(["aim", str(trebuchet_run), *argv])

@@ -95,6 +95,7 @@ def user_run(user_dir):
     return out
 
 
+@pytest.mark.slow
 def test_train_by_import_path_writes_a_loadable_run(user_run):
     doc = json.loads((user_run / "model.json").read_text())
     assert doc["task"] == "user-rail"
@@ -112,6 +113,7 @@ def test_train_by_import_path_writes_a_loadable_run(user_run):
     env.step(action)
 
 
+@pytest.mark.slow
 def test_evaluate_and_animate_by_import_path(user_run, user_dir, capsys, monkeypatch):
     monkeypatch.chdir(user_dir)
     argv = ["evaluate", str(user_run), "--task", "my_rail_tasks:UserRail", "--episodes", "3"]
