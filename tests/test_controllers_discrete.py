@@ -133,10 +133,13 @@ def test_model_json_rejects_mismatched_heads(change, problem):
 def test_numpy_policy_equals_jax_controller():
     ctrl = _controller()
     policy = io.NumpyPolicy(io.controller_to_dict(ctrl, _fake_task()))
-    obs = np.random.default_rng(4).normal(0, 2, (500, OBS)).astype(np.float32)
+    obs = np.random.default_rng(4).normal(0, 2, (600, OBS)).astype(np.float32)
     logits = np.asarray(jax.vmap(_controller(head="linear"))(obs))
     top2 = np.sort(logits, axis=-1)[:, -2:]
-    assert np.min(top2[:, 1] - top2[:, 0]) > 1e-4  # no near-ties: the choice is unambiguous
+    # Only unambiguous choices: a GPU's float32 matmul (TF32) may differ from NumPy's float64
+    # by ~1e-3, which decides a near-tie either way.
+    obs = obs[top2[:, 1] - top2[:, 0] > 1e-2][:500]
+    assert len(obs) == 500
     want = np.asarray(jax.vmap(ctrl)(obs))
     assert len(np.unique(want.argmax(axis=-1))) > 1  # several choices occur
     np.testing.assert_array_equal(policy.action(obs), want)  # a batch of one-hot vectors

@@ -172,9 +172,9 @@ def test_numpy_policy_matches_the_jax_controller(pendulum_run, cartpole_run):
         ctrl = io.controller_from_dict(doc)
         policy = io.NumpyPolicy(doc)
         obs = np.random.default_rng(0).normal(size=(50, doc["observation"]["size"]))
-        np.testing.assert_allclose(
-            policy.action(obs), np.asarray(jax.vmap(ctrl)(jnp.asarray(obs, jnp.float32))), atol=1e-5
-        )
+        with jax.default_matmul_precision("highest"):  # a GPU would use TF32 otherwise
+            want = np.asarray(jax.vmap(ctrl)(jnp.asarray(obs, jnp.float32)))
+        np.testing.assert_allclose(policy.action(obs), want, atol=1e-5)
 
 
 @pytest.mark.slow
