@@ -24,11 +24,12 @@ def evaluate_dir(
 
     Args:
         task: the run's task where it is not registered (see ``open_run``).
-        env_id, env_kwargs: a Gymnasium environment to evaluate in instead (e.g. the real
-            system of a fitted model); by default a run trained through a fitted model is
-            evaluated on the real system its metrics name, any other on its task's own.
-        episodes, seed: episodes (or random targets) and the first seed; ``None``: the task's
-            default number.
+        env_id: a Gymnasium environment to evaluate in instead (e.g. the real system of a
+            fitted model); by default a run trained through a fitted model is evaluated on the
+            real system its metrics name, any other on its task's own.
+        env_kwargs: the keyword arguments of ``env_id``.
+        episodes: episodes (or random targets); ``None``: the task's default number.
+        seed: the first reset seed (or the seed of the random targets).
 
     Returns:
         The ``Run`` and the task's evaluation result (``summary()``, ``to_json()``).
