@@ -39,3 +39,96 @@ def train_cli(task: str, seed: int, out: Path, extra: list[str]) -> tuple[dict, 
     subprocess.run(cmd, check=True, env=env, stdout=subprocess.DEVNULL)
     seconds = time.perf_counter() - t0
     return json.loads((out / "metrics.json").read_text()), seconds
+
+
+def gym_seeds_benchmark(
+    task: str,
+    description: str,
+    default_out: Path,
+    target_return: float,
+    target_seconds: float,
+    reference: str = "",
+    note: str = "",
+) -> None:
+    """The benchmark of a task evaluated in Gymnasium: `diffcontrol train TASK --seed S` with
+    the defaults for training seeds 0..N-1 (``train_cli``), each controller evaluated on
+    Gymnasium's reset seeds 0-99; prints a table and a summary against the target (a mean
+    return of at least ``target_return`` in under ``target_seconds`` of training) and writes
+    the JSON (``--out``, default ``default_out``)."""
+    import argparse
+    import statistics
+    import tempfile
+
+    parser = argparse.ArgumentParser(
+        description=description, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--seeds", type=int, default=5, help="training seeds 0..N-1 (default 5)")
+    parser.add_argument("--out", type=Path, default=default_out)
+    args = parser.parse_args()
+
+    header = (
+        f"{'seed':>4} {'train s':>8} {'compile s':>9} {'process s':>9} {'update':>6} "
+        f"{'Gymnasium return (seeds 0-99)':>30} {'min':>6} {'steps':>6}"
+    )
+    print(header)
+    print("-" * len(header))
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for seed in range(args.seeds):
+            extra = ["--no-animation", "--final-eval", "100"]
+            metrics, process_seconds = train_cli(task, seed, Path(tmp) / f"{task}-{seed}", extra)
+            ev, chosen = metrics["gym_eval"], metrics["returned_update"]
+            r = {
+                "seed": seed,
+                "train_seconds": metrics["train_seconds"],
+                "compile_seconds": metrics["compile_seconds"],
+                "process_seconds": process_seconds,
+                "simulated_episodes": metrics["simulated_episodes"],
+                "simulated_steps": metrics["simulated_steps"],
+                "returned_update": chosen,
+                "returned_member": next(
+                    (c.get("best_member") for c in metrics["curve"] if c["update"] == chosen),
+                    None,
+                ),
+                "gym_env": ev["env_id"],
+                "eval_episodes": ev["episodes"],
+                "eval_mean": ev["mean_return"],
+                "eval_std": ev["std_return"],
+                "eval_min": ev["min_return"],
+                "eval_mean_length": ev["mean_length"],
+                "eval_returns": ev["returns"],
+            }
+            rows.append(r)
+            print(
+                f"{seed:>4} {r['train_seconds']:>8.1f} {r['compile_seconds']:>9.1f} "
+                f"{r['process_seconds']:>9.1f} {r['returned_update']:>6} "
+                f"{r['eval_mean']:>21.2f} ± {r['eval_std']:<6.2f} {r['eval_min']:>6.1f} "
+                f"{r['eval_mean_length']:>6.1f}",
+                flush=True,
+            )
+    means = [r["eval_mean"] for r in rows]
+    seconds = [r["train_seconds"] for r in rows]
+    meeting = sum(m >= target_return and s < target_seconds for m, s in zip(means, seconds))
+    summary = {
+        "task": task,
+        "seeds": len(rows),
+        "median_eval_mean": statistics.median(means),
+        "worst_eval_mean": min(means),
+        "best_eval_mean": max(means),
+        "median_train_seconds": statistics.median(seconds),
+        "max_train_seconds": max(seconds),
+        "target_return": target_return,
+        "target_seconds": target_seconds,
+        "reference": reference,
+        "seeds_meeting_target": meeting,
+    }
+    print(
+        f"\nworst {min(means):.2f}, median {summary['median_eval_mean']:.2f}; train s median "
+        f"{summary['median_train_seconds']:.1f}, max {max(seconds):.1f}; {meeting}/{len(rows)} "
+        f"seeds meet >= {target_return:g} in < {target_seconds:g} s"
+        + (f" ({reference})" if reference else "")
+    )
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    doc = {"machine": machine(), "note": note, "runs": rows, "summary": summary}
+    args.out.write_text(json.dumps(doc, indent=1) + "\n")
+    print(f"wrote {args.out}")
