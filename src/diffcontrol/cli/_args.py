@@ -1,7 +1,7 @@
 """The parser class, the argument types, and ``add``: options from compact specs.
 
-A spec is ``(flag, kind, default, metavar, help)``: ``flag`` is ``--name`` (its ``dest`` is
-``name`` with ``_``) or a positional's ``dest``; ``kind`` is a type function (``str``,
+A spec is ``(flag, form, default, metavar, help)``: ``flag`` is ``--name`` (its ``dest`` is
+``name`` with ``_``) or a positional's ``dest``; ``form`` is a type function (``str``,
 ``positive_int``, ...), ``FLAG`` (``store_true``), ``[type]`` (repeatable: a list) or a tuple of
 choices; ``default`` is the value, or ``REQUIRED``; a positional whose default is not
 ``REQUIRED`` is optional. The options several commands share are specs here. The commands
@@ -31,13 +31,13 @@ class Parser(argparse.ArgumentParser):
 
 def add(parser: Any, *specs: tuple) -> None:
     """Add one argument to ``parser`` (or an argument group) per spec (see the module doc)."""
-    for flag, kind, default, metavar, help in specs:
-        if kind == FLAG:
+    for flag, form, default, metavar, help in specs:
+        if form == FLAG:
             kw: dict[str, Any] = {"action": FLAG}
-        elif isinstance(kind, list):
-            kw = {"action": "append", "type": kind[0], "metavar": metavar}
+        elif isinstance(form, list):
+            kw = {"action": "append", "type": form[0], "metavar": metavar}
         else:
-            kw = {"choices" if isinstance(kind, tuple) else "type": kind, "metavar": metavar}
+            kw = {"choices" if isinstance(form, tuple) else "type": form, "metavar": metavar}
         if default is not REQUIRED:
             kw.update(default=default, **({} if flag.startswith("-") else {"nargs": "?"}))
         elif flag.startswith("-"):
