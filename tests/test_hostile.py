@@ -190,3 +190,39 @@ def test_damaged_checkpoints_get_one_line(resumable, capsys):
         ckpt.write_bytes(original)
     with pytest.raises(ModelFileError):
         io.load_checkpoint(resumable / "missing.npz", None)
+
+
+# --- data files ------------------------------------------------------------------------------
+
+
+def test_a_csv_field_beyond_the_csv_limit(tmp_path, capsys):
+    from diffcontrol.identify.data import read_trajectories
+
+    path = tmp_path / "big.csv"
+    header = '# {"format": "diffcontrol-trajectories", "version": 1, "metadata": {}}'
+    path.write_text(header + "\ntime,episode,obs.x [m],action.u [N]\n" + "1" * 200_000 + ",0,0,0\n")
+    with pytest.raises(diffcontrol.errors.DataFileError) as e:
+        read_trajectories(path)
+    assert "\n" not in str(e.value)
+
+
+def test_an_npz_that_claims_a_huge_array_is_refused_unread(tmp_path):
+    import io as _io
+    import zipfile
+
+    from diffcontrol.identify.data import read_trajectories
+
+    path = tmp_path / "huge.npz"
+    with zipfile.ZipFile(path, "w") as z:
+        for name, shape in [("time", (10**12,)), ("episode", (1,)), ("observations", (1, 1))]:
+            buf = _io.BytesIO()
+            np.lib.format.write_array_header_1_0(
+                buf, {"descr": "<f8", "fortran_order": False, "shape": shape}
+            )
+            z.writestr(f"{name}.npy", buf.getvalue())
+        for name in ("actions", "header"):
+            buf = _io.BytesIO()
+            np.save(buf, np.zeros(1))
+            z.writestr(f"{name}.npy", buf.getvalue())
+    with pytest.raises(diffcontrol.errors.DataFileError, match="claims shape"):
+        read_trajectories(path)

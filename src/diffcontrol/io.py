@@ -525,7 +525,7 @@ def save_checkpoint(path: str | os.PathLike, tree: Any, meta: dict) -> None:
     write_bytes(path, buf.getvalue())
 
 
-def _npz_shape(data: Any, name: str) -> tuple[tuple[int, ...], np.dtype]:
+def npz_shape(data: Any, name: str) -> tuple[tuple[int, ...], np.dtype]:
     """The shape and dtype an ``.npz`` member declares, read from its header alone."""
     with data.zip.open(f"{name}.npy") as f:
         version = np.lib.format.read_magic(f)
@@ -584,7 +584,7 @@ def load_checkpoint(path: str | os.PathLike, like: Any) -> tuple[Any, dict]:
                 name = f"leaf_{i:04d}"
                 ref_arr = np.asarray(ref)
                 # the stored shape first: a file that claims a huge array is refused unread
-                if _npz_shape(data, name) != (ref_arr.shape, ref_arr.dtype):
+                if npz_shape(data, name) != (ref_arr.shape, ref_arr.dtype):
                     raise bad("does not match this run's configuration")
                 leaves.append(jax.numpy.asarray(data[name]))
     except ModelFileError:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import errno
+import os
 import sys
 
 from ..errors import DiffcontrolError, Interrupted
@@ -55,6 +56,9 @@ def main(argv: list[str] | None = None) -> int:
     except Interrupted as e:
         print(f"\n{e}", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # `diffcontrol list | head`: the reader has had enough
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
     except DiffcontrolError as e:
         print(f"diffcontrol {args.command}: error: {e}", file=sys.stderr)
         return EXIT_USAGE

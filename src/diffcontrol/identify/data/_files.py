@@ -140,7 +140,10 @@ def csv_parts(path: Path, format_: str, version: int) -> tuple[Any, list[str], l
             f"{path}, line 1: no header; the first line must be "
             f'# {{"format": "{format_}", "version": {version}, "metadata": {{...}}}}'
         )
-    body = [(n, row) for n, row in enumerate(csv.reader(lines[1:]), start=2) if row]
+    try:
+        body = [(n, row) for n, row in enumerate(csv.reader(lines[1:]), start=2) if row]
+    except csv.Error as e:  # e.g. a field longer than the csv module's limit
+        raise DataFileError(f"{path}: not a CSV table diffcontrol can read ({e})") from None
     if not body:
         raise DataFileError(f"{path}: no column names after the header line; see the format")
     return header, [c.strip() for c in body[0][1]], body[1:]
@@ -175,6 +178,24 @@ def _read_csv(path: Path) -> TrajectoryData:
 
 
 _NPZ_ARRAYS = ("time", "episode", "observations", "actions", "header")
+MAX_NPZ_ELEMENTS = 10**9
+"""The most numbers one array of a data file may declare (8 GB of float64): a file that
+claims more is refused before anything is read."""
+
+
+def npz_arrays(npz: Any, names: tuple[str, ...], path: Path) -> dict[str, np.ndarray]:
+    """The arrays ``names`` of an open ``.npz``, each refused unread if its declared size is
+    beyond ``MAX_NPZ_ELEMENTS``."""
+    from ...io import npz_shape
+
+    for name in names:
+        shape, _ = npz_shape(npz, name)
+        if int(np.prod(shape, dtype=object)) > MAX_NPZ_ELEMENTS:
+            raise DataFileError(
+                f"{path}: array {name!r} claims shape {shape}, more than any recording; "
+                "write it again"
+            )
+    return {name: npz[name] for name in names}
 
 
 def _read_npz(path: Path) -> TrajectoryData:
@@ -186,7 +207,7 @@ def _read_npz(path: Path) -> TrajectoryData:
                     f"{path}: missing array(s) {missing}; a trajectory .npz holds "
                     f"{list(_NPZ_ARRAYS)} (write it with diffcontrol.data.write_npz)"
                 )
-            arrays = {name: npz[name] for name in _NPZ_ARRAYS}
+            arrays = npz_arrays(npz, _NPZ_ARRAYS, path)
     except (OSError, ValueError, zipfile.BadZipFile, EOFError) as e:
         raise DataFileError(f"{path} is not a readable .npz ({e}); write it again") from None
     try:

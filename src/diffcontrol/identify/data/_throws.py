@@ -44,7 +44,7 @@ import numpy as np
 
 from ...errors import ConfigError, DataFileError
 from ...io import _finite, write_bytes
-from ._files import check_header, csv_parts, file_suffix, readable_suffix
+from ._files import check_header, csv_parts, file_suffix, npz_arrays, readable_suffix
 from ._format import parse_column
 
 THROWS_FORMAT = "diffcontrol-throws"
@@ -292,7 +292,7 @@ def _read_npz(path: Path) -> ThrowData:
                     + f"; a throws .npz holds {list(names)} (write it with "
                     "diffcontrol.data.write_throws)"
                 )
-            arrays = {n: npz[n] for n in names}
+            arrays = npz_arrays(npz, names, path)
     except (OSError, ValueError, zipfile.BadZipFile, EOFError) as e:
         raise DataFileError(f"{path} is not a readable .npz ({e}); write it again") from None
     try:
