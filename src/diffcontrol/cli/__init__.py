@@ -66,12 +66,9 @@ def main(argv: list[str] | None = None) -> int:
         if e.errno not in _FILE_SYSTEM_ERRORS:
             raise
         where = f" ({e.filename})" if e.filename else ""
-        hint = " then continue with --resume" if args.command == "train" else ""
-        print(
-            f"diffcontrol {args.command}: error: {e.strerror}{where}; make room or choose "
-            f"another place,{hint or ' then run the command again'}",
-            file=sys.stderr,
-        )
+        hint = "continue with --resume" if args.command == "train" else "run it again"
+        msg = f"{e.strerror}{where}; make room or choose another place, then {hint}"
+        print(f"diffcontrol {args.command}: error: {msg}", file=sys.stderr)
         return EXIT_USAGE
 
 
