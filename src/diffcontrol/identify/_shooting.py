@@ -186,3 +186,24 @@ def standard_errors(residual_fn, values: jax.Array) -> jax.Array:
         return jnp.full(values.shape, jnp.inf)
     cov = sigma2 * jnp.linalg.inv(jtj)
     return jnp.sqrt(jnp.clip(jnp.diag(cov), 0.0))
+
+
+def lm_refine(residuals: Any, loss: Any, best: Any, best_loss: float, batch: Any, steps: int):
+    """Refine an Adam fit by ``steps`` Levenberg-Marquardt iterations on ``residuals`` (an
+    ``optimistix`` least-squares solve, no exception on failure). Returns ``(best, best_loss,
+    lm_loss)``: the refined point where it lowers ``loss``, else the Adam one; ``lm_loss`` is the
+    refinement's loss (NaN or inf where it diverged)."""
+    import optimistix as optx
+
+    solution = optx.least_squares(
+        residuals,
+        optx.LevenbergMarquardt(rtol=1e-10, atol=1e-12),
+        best,
+        args=batch,
+        max_steps=steps,
+        throw=False,
+    )
+    lm_loss = float(loss(solution.value, batch))
+    if math.isfinite(lm_loss) and lm_loss < best_loss:
+        return solution.value, lm_loss, lm_loss
+    return best, best_loss, lm_loss

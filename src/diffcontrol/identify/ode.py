@@ -30,7 +30,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optax
-import optimistix as optx
 
 from ..errors import ConfigError, DataFileError, InsufficientDataError
 from ._shooting import (
@@ -40,6 +39,7 @@ from ._shooting import (
     FitResult,
     adam_fit,
     check_settings,
+    lm_refine,
     standard_errors,
 )
 from .data import TrajectoryData, parse_column
@@ -260,17 +260,7 @@ def _fit(
         loss, theta0, optimiser, steps, batch, "model"
     )
     if model_type == "params" and lm_steps and not diverged:
-        sol = optx.least_squares(
-            residuals,
-            optx.LevenbergMarquardt(rtol=1e-10, atol=1e-12),
-            best,
-            args=batch,
-            max_steps=lm_steps,
-            throw=False,
-        )
-        lm_loss = float(loss(sol.value, batch))
-        if math.isfinite(lm_loss) and lm_loss < best_loss:
-            best, best_loss = sol.value, lm_loss
+        best, best_loss, _ = lm_refine(residuals, loss, best, best_loss, batch, lm_steps)
     model = build(best)
     values, errors = {}, {}
     if model_type == "params":

@@ -44,7 +44,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optax
-import optimistix as optx
 
 from ..errors import ConfigError, DataFileError, InsufficientDataError
 from ..tasks._base import Task
@@ -54,6 +53,7 @@ from ._shooting import (
     FitResult,
     adam_fit,
     check_settings,
+    lm_refine,
     set_params,
     standard_errors,
 )
@@ -234,18 +234,10 @@ def _fit(task, data, names, window, steps, learning_rate, lm_steps, init) -> Fit
         loss, z, optimiser, steps, batch, "parameters"
     )
     if lm_steps and not diverged:
-        solution = optx.least_squares(
-            lambda z, b: residuals(to_values(z), b),
-            optx.LevenbergMarquardt(rtol=1e-10, atol=1e-12),
-            best_z,
-            args=batch,
-            max_steps=lm_steps,
-            throw=False,
+        best_z, best_loss, lm_loss = lm_refine(
+            lambda z, b: residuals(to_values(z), b), loss, best_z, best_loss, batch, lm_steps
         )
-        lm_loss = float(loss(solution.value, batch))
-        if math.isfinite(lm_loss) and lm_loss < best_loss:
-            best_z, best_loss = solution.value, lm_loss
-        elif not math.isfinite(lm_loss):
+        if not math.isfinite(lm_loss):
             message = "the Levenberg-Marquardt refinement diverged; kept the Adam fit"
         history.append(lm_loss if math.isfinite(lm_loss) else math.nan)
     values = to_values(best_z)

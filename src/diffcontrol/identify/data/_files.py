@@ -149,18 +149,16 @@ def csv_parts(path: Path, format_: str, version: int) -> tuple[Any, list[str], l
     return header, [c.strip() for c in body[0][1]], body[1:]
 
 
-def _read_csv(path: Path) -> TrajectoryData:
-    header, columns, rows = csv_parts(path, FORMAT, VERSION)
-    meta = check_header(header, path, FORMAT, VERSION)
-    n_cols = len(columns)
-    if not rows:
-        raise DataFileError(f"{path} holds no rows; record at least one episode")
-    table = np.empty((len(rows), n_cols))
+def csv_table(path: Path, columns: list[str], rows: list, rule: str) -> np.ndarray:
+    """The numbers of a CSV body (``csv_parts``' rows) as a [rows, columns] array, an empty
+    cell as NaN; a row of the wrong length or a cell that is not a number is a
+    ``DataFileError`` naming the file, the line and the column (``rule`` says what a row
+    needs)."""
+    table = np.empty((len(rows), len(columns)))
     for i, (line, cells) in enumerate(rows):
-        if len(cells) != n_cols:
+        if len(cells) != len(columns):
             raise DataFileError(
-                f"{path}, line {line}: {len(cells)} cells but {n_cols} columns; every row "
-                "needs one cell per column (an empty cell for a missing action)"
+                f"{path}, line {line}: {len(cells)} cells but {len(columns)} columns; {rule}"
             )
         for j, cell in enumerate(cells):
             try:
@@ -169,6 +167,21 @@ def _read_csv(path: Path) -> TrajectoryData:
                 raise DataFileError(
                     f"{path}, line {line}, column {columns[j]!r}: {cell!r} is not a number"
                 ) from None
+    return table
+
+
+def _read_csv(path: Path) -> TrajectoryData:
+    header, columns, rows = csv_parts(path, FORMAT, VERSION)
+    meta = check_header(header, path, FORMAT, VERSION)
+    n_cols = len(columns)
+    if not rows:
+        raise DataFileError(f"{path} holds no rows; record at least one episode")
+    table = csv_table(
+        path,
+        columns,
+        rows,
+        "every row needs one cell per column (an empty cell for a missing action)",
+    )
     lines_of = [line for line, _ in rows]
     episode = table[:, 1] if n_cols > 1 else np.zeros(0)
     k = sum(parse_column(c)[0] in ("obs", "state") for c in columns)

@@ -35,7 +35,6 @@ import csv
 import dataclasses
 import io as _io
 import json
-import math
 import os
 import zipfile
 from pathlib import Path
@@ -44,7 +43,14 @@ import numpy as np
 
 from ...errors import ConfigError, DataFileError
 from ...io import _finite, write_bytes
-from ._files import check_header, csv_parts, file_suffix, npz_arrays, readable_suffix
+from ._files import (
+    check_header,
+    csv_parts,
+    csv_table,
+    file_suffix,
+    npz_arrays,
+    readable_suffix,
+)
 from ._format import parse_column
 
 THROWS_FORMAT = "diffcontrol-throws"
@@ -259,20 +265,7 @@ def _read_csv(path: Path) -> ThrowData:
     header, columns, rows = csv_parts(path, THROWS_FORMAT, THROWS_VERSION)
     meta = _check_header(header, path)
     order = _column_order(columns, path)
-    table = np.empty((len(rows), len(columns)))
-    for i, (line, cells) in enumerate(rows):
-        if len(cells) != len(columns):
-            raise DataFileError(
-                f"{path}, line {line}: {len(cells)} cells but {len(columns)} columns; every "
-                "throw needs one number per column"
-            )
-        for j, cell in enumerate(cells):
-            try:
-                table[i, j] = float(cell) if cell.strip() else math.nan
-            except ValueError:
-                raise DataFileError(
-                    f"{path}, line {line}, column {columns[j]!r}: {cell!r} is not a number"
-                ) from None
+    table = csv_table(path, columns, rows, "every throw needs one number per column")
     arrays = {f: table[:, j] for f, j in zip(_FIELDS, order)}
     lines_of = [line for line, _ in rows]
     validate_throws(arrays, where=str(path), row=lambda i: f"line {lines_of[i]}")
