@@ -46,7 +46,7 @@ import optax
 
 from ..errors import ConfigError, InsufficientDataError
 from ..identify._routes import TrajectoryRoute, parameters_doc
-from ..identify._shooting import FitResult, set_params, standard_errors
+from ..identify._shooting import FitResult, check_settings, set_params, standard_errors
 from ..identify.data import TrajectoryData
 from ..systems import trebuchet as tb
 from ._trebuchet_record import as64, parameter_names, params_dict, predict_distances
@@ -112,12 +112,7 @@ def fit_throws(
     if bad or not names or len(set(names)) != len(names):
         what = f"unknown parameter(s) {bad}" if bad else f"parameter names {list(names)}"
         raise ConfigError(f"{what} for the trebuchet; choose distinct names among {list(known)}")
-    if not isinstance(steps, int) or steps < 0 or not isinstance(lm_steps, int) or lm_steps < 0:
-        raise ConfigError(f"steps and lm_steps must be integers >= 0, got {steps!r}, {lm_steps!r}")
-    if not (isinstance(learning_rate, int | float) and math.isfinite(learning_rate)):
-        raise ConfigError(f"learning_rate must be a positive number, got {learning_rate!r}")
-    if learning_rate <= 0:
-        raise ConfigError(f"learning_rate must be a positive number, got {learning_rate!r}")
+    check_settings(steps=steps, learning_rate=learning_rate, lm_steps=lm_steps)
     need = MIN_THROWS_PER_PARAMETER * len(names)
     throws = _throws(data)
     if throws.wind.size < need:
