@@ -6,9 +6,9 @@ degrees and 200 lb in calm air it throws 63 m where the nominal model says 83 m.
 
 1. Parameter recovery: for data seeds S = 0 .. 4, ``N_THROWS`` throws of the real trebuchet
    with random inputs (winds N(0, 5^2) m/s, angles U(20, 70) deg, counterweights U(50, 450) lb;
-   ``diffcontrol.identify.throws.record_throws(seed=S)``), once noise-free and once with Gaussian
-   noise of ``NOISE_M`` m on the measured distance; ``fit_throws`` fits drag_coefficient and
-   wind_factor (300 Adam steps, 20 Levenberg-Marquardt steps). Held-out: 200 more throws
+   the task's ``record_data(seed=S)``, one-step episodes), once noise-free and once with
+   Gaussian noise of ``NOISE_M`` m on the measured distance; ``diffcontrol.identify.fit`` fits
+   drag_coefficient and wind_factor (300 Adam steps, 20 Levenberg-Marquardt steps). Held-out: 200 more throws
    (seed 1000 + S, same noise) predicted by the nominal and the fitted model.
 2. Gap closure: for training seeds S = 0 .. SEEDS-1, three controllers trained with the same
    budget (the task's default config unless --updates is given) on (a) the nominal model, (b)
@@ -36,9 +36,9 @@ sys.path.insert(0, str(HERE))
 from _common import machine  # noqa: E402
 
 import diffcontrol  # noqa: E402
-from diffcontrol import io  # noqa: E402
-from diffcontrol.identify import throws as ft  # noqa: E402
+from diffcontrol import identify, io  # noqa: E402
 from diffcontrol.systems import trebuchet as tb  # noqa: E402
+from diffcontrol.tasks._trebuchet_fit import distance_errors  # noqa: E402
 
 TRUTH = {"drag_coefficient": 1.5, "wind_factor": 1.5}
 REAL = tb.TrebuchetParams(**TRUTH)
@@ -52,15 +52,16 @@ HELD_OUT = 200
 
 
 def recovery(seed: int, noise_m: float) -> tuple[dict, object]:
-    data = ft.record_throws(N_THROWS, REAL, seed=seed, noise_m=noise_m)
-    held_out = ft.record_throws(HELD_OUT, REAL, seed=1000 + seed, noise_m=noise_m)
+    task = diffcontrol.make("trebuchet")
+    data = task.record_data(N_THROWS, env_kwargs=TRUTH, seed=seed, noise_m=noise_m)
+    held_out = task.record_data(HELD_OUT, env_kwargs=TRUTH, seed=1000 + seed, noise_m=noise_m)
     t0 = time.perf_counter()
-    result = ft.fit_throws(data, tuple(TRUTH))
+    result = identify.fit(task, data, "params", names=tuple(TRUTH))
     seconds = time.perf_counter() - t0
     row = {
         "seed": seed,
         "noise_m": noise_m,
-        "throws": data.num_throws,
+        "throws": data.num_episodes,
         "seconds": seconds,
         "values": result.values,
         "standard_errors": result.standard_errors,
@@ -70,8 +71,8 @@ def recovery(seed: int, noise_m: float) -> tuple[dict, object]:
             for n, t in TRUTH.items()
         },
         "held_out": {
-            "nominal": ft.distance_errors(None, held_out),
-            "fitted": ft.distance_errors(result.params, held_out),
+            "nominal": distance_errors(None, held_out),
+            "fitted": distance_errors(result.params, held_out),
         },
         "diverged": result.diverged,
         "message": result.message,

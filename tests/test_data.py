@@ -18,7 +18,7 @@ from diffcontrol.identify import data
 from diffcontrol.identify.data import DataFileError, TrajectoryData, read_trajectories
 from diffcontrol.io import controller_to_dict, write_json
 
-PENDULUM_OBS, PENDULUM_ACT = data.KNOWN_COLUMNS["Pendulum-v1"]
+PENDULUM_OBS, PENDULUM_ACT = data.known_columns()["Pendulum-v1"]
 
 
 @pytest.fixture(scope="module")
@@ -196,6 +196,32 @@ def test_recorded_cartpole_pairs_reproduce_gymnasium():
         env.state, env.steps_beyond_terminated = x.copy(), None
         obs, *_ = env.step(int(u[0]))
         np.testing.assert_allclose(obs, x_next, atol=1e-6)
+
+
+def test_known_columns_are_the_tasks_data_columns(monkeypatch):
+    from diffcontrol import tasks
+
+    known = data.known_columns()
+    pendulum = diffcontrol.make("pendulum")
+    for eid in ("Pendulum-v1", "diffcontrol/Pendulum-v0", "diffcontrol/PendulumFriction-v0"):
+        assert known[eid] == pendulum.data_columns()
+    assert known["CartPole-v1"] == diffcontrol.make("cartpole").data_columns()
+    # tasks whose data are states (not their environment's observations) name no environment
+    assert "diffcontrol/Trebuchet-v0" not in known
+    assert "diffcontrol/CartPoleSwingUp-v0" not in known
+
+    class Renamed(type(pendulum)):
+        name, gym_id = "pendulum-renamed", "my_module:MyPendulum-v0"
+
+        def data_columns(self):
+            return ("obs.c [1]", "obs.s [1]", "obs.w [rad/s]"), ("action.tau [N m]",)
+
+    monkeypatch.setitem(tasks._REGISTRY, Renamed.name, Renamed())
+    assert data.known_columns()["my_module:MyPendulum-v0"] == Renamed().data_columns()
+    assert data.known_columns()["Pendulum-v1"] == pendulum.data_columns()  # the first task's
+    # a file that says it is from that environment must have its columns
+    with pytest.raises(DataFileError, match="not those of my_module:MyPendulum-v0"):
+        _small(env_id="my_module:MyPendulum-v0")
 
 
 def test_record_with_a_controller(pendulum_model):

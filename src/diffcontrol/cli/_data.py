@@ -21,8 +21,8 @@ def add_parsers(sub: Any) -> None:
             "holds the final observation and no action). ENV_ID is a Gymnasium id (e.g. "
             "Pendulum-v1, my_module:MyEnv-v0) or a task's name, which records the task's own "
             "data: the trebuchet's throws (random inputs, or --controller aiming; --env-arg "
-            "sets the real trebuchet's parameters, --noise-m the distance noise; a "
-            "diffcontrol-throws file), a swing-up's full state under random forces (--env-arg "
+            "sets the real trebuchet's parameters, --noise-m the distance noise; a throw is "
+            "a one-step episode), a swing-up's full state under random forces (--env-arg "
             "sets its parameters). With --task, ENV_ID is the real system of TASK: its spaces "
             "must match the task's and the columns are named by the task."
         ),

@@ -1,15 +1,16 @@
 """Learning models of a system from recorded data, and the loop that uses them.
 
 - **Data** (``identify.data``): the trajectory table ``TrajectoryData`` and its CSV/NPZ
-  files (``diffcontrol-trajectories``), and recorded throws (``ThrowData``,
-  ``diffcontrol-throws``). ``record`` records any Gymnasium environment, as the real system of
-  a task when ``task=`` is given (the columns are then the task's ``data_columns()``).
+  files (``diffcontrol-trajectories``), every system's data (a single measured outcome is a
+  one-step episode). ``record`` records any Gymnasium environment, as the real system of a
+  task when ``task=`` is given (the columns are then the task's ``data_columns()``);
+  ``record_data`` is a task's own recording (its ``record_data`` hook).
 - **Models**: ``params`` (grey box: the task's physical parameters), ``hybrid`` (the physics
   plus a ``Correction`` network) and ``neural`` (a network alone), of a discrete step
   (``HybridModel``, ``NeuralModel``, ``model_task``) or of a vector field (the task's own
   model, ``identify.ode``).
 - **Fitting**: ``fit(task, data, model, **settings) -> FitResult``, by the task's route
-  (``task.model_route()``: its step, its vector field, or recorded throws); the prediction
+  (``task.model_route()``: its step, its vector field, or the task's own); the prediction
   errors of ``identify.steps`` / ``identify.ode`` and the plot of ``identify.plot``.
 - **Files**: ``fit_dir`` writes a fit directory (``fitted.json`` by ``save_fit``,
   ``prediction.png``); ``read_fitted`` and ``fitted_model`` read it back, and
@@ -22,7 +23,7 @@ from . import data
 from ._fit import FitDir, fit, fit_dir, save_fit
 from ._loop import loop
 from ._shooting import HORIZONS, MODEL_TYPES, NETWORK_MODELS, FitResult
-from .data import ThrowData, TrajectoryData, concat, read_throws, read_trajectories
+from .data import TrajectoryData, concat, read_trajectories
 from .fitted import (
     FITTED_FILE,
     FITTED_FORMAT,
@@ -51,7 +52,6 @@ __all__ = [
     "FitResult",
     "HybridModel",
     "NeuralModel",
-    "ThrowData",
     "TrajectoryData",
     "as_env",
     "checked_env_id",
@@ -70,7 +70,6 @@ __all__ = [
     "predict",
     "prediction_errors",
     "read_fitted",
-    "read_throws",
     "read_trajectories",
     "real_params",
     "real_system",

@@ -19,12 +19,13 @@ from .fitted import FITTED_FILE, FITTED_FORMAT
 def fit(task: Any, data: Any, model: str = "params", **settings: Any) -> FitResult:
     """Fit a model of ``task``'s system to recorded ``data``.
 
-    The route (discrete step, vector field, recorded throws) is the task's ``model_route()``;
-    nothing here asks which system the task is.
+    The route (the discrete step, the vector field, or the task's own) is the task's
+    ``model_route()``; nothing here asks which system the task is.
 
     Args:
         task: any task (``diffcontrol.make``/``tasks.resolve``).
-        data: what the task's route reads (``TrajectoryData``; ``ThrowData`` for throws).
+        data: recorded episodes (``TrajectoryData``; one-step episodes where the system gives
+            one measured outcome).
         model: ``params`` (grey box: the task's physical parameters), ``hybrid`` (physics plus
             a network) or ``neural`` (a network alone).
         settings: ``names`` (the parameters of a grey box; default the task's
@@ -75,7 +76,7 @@ def check_fit_dir(out: Path, force: bool) -> None:
 
 
 def split(route: Any, data: Any, fraction: float) -> tuple[Any, Any]:
-    """``(fitted, held_out)``: the last ``fraction`` of the episodes (or throws) held out, at
+    """``(fitted, held_out)``: the last ``fraction`` of the episodes held out, at
     least one when ``fraction > 0``; ``held_out`` is None for 0."""
     n = route.count(data)
     if fraction == 0:

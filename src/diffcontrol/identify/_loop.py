@@ -1,7 +1,7 @@
 """``loop``: record -> fit -> train, a few rounds, for a system known only by acting.
 
-Each round is made of the library's steps (``record``, ``identify.fit_dir``, ``train`` through
-the fitted model, ``runs.save_run``) on files in ``out``, so every round's outputs are the ones
+Each round is made of the library's steps (the task's ``record_data``, ``identify.fit_dir``,
+``train`` through the fitted model, ``runs.save_run``) on files in ``out``, so every round's outputs are the ones
 ``diffcontrol record/fit/train`` write, and an interrupted loop continues where it stopped
 (``resume``): a round's data, fitted model and controller are each kept once written.
 """
@@ -15,10 +15,9 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import ConfigError, RunDirectoryError
-from ..io import NumpyPolicy, now_iso, read_json, read_model, write_figure, write_json
+from ..io import now_iso, read_json, write_figure, write_json
 from ._fit import fit_dir
 from .data import concat, read_trajectories, write_trajectories
-from .recording import record
 
 LOOP_FILE = "loop.json"
 
@@ -41,7 +40,8 @@ def loop(
     report: Callable[[str], None] = print,
 ) -> dict:
     """Learn a controller for a system you can only run: record ``episodes`` episodes of the
-    real environment ``env_id`` (default the task's own; random actions at first), fit a model
+    real system (the task's ``record_data``: by default Gymnasium episodes of ``env_id``, the
+    task's own environment unless given; random actions at first), fit a model
     of ``task``'s system to all data so far, train a controller through it, judge it on the
     real environment, record ``episodes`` more with it, and repeat for ``rounds`` rounds.
 
@@ -64,12 +64,11 @@ def loop(
             f"loop needs a discrete-time control task with a Gymnasium environment, not "
             f"{task.name!r}; e.g. pendulum"
         )
-    env_id = env_id or task.gym_id or own_id(task)
     env_kwargs = dict(env_kwargs or {})
     out = Path(out)
     settings = {
         "task": task.name,
-        "env_id": env_id,
+        "env_id": env_id or task.gym_id or own_id(task),
         "env_kwargs": env_kwargs,
         "model": model,
         "params": names,
@@ -80,18 +79,17 @@ def loop(
     state = _start(out, settings, resume)
     say = progress or (lambda line: None)
 
-    def record_round(k: int, policy: Any) -> None:
-        """Record the episodes of round k (random for k = 0) and append them to data.csv."""
+    def record_round(k: int, controller: Path | None) -> None:
+        """Record the episodes of round k (random for k = 0, else with round k's controller
+        ``controller``) and append them to data.csv."""
         part = out / f"round_{k}" / "recorded.csv"
         if not part.exists():
-            data = record(
-                env_id,
+            data = task.record_data(
                 episodes,
-                policy=policy,
-                seed=seed + 1000 * k,
+                env_id=env_id,
                 env_kwargs=env_kwargs,
-                source="random actions" if policy is None else f"round {k} controller",
-                task=task,
+                controller=None if controller is None else str(controller),
+                seed=seed + 1000 * k,
             )
             part.parent.mkdir(parents=True, exist_ok=True)
             write_trajectories(part, data)
@@ -144,7 +142,7 @@ def loop(
             + (f"; return on the real system {ret:.1f}" if ret is not None else "")
         )
         if k < rounds:
-            record_round(k, NumpyPolicy(read_model(here / "run")))
+            record_round(k, here / "run")
     _plot(state, out / "loop.png")
     report(
         f"wrote {out / LOOP_FILE}, {out / 'loop.png'} and {out / 'data.csv'}; the controller: "

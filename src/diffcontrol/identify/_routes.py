@@ -1,22 +1,24 @@
 """The routes of model learning: how a task's data is read, fitted, judged and drawn.
 
 A task picks its route with its ``model_route()`` hook (by base class: ``STEPS`` for a
-discrete-time ``Task``, ``ODE`` for a ``ContinuousTask``; the trebuchet's ``THROWS``), so
+discrete-time ``Task``, ``ODE`` for a ``ContinuousTask``; a task with its own model, fit or
+plot returns its own route, a ``TrajectoryRoute`` subclass in the task's files), so
 ``identify.fit`` and ``identify.fit_dir`` never ask which system a task is. Each route has
-the same methods: ``read(path)``, ``count(data)``, ``split(data, n)``, ``fit(task, data,
-model_type, **settings)`` and ``outputs(...)`` (the route's part of ``fitted.json``, the lines
-it reports and ``prediction.png``).
+the same methods: ``read(path)``, ``count(data)``, ``split(data, n)``, ``announce(...)`` (the
+line said before fitting), ``fit(task, data, model_type, **settings)`` and ``outputs(...)``
+(the route's part of ``fitted.json``, the lines it reports and ``prediction.png``), its
+``unit`` (what ``count`` counts) and ``defaults`` (Adam's steps and learning rate by model
+type); optionally ``check_model(task, model_type)`` (before anything is read) and
+``check_split(task, data, train, held_out, settings)`` (after the hold-out is split off).
 """
 
 from __future__ import annotations
 
 import dataclasses
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from ..errors import ConfigError
 from ._shooting import HORIZONS, FitResult
 
 
@@ -58,8 +60,9 @@ def _data_doc(data_file: Any, train: Any, held_out: Any, **extra: Any) -> dict:
     }
 
 
-class _Trajectories:
-    """What the trajectory routes share: the data file and its split into episodes."""
+class TrajectoryRoute:
+    """What every route shares: the trajectory file (``read_trajectories``) and its split into
+    episodes; subclasses define ``defaults``, ``fit`` and ``outputs``."""
 
     unit = "episode"
 
@@ -84,7 +87,7 @@ class _Trajectories:
         )
 
 
-class StepRoute(_Trajectories):
+class StepRoute(TrajectoryRoute):
     """A discrete-time task: its step with fitted parameters, or a hybrid or neural model."""
 
     defaults = {"params": (300, 0.02), "hybrid": (2000, 3e-3), "neural": (2000, 3e-3)}
@@ -187,7 +190,7 @@ class StepRoute(_Trajectories):
         return body, lines
 
 
-class ODERoute(_Trajectories):
+class ODERoute(TrajectoryRoute):
     """A continuous-time task: its vector field with fitted parameters, hybrid or neural."""
 
     defaults = {"params": (300, 0.02), "hybrid": (500, 1e-2), "neural": (500, 1e-2)}
@@ -269,113 +272,5 @@ class ODERoute(_Trajectories):
         return body, lines
 
 
-class ThrowRoute:
-    """Recorded throws (a throw is a one-step episode with one measured outcome)."""
-
-    unit = "throw"
-    defaults = {"params": (300, 0.02)}
-
-    def read(self, path: Any) -> Any:
-        from .data import read_throws
-
-        return read_throws(path)
-
-    def count(self, data: Any) -> int:
-        return data.num_throws
-
-    def split(self, data: Any, n: int) -> tuple[Any, Any]:
-        return data.split(n)
-
-    def announce(self, task, model_type, train, held_out, data_file, settings) -> str:
-        names = settings.get("names") or task.fit_parameter_names
-        return f"fitting {', '.join(names)} of the trebuchet to {train.num_throws} throw(s) of " + (
-            f"{data_file}" + (f" ({held_out.num_throws} held out)" if held_out else "")
-        )
-
-    def check_split(self, task, data, train, held_out, settings) -> None:
-        from ..errors import InsufficientDataError
-        from .throws import MIN_THROWS_PER_PARAMETER
-
-        names = settings.get("names") or task.fit_parameter_names
-        need = MIN_THROWS_PER_PARAMETER * len(names)
-        if held_out is not None and train.num_throws < need <= data.num_throws:
-            raise InsufficientDataError(
-                f"holding out {held_out.num_throws} of the {data.num_throws} throws (--holdout "
-                f"{settings.get('holdout')}) leaves {train.num_throws} to fit {len(names)} "
-                f"parameter(s), but at least {need} are needed; record more throws or pass "
-                "--holdout 0"
-            )
-
-    def check_model(self, task: Any, model_type: str) -> None:
-        """Refuse a network model: a throw has no trajectory to learn a correction from."""
-        if model_type != "params":
-            raise ConfigError(
-                f"--model {model_type} is not supported for aiming tasks such as {task.name!r} "
-                "(a throw has no trajectory to learn a correction from); use --model params to "
-                "fit its physical parameters"
-            )
-
-    def fit(self, task: Any, data: Any, model_type: str, **s: Any) -> FitResult:
-        from .throws import fit_throws
-
-        self.check_model(task, model_type)
-        keys = ("steps", "learning_rate", "lm_steps", "init", "params")
-        kw = {k: s[k] for k in keys if s.get(k) is not None}
-        return fit_throws(data, tuple(s.get("names") or task.fit_parameter_names), **kw)
-
-    def outputs(self, task, result, data, train, held_out, data_file, settings, out):
-        from .throws import distance_errors, params_dict, throws_plot
-
-        nominal = task.default_params()
-        errors = None
-        if held_out is not None:
-            errors = {
-                "nominal": distance_errors(nominal, held_out),
-                "fitted": distance_errors(result.params, held_out),
-            }
-        body = {
-            "parameters": parameters_doc(result),
-            # the float fields of TrebuchetParams only (its step budgets are static, not fitted)
-            "all_parameters": params_dict(result.params),
-            "fit": dict(
-                residual="predicted minus recorded distance (m), one per throw",
-                adam_steps=settings["steps"],
-                learning_rate=settings["learning_rate"],
-                lm_steps=settings.get("lm_steps", 20),
-            ),
-            "data": {
-                "file": str(data_file),
-                "kind": "throws",
-                "metadata": data.metadata,
-                "fit_throws": train.num_throws,
-                "held_out_throws": held_out.num_throws if held_out else 0,
-            },
-            "prediction_error": None
-            if errors is None
-            else {
-                "what": "error of the predicted distance (m) of the held-out throws (the last "
-                "ones of the file), with their recorded inputs",
-                **errors,
-            },
-        }
-        shown = held_out if held_out is not None else train
-        throws_plot(
-            {"fitted": result.params, "nominal": nominal},
-            shown,
-            out / "prediction.png",
-            title=f"trebuchet, {shown.num_throws} {'held-out' if held_out else 'fitted'} throws "
-            f"of {Path(data_file).name}",
-        )
-        lines = []
-        if errors is not None:
-            nom, fit = errors["nominal"]["rmse_m"], errors["fitted"]["rmse_m"]
-            lines.append(
-                f"held-out RMS distance error over {held_out.num_throws} throw(s): nominal "
-                f"{nom:.3g} m, fitted {fit:.3g} m"
-            )
-        return body, lines
-
-
 STEPS = StepRoute()
 ODE = ODERoute()
-THROWS = ThrowRoute()

@@ -51,8 +51,8 @@ class FitResult:
             one entry after it where the route records one.
         diverged: a step gave a non-finite loss; the model is then the best seen before it.
         message: one line on how the fit ended.
-        window, windows, transitions: the window length (steps; 1 for throws), how many
-            windows (or throws) and how many recorded transitions the fit used.
+        window, windows, transitions: the window length (steps; 1 for one-step episodes),
+            how many windows and how many recorded transitions the fit used.
         num_parameters: how many numbers were fitted (weights, or parameters).
         dt_s, substeps: a continuous-time fit's recorded interval (s) and RK4 steps per
             interval (``None`` otherwise).

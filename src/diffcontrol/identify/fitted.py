@@ -99,8 +99,9 @@ def fitted_model(task: Any, doc: dict[str, Any]) -> HybridModel | NeuralModel | 
 
 
 def real_system(doc: dict) -> dict | None:
-    """The system a fitted model's data came from: ``{"env_id", "env_kwargs"}`` for recorded
-    trajectories, ``{"params"}`` (the simulated trebuchet's) for recorded throws, or None."""
+    """The system a fitted model's data came from: ``{"env_id", "env_kwargs"}`` for data
+    recorded from a Gymnasium environment, ``{"params"}`` (the physical parameters of a
+    simulated system, from the data's metadata), or None."""
     data = doc.get("data") or {}
     if data.get("env_id"):
         env_id = checked_env_id(data["env_id"], doc.get("_path", "the fitted model"))
@@ -135,8 +136,8 @@ def as_env(real: dict | None) -> tuple[str, dict] | None:
 
 
 def real_params(task: Any, real: dict | None) -> Any:
-    """The task's parameters of a real system given by its parameters (the trebuchet's recorded
-    throws), else None."""
+    """The task's parameters of a real system given by its parameters (data recorded from the
+    task's own simulator with other parameters), else None."""
     if not real or "params" not in real:
         return None
     return fitted_physics(task, {"task": task.name, "all_parameters": real["params"]})

@@ -2,9 +2,11 @@
 
 ``record(env_id, ...)`` records any environment; with ``task=`` the environment is the real
 system of a task (its spaces must match the task's) and the columns are named by the task
-(``task.data_columns()``). ``record_data(source, ...)`` is ``diffcontrol record``: a task's
-own recording (its ``record_data`` hook: Gymnasium episodes by default, the trebuchet's throws,
-the swing-up's state) or a plain Gymnasium id, written to a CSV or NPZ file.
+(``task.data_columns()``), and without it by the task that names that environment's columns
+(``data.known_columns()``). ``record_data(source, ...)`` is ``diffcontrol record``: a task's
+own recording (its ``record_data`` hook: Gymnasium episodes by default; a task may record its
+own simulator, e.g. one-step episodes of a single measured outcome) or a plain Gymnasium id,
+written to a CSV or NPZ file.
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ from gymnasium import spaces
 from ..envs import make_env
 from ..errors import ConfigError
 from ..io import now_iso
-from .data import DISCRETE_UNIT, KNOWN_COLUMNS, TrajectoryData
+from .data import DISCRETE_UNIT, TrajectoryData, known_columns, write_trajectories
 
 
 def _time_step(env: gymnasium.Env) -> float | None:
@@ -38,8 +40,8 @@ def _time_step(env: gymnasium.Env) -> float | None:
 
 
 def columns_for(env_id: str, env: gymnasium.Env) -> tuple[tuple[str, ...], tuple[str, ...]]:
-    """The observation and action columns of ``env``: the known names and units for the
-    environments in ``KNOWN_COLUMNS``, otherwise ``obs.0 [?]``, ... (unknown units),
+    """The observation and action columns of ``env``: the names and units a registered task
+    gives them (``known_columns()``), otherwise ``obs.0 [?]``, ... (unknown units),
     ``action.0 [?]`` and ``action.0 [index]`` for a ``Discrete`` action.
 
     Raises:
@@ -61,7 +63,7 @@ def columns_for(env_id: str, env: gymnasium.Env) -> tuple[tuple[str, ...], tuple
             f"{env_id} has the action space {act_space}; recording needs a flat Box or Discrete"
         )
     observations = tuple(f"obs.{i} [?]" for i in range(obs_space.shape[0]))
-    known = KNOWN_COLUMNS.get(env_id)
+    known = known_columns().get(env_id)
     if known and (len(known[0]), len(known[1])) == (len(observations), len(actions)):
         return known
     return observations, actions
@@ -242,7 +244,8 @@ def _record_env(env_id, episodes, task, env_kwargs, controller, seed, max_steps,
 
     if noise_m is not None:
         raise ConfigError(
-            f"--noise-m applies to `diffcontrol record trebuchet` only, not {env_id}; drop it"
+            f"--noise-m does not apply to recording {env_id} (only to a task's own recording "
+            "that measures with noise); drop it"
         )
     # The network alone (observations -> Gymnasium action), whatever the task.
     policy = NumpyPolicy(read_model(controller)) if controller else None
@@ -303,10 +306,10 @@ def record_data(
     """``diffcontrol record``: record ``episodes`` episodes and write them to ``out``.
 
     Args:
-        source: a registered task's name (its ``record_data``: e.g. the trebuchet's throws,
-            the swing-up's state) or a Gymnasium id (``module:Env-v0`` too; imported because
+        source: a registered task's name (its ``record_data``: Gymnasium episodes, or the
+            task's own recording) or a Gymnasium id (``module:Env-v0`` too; imported because
             the caller named it).
-        episodes: how many episodes (throws for the trebuchet).
+        episodes: how many episodes.
         out: a ``.csv`` or ``.npz`` file (default: the task's ``data_file_name``, or the id
             with ``/`` as ``-``).
         task: the task whose real system the Gymnasium id ``source`` is (its columns).
@@ -319,7 +322,6 @@ def record_data(
     """
     from .. import tasks
     from ..errors import DataFileError
-    from .data import ThrowData, write_throws, write_trajectories
 
     env_id: str | None = source
     if task is None and source in tasks.names():
@@ -338,9 +340,8 @@ def record_data(
             progress=options.get("progress"),
             **o,
         )
-    write = write_throws if isinstance(data, ThrowData) else write_trajectories
     try:
-        write(path, data)
+        write_trajectories(path, data)
     except OSError as e:
         raise DataFileError(
             f"cannot write --out {path} ({e.strerror}); choose a writable --out"
@@ -348,12 +349,11 @@ def record_data(
     return data, path
 
 
-def describe(data: Any) -> str:
-    """One line on recorded data: episodes, steps and columns (or throws and their noise)."""
-    if hasattr(data, "num_throws"):
-        return f"{data.num_throws} throw(s), distance noise {data.metadata.get('noise_m', 0):g} m"
+def describe(data: TrajectoryData) -> str:
+    """One line on recorded data: episodes, steps and columns."""
+    kind = "observation" if data.kind == "obs" else "state"
     return (
         f"{data.num_episodes} episode(s), {data.num_steps} steps, "
-        f"{len(data.observation_columns)} observation and {len(data.action_columns)} action "
+        f"{len(data.observation_columns)} {kind} and {len(data.action_columns)} action "
         "column(s)"
     )

@@ -173,10 +173,17 @@ class _TaskBase(abc.ABC):
     fit_parameter_names: ClassVar[tuple[str, ...]] = ()
     """The physical parameters a grey-box fit (``--model params``) fits by default."""
 
+    data_env_ids: ClassVar[tuple[str, ...]] = ()
+    """Gymnasium ids, besides ``gym_id``, of environments that are this task's system with
+    other physics (e.g. ``diffcontrol/PendulumFriction-v0``): ``diffcontrol record ID``
+    names their columns by ``data_columns()`` too (``identify.data.known_columns``)."""
+
     def data_columns(self) -> tuple[tuple[str, ...], tuple[str, ...]]:
         """The observation and action columns (names with units) of this task's recorded
         data. Default: ``obs.0 [?]``, ... and ``action.0 [?]``, ... (``action.0 [index]`` for
-        a discrete action); a task that knows its units names them."""
+        a discrete action); a task that knows its units names them, and the Gymnasium
+        environments of a task whose columns are observations with known units are recorded
+        under these names (``identify.data.known_columns``)."""
         obs = tuple(f"obs.{i} [?]" for i in range(self.observation_size))
         if self.action_head in ("sign", "argmax"):
             return obs, ("action.0 [index]",)

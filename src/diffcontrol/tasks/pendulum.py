@@ -39,6 +39,7 @@ class Pendulum(Task):
     positive_params = ("m", "l", "dt", "max_speed")
     nonnegative_params = ("max_torque", "friction")
     fit_parameter_names = ("g", "friction")
+    data_env_ids = ("diffcontrol/PendulumFriction-v0",)  # Pendulum-v1 with joint friction
 
     def data_columns(self):
         return ("obs.cos_theta [1]", "obs.sin_theta [1]", "obs.theta_dot [rad/s]"), (

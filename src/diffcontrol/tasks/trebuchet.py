@@ -35,6 +35,12 @@ ANGLE_RANGE_DEG = (5.0, 85.0)
 WEIGHT_RANGE_LB = (30.0, 450.0)
 """The counterweight head's bounds (lb). The distance grows with the weight up to about
 500 lb at every angle; beyond that the sling releases early and the throw shortens."""
+THROW_COLUMNS = (
+    ("state.wind [m/s]", "state.distance [m]"),
+    ("action.release_angle [deg]", "action.counterweight [lb]"),
+)
+"""The columns of recorded throws (``data_columns()``): the wind and distance of the task's
+state ``(target, wind, distance)``, and the aim."""
 
 
 class TrebuchetAiming(Task):
@@ -76,60 +82,29 @@ class TrebuchetAiming(Task):
     def default_params(self) -> tb.TrebuchetParams:
         return tb.TrebuchetParams()
 
-    # --- learning its physics from recorded throws (``identify.throws``) --------------------
+    # --- learning its physics from recorded throws (``_trebuchet_throws``, ``_fit``) -------
 
     def data_columns(self):
-        return ("obs.target [m]", "obs.wind [m/s]"), (
-            "action.release_angle [deg]",
-            "action.counterweight [lb]",
-        )
+        """A throw is a one-step episode: the wind and distance 0, the aim, then the wind and
+        the measured distance (``_trebuchet_throws``)."""
+        return THROW_COLUMNS
 
     def model_route(self):
-        """A throw is one measured distance: fitted by ``identify.throws``."""
-        from ..identify import _routes
+        """The grey box fitted to the measured distances (``_trebuchet_fit.THROWS``)."""
+        from ._trebuchet_fit import THROWS
 
-        return _routes.THROWS
+        return THROWS
 
     def data_file_name(self, env_id=None) -> str:
         return "trebuchet-throws.csv"
 
-    def record_data(self, episodes, *, env_id=None, env_kwargs=None, controller=None,
-                    seed=0, max_steps=None, noise_m=None, progress=None):  # fmt: skip
+    def record_data(self, episodes, **options):
         """``episodes`` throws with random inputs (or a trained ``controller`` aiming at random
-        targets) of the trebuchet whose parameters ``env_kwargs`` change
-        (``identify.throws.record_throws``)."""
-        from ..errors import ConfigError
-        from ..identify.throws import record_throws, trebuchet_params
-        from ..io import AimingPolicy, read_model
+        targets) of the trebuchet whose parameters ``env_kwargs`` change, ``noise_m`` m of
+        noise on the distances (``_trebuchet_record.record_throws``)."""
+        from ._trebuchet_record import record_data
 
-        if max_steps is not None:
-            raise ConfigError(
-                "--max-steps does not apply to the trebuchet (one episode is one throw); drop it"
-            )
-        params = trebuchet_params(list((env_kwargs or {}).items()))
-        policy = None
-        if controller:
-            policy = AimingPolicy(read_model(controller))
-            if policy.task != "trebuchet":
-                raise ConfigError(
-                    f"--controller {controller} was trained for task {policy.task!r}, not "
-                    "trebuchet; give a trebuchet run, or omit --controller for random throws"
-                )
-        if progress:
-            changed = ", ".join(f"{n}={v:g}" for n, v in (env_kwargs or {}).items())
-            what = f"controller {controller}" if policy else "random inputs"
-            progress(
-                f"recording {episodes} throw(s) of the trebuchet "
-                f"({changed or 'the nominal parameters'}) with {what}"
-            )
-        return record_throws(
-            episodes,
-            params,
-            seed=seed,
-            noise_m=noise_m or 0.0,
-            policy=policy,
-            source=f"controller {controller}" if policy else None,
-        )
+        return record_data(self, episodes, **options)
 
     def reset(self, key, params):
         k_target, k_wind = jax.random.split(key)

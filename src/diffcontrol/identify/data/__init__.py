@@ -1,7 +1,9 @@
-"""Recorded trajectories: the ``TrajectoryData`` value and its CSV and NPZ files.
+"""Recorded data: the ``TrajectoryData`` value and its CSV and NPZ files.
 
 The format (``diffcontrol-trajectories``, version 1) is one table, a row per time step of an
-episode. Columns, each named with its unit in brackets:
+episode; every system's data is such a table, an episode of one step where the system gives
+one measured outcome (what is known before, the input, the outcome). Columns, each named with
+its unit in brackets:
 
 - ``time [s]`` (or ``time [step]`` where the system has no physical time step): the time of
   the row within its episode, strictly increasing within an episode;
@@ -13,9 +15,10 @@ episode. Columns, each named with its unit in brackets:
   the integer index.
 
 Units are free text (``1`` for dimensionless, ``?`` for unknown, e.g. ``m/s``, ``N m``). For the
-environments in ``KNOWN_COLUMNS`` (``Pendulum-v1``, ``CartPole-v1`` and the ``diffcontrol/``
-environments) the names and units must be exactly those, so a column in degrees where radians
-are expected is refused by name.
+environments whose columns a registered task names (``known_columns()``: ``Pendulum-v1``,
+``CartPole-v1``, the ``diffcontrol/`` environments of those tasks, ...) the names and units
+must be exactly the task's ``data_columns()``, so a column in degrees where radians are
+expected is refused by name.
 
 **The last row of every episode holds the final observation and no action** (empty action
 cells in CSV, NaN in NPZ); every other row has finite actions. So an episode of ``n`` steps
@@ -34,11 +37,8 @@ Numbers are written as the shortest text that reads back to the same float64. NP
 ``time`` [T] (float64), ``episode`` [T] (int64), ``observations`` [T, k] and ``actions``
 [T, m] (float64), and ``header``: the JSON header as UTF-8 bytes (uint8) with the column names
 under ``"columns"``. No object arrays; it is read with ``allow_pickle=False``. ``metadata`` is
-free JSON; the recorder writes ``env_id``, ``dt_s``, ``source``, ``seed`` and ``recorded``.
-
-Recorded trebuchet throws (one row per throw: wind, release angle, counterweight, distance)
-have their own small format, ``diffcontrol-throws`` (``ThrowData``, ``read_throws``,
-``write_throws``; see ``data/_throws.py``).
+free JSON; the recorder writes ``env_id``, ``dt_s``, ``source``, ``seed`` and ``recorded``
+(a task's own recording writes what describes its system, e.g. ``system`` and ``params``).
 """
 
 from ...errors import DataFileError
@@ -46,34 +46,28 @@ from ._files import read_trajectories, write_csv, write_npz, write_trajectories
 from ._format import (
     DISCRETE_UNIT,
     FORMAT,
-    KNOWN_COLUMNS,
     TIME_UNITS,
     VERSION,
+    known_columns,
     parse_column,
     validate,
 )
 from ._table import Episode, TrajectoryData, concat
-from ._throws import THROW_COLUMNS, THROWS_FORMAT, ThrowData, read_throws, write_throws
 
 __all__ = [
     "DISCRETE_UNIT",
     "DataFileError",
     "Episode",
     "FORMAT",
-    "KNOWN_COLUMNS",
-    "THROWS_FORMAT",
-    "THROW_COLUMNS",
     "TIME_UNITS",
-    "ThrowData",
     "TrajectoryData",
     "VERSION",
     "concat",
+    "known_columns",
     "parse_column",
-    "read_throws",
     "read_trajectories",
     "validate",
     "write_csv",
     "write_npz",
-    "write_throws",
     "write_trajectories",
 ]

@@ -119,7 +119,7 @@ def read_trajectories(path: str | os.PathLike) -> TrajectoryData:
 
 
 def csv_parts(path: Path, format_: str, version: int) -> tuple[Any, list[str], list]:
-    """The parts of a diffcontrol CSV file (trajectories or throws): the JSON header of its
+    """The parts of a diffcontrol CSV file (of any format): the JSON header of its
     first line (unchecked), the column names, and the other non-empty rows as ``(line number,
     cells)``.
 

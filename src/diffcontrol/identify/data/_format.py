@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -14,26 +15,41 @@ VERSION = 1
 TIME_UNITS = ("s", "step")
 DISCRETE_UNIT = "index"
 
-_PENDULUM = ("obs.cos_theta [1]", "obs.sin_theta [1]", "obs.theta_dot [rad/s]")
-_CARTPOLE = ("obs.x [m]", "obs.x_dot [m/s]", "obs.theta [rad]", "obs.theta_dot [rad/s]")
-_SWINGUP = (_PENDULUM, ("action.force [N]",))
-KNOWN_COLUMNS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
-    "Pendulum-v1": (_PENDULUM, ("action.torque [N m]",)),
-    "CartPole-v1": (_CARTPOLE, ("action.push [index]",)),
-    "diffcontrol/Pendulum-v0": (_PENDULUM, ("action.torque [N m]",)),
-    "diffcontrol/PendulumFriction-v0": (_PENDULUM, ("action.torque [N m]",)),
-    "diffcontrol/PendulumUnclipped-v0": (_PENDULUM, ("action.torque [N m]",)),
-    "diffcontrol/CartPole-v0": (_CARTPOLE, ("action.push [index]",)),
-    "diffcontrol/Trebuchet-v0": (
-        ("obs.target [m]", "obs.wind [m/s]"),
-        ("action.release_angle [deg]", "action.counterweight [lb]"),
-    ),
-    "diffcontrol/CartPoleSwingUp-v0": _SWINGUP,
-    "diffcontrol/CartPoleSwingUpLimited-v0": _SWINGUP,
-    "diffcontrol/CartPoleSwingUpFriction-v0": _SWINGUP,
-}
-"""The observation and action columns (names with units) of environments whose units we know.
-CartPole's push is Gymnasium's ``Discrete(2)`` index: 0 pushes left, 1 right (10 N)."""
+Columns = tuple[tuple[str, ...], tuple[str, ...]]
+
+
+def known_columns() -> dict[str, Columns]:
+    """The observation and action columns (names with units) of the Gymnasium environments
+    that a registered task names: for every task whose ``data_columns()`` are observations
+    (``obs.``) with every unit known, its ``gym_id``, its own ``diffcontrol/<Name>-v0`` and
+    its ``data_env_ids``. The task registered first names an id that two tasks share.
+
+    ``diffcontrol record ENV_ID`` names its columns so, and a file whose metadata names such
+    an environment (``env_id``) must have exactly these columns.
+    """
+    from ... import tasks
+
+    return dict(_known_columns(tuple(tasks.names())))
+
+
+@functools.lru_cache(maxsize=8)
+def _known_columns(names: tuple[str, ...]) -> dict[str, Columns]:
+    from ... import tasks
+    from ...envs import env_id
+
+    known: dict[str, Columns] = {}
+    for name in names:
+        task = tasks.make(name)
+        obs, act = (tuple(c) for c in task.data_columns())
+        parsed = [parse_column(c) for c in (*obs, *act)]
+        if any(p != "obs" for p, _, _ in parsed[: len(obs)]) or any(
+            u in (None, "", "?") for _, _, u in parsed
+        ):
+            continue
+        for eid in (task.gym_id, env_id(task), *task.data_env_ids):
+            if eid:
+                known.setdefault(eid, (obs, act))
+    return known
 
 
 def parse_column(text: str) -> tuple[str, str, str | None]:
@@ -203,9 +219,10 @@ def _check_rows(time, episode, obs, act, columns, bad, row) -> None:
 
 
 def _check_known(env_id: Any, columns: Sequence[str], bad: Callable) -> None:
-    if not isinstance(env_id, str) or env_id not in KNOWN_COLUMNS:
+    known = known_columns().get(env_id) if isinstance(env_id, str) else None
+    if known is None:
         return
-    expected = [*KNOWN_COLUMNS[env_id][0], *KNOWN_COLUMNS[env_id][1]]
+    expected = [*known[0], *known[1]]
     got = list(columns[2:])
     by_name = {parse_column(c)[:2]: c for c in expected}
     for c in got:  # compared parsed, so 'obs.x[m]' is 'obs.x [m]'

@@ -1,15 +1,12 @@
-"""Recorded throws (the trebuchet task's data): its unknown physics fitted to the distances.
+"""The trebuchet's physics fitted to recorded throws, and its route of model learning.
 
 A throw is one input ``(wind, release angle, counterweight)`` and one measured outcome, the
-distance. The model is the differentiable trebuchet itself (``systems.trebuchet.shoot``) with
-some of its parameters unknown (by default the drag coefficient ``C_d`` and ``wind_factor``,
-how strongly the wind acts on the flight). They are fitted by least squares on the distance
-residuals ``r_i = shoot(w_i, a_i, m_i; theta) - d_i`` (m), differentiating through the whole
-simulated throw: no windows are needed, since a throw is one short open-loop run.
-
-``record_throws`` plays the real trebuchet: it throws a ``TrebuchetParams`` (the "real" one,
-e.g. ``C_d = 1.5`` and ``wind_factor = 1.5``) with random or given inputs and adds Gaussian
-noise to the measured distances.
+distance (a one-step episode: ``_trebuchet_throws``). The model is the differentiable trebuchet
+itself (``systems.trebuchet.shoot``) with some of its parameters unknown (by default the drag
+coefficient ``C_d`` and ``wind_factor``, how strongly the wind acts on the flight). They are
+fitted by least squares on the distance residuals ``r_i = shoot(w_i, a_i, m_i; theta) - d_i``
+(m), differentiating through the whole simulated throw: no windows are needed, since a throw is
+one short open-loop run.
 
 **The fit** runs in float64 on unconstrained coordinates ``z`` (``value = exp(z)`` for a
 positive nominal value, ``value = z`` for a nominal 0): Adam (optax) for ``steps`` steps, then
@@ -29,14 +26,17 @@ product enters).
 
 **Divergence** is reported, not hidden: a non-finite loss stops the fit with ``diverged=True``
 and the best parameters seen before it are kept; no NaN is returned.
+
+``THROWS`` is the task's ``model_route()``: ``identify.fit`` and ``identify.fit_dir`` reach the
+fit, the held-out distance errors and the plot through it.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import math
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 import jax
@@ -45,76 +45,28 @@ import numpy as np
 import optax
 
 from ..errors import ConfigError, InsufficientDataError
-from ..io import now_iso
+from ..identify._routes import TrajectoryRoute, parameters_doc
+from ..identify._shooting import FitResult, check_settings, set_params, standard_errors
+from ..identify.data import TrajectoryData
 from ..systems import trebuchet as tb
-from ._shooting import FitResult, set_params, standard_errors
-from .data import ThrowData
+from ._trebuchet_record import as64, parameter_names, params_dict, predict_distances
+from ._trebuchet_throws import Throws, read_throws, throws_of
 
 MIN_THROWS_PER_PARAMETER = 5
 """The fewest recorded throws per fitted parameter."""
 DEFAULT_NAMES = ("drag_coefficient", "wind_factor")
 """The parameters fitted by default: what the nominal trebuchet does not know."""
-RANDOM_ANGLE_DEG = (20.0, 70.0)
-"""``record_throws`` draws random release angles uniformly from here (degrees)."""
-RANDOM_WEIGHT_LB = (50.0, 450.0)
-"""``record_throws`` draws random counterweights uniformly from here (pounds)."""
-RANDOM_WIND_STD_MPS = 5.0
-"""``record_throws`` draws random winds ~ N(0, 5^2) m/s clipped to +-20, as the task does."""
 
 
-def parameter_names() -> tuple[str, ...]:
-    """The trebuchet's fittable parameters: the float fields of ``TrebuchetParams`` (the step
-    budgets and ``swap_inertias`` are static and cannot be fitted)."""
-    p = tb.TrebuchetParams()
-    return tuple(
-        f.name
-        for f in dataclasses.fields(p)
-        if not f.metadata.get("static", False) and isinstance(getattr(p, f.name), float)
-    )
+def _throws(data: TrajectoryData | Throws) -> Throws:
+    return data if isinstance(data, Throws) else throws_of(data)
 
 
-def trebuchet_params(env_args: list[tuple[str, float]]) -> tb.TrebuchetParams:
-    """``TrebuchetParams`` with the ``--env-arg NAME=VALUE`` overrides (floats only).
-
-    Raises:
-        ConfigError: an unknown name (the message lists the trebuchet's parameters).
-    """
-    known = parameter_names()
-    bad = [name for name, _ in env_args if name not in known]
-    if bad:
-        raise ConfigError(
-            f"--env-arg {bad[0]}: the trebuchet has no parameter {bad[0]!r}; choose among "
-            f"{', '.join(known)} (e.g. --env-arg drag_coefficient=1.5 --env-arg wind_factor=1.5)"
-        )
-    return tb.TrebuchetParams(**{name: float(value) for name, value in env_args})
-
-
-def params_dict(params: tb.TrebuchetParams) -> dict[str, float]:
-    """The fittable parameters of ``params`` as plain floats (for metadata and JSON)."""
-    return {n: float(np.asarray(getattr(params, n))) for n in parameter_names()}
-
-
-def _as64(params: tb.TrebuchetParams) -> tb.TrebuchetParams:
-    return jax.tree.map(lambda x: jnp.asarray(x, jnp.float64), params)
-
-
-@jax.jit
-def _shoot(wind, angle, weight, params):
-    return tb.shoot(wind, angle, weight, params)
-
-
-def predict_distances(params: tb.TrebuchetParams | None, data: ThrowData) -> np.ndarray:
-    """The distances (m) the trebuchet ``params`` (default the nominal one) throws with the
-    recorded inputs of ``data``, simulated in float64."""
-    with jax.enable_x64(True):
-        p = _as64(params or tb.TrebuchetParams())
-        return np.asarray(_shoot(data.wind, data.release_angle, data.counterweight, p))
-
-
-def distance_errors(params: tb.TrebuchetParams | None, data: ThrowData) -> dict[str, Any]:
+def distance_errors(params: tb.TrebuchetParams | None, data: TrajectoryData | Throws) -> dict:
     """How well ``params`` predicts the recorded distances: ``rmse_m`` (root mean square of
     predicted minus recorded, m), ``mean_abs_m``, ``max_abs_m`` and ``throws``."""
-    err = predict_distances(params, data) - data.distance
+    throws = _throws(data)
+    err = predict_distances(params, throws) - throws.distance
     return {
         "rmse_m": float(np.sqrt(np.mean(err**2))),
         "mean_abs_m": float(np.mean(np.abs(err))),
@@ -123,77 +75,8 @@ def distance_errors(params: tb.TrebuchetParams | None, data: ThrowData) -> dict[
     }
 
 
-def record_throws(
-    n: int,
-    params: tb.TrebuchetParams | None = None,
-    *,
-    seed: int = 0,
-    noise_m: float = 0.0,
-    inputs: tuple[Any, Any, Any] | None = None,
-    policy: Any = None,
-    source: str | None = None,
-) -> ThrowData:
-    """Throw the trebuchet ``params`` (default nominal) ``n`` times and record the throws.
-
-    The inputs are, in this order of precedence: ``inputs`` ``(wind_mps, angle_deg,
-    weight_lb)`` (arrays of length ``n``, or scalars); or ``policy`` (a trained aiming
-    controller, e.g. ``diffcontrol.load(run)``, whose ``action`` maps ``(target, wind)`` to
-    ``(angle, weight)``) aiming at random targets ~ U(20, 100) m; or random inputs (angles
-    ~ U(``RANDOM_ANGLE_DEG``), counterweights ~ U(``RANDOM_WEIGHT_LB``)). Random winds are
-    N(0, 5^2) m/s clipped to +-20 m/s. Everything random comes from
-    ``numpy.random.default_rng(seed)``; the recorded distance is the simulated one (float64)
-    plus Gaussian noise of standard deviation ``noise_m`` (m).
-
-    Returns:
-        A ``ThrowData`` whose metadata records the system's parameters, the noise and seed.
-
-    Raises:
-        ConfigError: ``n < 1``, a negative or non-finite ``noise_m``, or inputs out of the
-            simulator's checked ranges (the message names the bad value).
-    """
-    if not isinstance(n, int | np.integer) or n < 1:
-        raise ConfigError(f"the number of throws must be a positive integer, got {n!r}")
-    if not (math.isfinite(noise_m) and noise_m >= 0):
-        raise ConfigError(f"noise_m must be a standard deviation >= 0 (m), got {noise_m!r}")
-    p = params or tb.TrebuchetParams()
-    rng = np.random.default_rng(seed)
-    wind = np.clip(RANDOM_WIND_STD_MPS * rng.standard_normal(n), -20.0, 20.0)
-    if inputs is not None:
-        wind, angle, weight = (np.broadcast_to(np.asarray(x, np.float64), (n,)) for x in inputs)
-        how = "given inputs"
-    elif policy is not None:
-        from ..tasks.trebuchet import TARGET_RANGE_M
-
-        target = rng.uniform(*TARGET_RANGE_M, size=n)
-        actions = np.asarray(policy.action(np.stack([target, wind], axis=-1)), np.float64)
-        angle, weight = actions[:, 0], actions[:, 1]
-        how = f"a controller (task {getattr(policy, 'task', '?')!r}) aiming at random targets"
-    else:
-        angle = rng.uniform(*RANDOM_ANGLE_DEG, size=n)
-        weight = rng.uniform(*RANDOM_WEIGHT_LB, size=n)
-        how = "random inputs"
-    wind, angle, weight = tb.check_inputs(wind, angle, weight)
-    distance = predict_distances(p, ThrowData(wind, angle, weight, np.zeros(n)))
-    if not np.all(np.isfinite(distance)):
-        i = int(np.flatnonzero(~np.isfinite(distance))[0])
-        raise ConfigError(
-            f"throw {i} (wind {wind[i]:g} m/s, {angle[i]:g} deg, {weight[i]:g} lb) diverged in "
-            f"the simulator with these parameters; check them ({params_dict(p)})"
-        )
-    distance = distance + noise_m * rng.standard_normal(n)
-    metadata = {
-        "system": "trebuchet",
-        "source": source or f"simulated trebuchet, {how}",
-        "params": params_dict(p),
-        "noise_m": float(noise_m),
-        "seed": int(seed),
-        "recorded": now_iso(),
-    }
-    return ThrowData(wind, angle, weight, distance, metadata)
-
-
 def fit_throws(
-    data: ThrowData,
+    data: TrajectoryData | Throws,
     names: Sequence[str] = DEFAULT_NAMES,
     *,
     steps: int = 300,
@@ -229,16 +112,12 @@ def fit_throws(
     if bad or not names or len(set(names)) != len(names):
         what = f"unknown parameter(s) {bad}" if bad else f"parameter names {list(names)}"
         raise ConfigError(f"{what} for the trebuchet; choose distinct names among {list(known)}")
-    if not isinstance(steps, int) or steps < 0 or not isinstance(lm_steps, int) or lm_steps < 0:
-        raise ConfigError(f"steps and lm_steps must be integers >= 0, got {steps!r}, {lm_steps!r}")
-    if not (isinstance(learning_rate, int | float) and math.isfinite(learning_rate)):
-        raise ConfigError(f"learning_rate must be a positive number, got {learning_rate!r}")
-    if learning_rate <= 0:
-        raise ConfigError(f"learning_rate must be a positive number, got {learning_rate!r}")
+    check_settings(steps=steps, learning_rate=learning_rate, lm_steps=lm_steps)
     need = MIN_THROWS_PER_PARAMETER * len(names)
-    if data.num_throws < need:
+    throws = _throws(data)
+    if throws.wind.size < need:
         raise InsufficientDataError(
-            f"{data.num_throws} recorded throw(s) are too few to fit {len(names)} parameter(s) "
+            f"{throws.wind.size} recorded throw(s) are too few to fit {len(names)} parameter(s) "
             f"{list(names)}: at least {need} are needed ({MIN_THROWS_PER_PARAMETER} per "
             "parameter), with winds of both signs to tell wind_factor; record more throws "
             "(`diffcontrol record trebuchet --episodes N`)"
@@ -248,7 +127,7 @@ def fit_throws(
     if unknown:
         raise ConfigError(f"init names {unknown} are not among the fitted ones {list(names)}")
     with jax.enable_x64(True):
-        return _fit(data, names, steps, learning_rate, lm_steps, init, _as64(base))
+        return _fit(throws, names, steps, learning_rate, lm_steps, init, as64(base))
 
 
 @functools.partial(jax.jit, static_argnames="names")
@@ -351,8 +230,8 @@ def _fit(data, names, steps, learning_rate, lm_steps, init, base) -> FitResult:
         diverged=diverged,
         message=message,
         window=1,
-        windows=data.num_throws,
-        transitions=data.num_throws,
+        windows=data.wind.size,
+        transitions=data.wind.size,
     )
 
 
@@ -383,7 +262,9 @@ def _levenberg_marquardt(evaluate, z, loss, r, jac, max_steps):
     return z, loss, r, jac, all_finite
 
 
-def throws_plot(models: dict[str, Any], data: ThrowData, path: Any, title: str = "") -> Any:
+def throws_plot(
+    models: dict[str, Any], data: TrajectoryData | Throws, path: Any, title: str = ""
+) -> Any:
     """Scatter the distances each model in ``models`` (label -> ``TrebuchetParams``) predicts
     for the throws of ``data`` against the recorded ones (left), and the residuals against
     the wind (right), where a wrong wind factor shows as a slope; write a PNG atomically."""
@@ -394,6 +275,7 @@ def throws_plot(models: dict[str, Any], data: ThrowData, path: Any, title: str =
 
     from ..io import write_figure
 
+    data = _throws(data)
     fig, (ax, ax_wind) = plt.subplots(1, 2, figsize=(10.0, 4.2))
     lo = min(0.0, float(np.min(data.distance)))
     hi = float(np.max(data.distance))
@@ -412,6 +294,107 @@ def throws_plot(models: dict[str, Any], data: ThrowData, path: Any, title: str =
     ax_wind.set_xlabel("wind (m/s, + toward the target)")
     ax_wind.set_ylabel("predicted - recorded (m)")
     ax_wind.legend(loc="best", fontsize=8)
-    fig.suptitle(title or f"{data.num_throws} recorded throws", fontsize=9)
+    fig.suptitle(title or f"{data.wind.size} recorded throws", fontsize=9)
     fig.tight_layout()
     return write_figure(fig, path, dpi=100)
+
+
+class ThrowRoute(TrajectoryRoute):
+    """The trebuchet's route of model learning (its ``model_route()``): its grey box fitted to
+    recorded throws (one-step episodes), judged by the held-out distance errors."""
+
+    unit = "throw"
+    defaults = {"params": (300, 0.02)}
+    """Adam steps and learning rate (only the grey box)."""
+
+    def read(self, path: Any) -> TrajectoryData:
+        return read_throws(path)
+
+    def announce(self, task, model_type, train, held_out, data_file, settings) -> str:
+        names = settings.get("names") or task.fit_parameter_names
+        held = f" ({held_out.num_episodes} held out)" if held_out else ""
+        return (
+            f"fitting {', '.join(names)} of the trebuchet to {train.num_episodes} throw(s) of "
+            f"{data_file}{held}"
+        )
+
+    def check_split(self, task, data, train, held_out, settings) -> None:
+        """Refuse a hold-out that leaves too few throws for the fit."""
+        names = settings.get("names") or task.fit_parameter_names
+        need = MIN_THROWS_PER_PARAMETER * len(names)
+        if held_out is not None and train.num_episodes < need <= data.num_episodes:
+            raise InsufficientDataError(
+                f"holding out {held_out.num_episodes} of the {data.num_episodes} throws "
+                f"(--holdout {settings.get('holdout')}) leaves {train.num_episodes} to fit "
+                f"{len(names)} parameter(s), but at least {need} are needed; record more "
+                "throws or pass --holdout 0"
+            )
+
+    def check_model(self, task: Any, model_type: str) -> None:
+        """Refuse a network model: a throw has no trajectory to learn a correction from."""
+        if model_type != "params":
+            raise ConfigError(
+                f"--model {model_type} is not supported for aiming tasks such as {task.name!r} "
+                "(a throw has no trajectory to learn a correction from); use --model params to "
+                "fit its physical parameters"
+            )
+
+    def fit(self, task: Any, data: Any, model_type: str, **s: Any) -> FitResult:
+        self.check_model(task, model_type)
+        keys = ("steps", "learning_rate", "lm_steps", "init", "params")
+        kw = {k: s[k] for k in keys if s.get(k) is not None}
+        return fit_throws(data, tuple(s.get("names") or task.fit_parameter_names), **kw)
+
+    def outputs(self, task, result, data, train, held_out, data_file, settings, out):
+        nominal = task.default_params()
+        errors = None
+        if held_out is not None:
+            errors = {
+                "nominal": distance_errors(nominal, held_out),
+                "fitted": distance_errors(result.params, held_out),
+            }
+        body = {
+            "parameters": parameters_doc(result),
+            # the float fields of TrebuchetParams only (its step budgets are static, not fitted)
+            "all_parameters": params_dict(result.params),
+            "fit": dict(
+                residual="predicted minus recorded distance (m), one per throw",
+                adam_steps=settings["steps"],
+                learning_rate=settings["learning_rate"],
+                lm_steps=settings.get("lm_steps", 20),
+            ),
+            "data": {
+                "file": str(data_file),
+                "kind": "throws",
+                "metadata": data.metadata,
+                "fit_throws": train.num_episodes,
+                "held_out_throws": held_out.num_episodes if held_out else 0,
+            },
+            "prediction_error": None
+            if errors is None
+            else {
+                "what": "error of the predicted distance (m) of the held-out throws (the last "
+                "ones of the file), with their recorded inputs",
+                **errors,
+            },
+        }
+        shown = held_out if held_out is not None else train
+        throws_plot(
+            {"fitted": result.params, "nominal": nominal},
+            shown,
+            out / "prediction.png",
+            title=f"trebuchet, {shown.num_episodes} {'held-out' if held_out else 'fitted'} "
+            f"throws of {Path(data_file).name}",
+        )
+        lines = []
+        if errors is not None:
+            nom, fit = errors["nominal"]["rmse_m"], errors["fitted"]["rmse_m"]
+            lines.append(
+                f"held-out RMS distance error over {held_out.num_episodes} throw(s): nominal "
+                f"{nom:.3g} m, fitted {fit:.3g} m"
+            )
+        return body, lines
+
+
+THROWS = ThrowRoute()
+"""The route of ``TrebuchetAiming.model_route()``."""
