@@ -24,11 +24,25 @@ from ._problem import Problem, SolveInfo
 _LINE_SEARCH = (1.0, 0.5, 0.25, 0.1, 0.03, 0.01)
 
 
+def _solve_pd(a: Array, b: Array) -> Array:
+    """``a^-1 b`` for a small positive definite ``a`` by Gaussian elimination unrolled over its
+    size: no LAPACK call, which on a CPU costs more than the arithmetic at these sizes (a few
+    per step of the backward pass, every iteration). Positive definite, so no pivoting."""
+    m = a.shape[0]
+    vector = b.ndim == 1
+    aug = jnp.concatenate([a, b[:, None] if vector else b], axis=1)
+    for i in range(m):
+        aug = aug.at[i].divide(aug[i, i])
+        aug = aug - jnp.outer(jnp.where(jnp.arange(m) == i, 0.0, aug[:, i]), aug[i])
+    out = aug[:, m:]
+    return out[:, 0] if vector else out
+
+
 def _box_qp(quu: Array, qu: Array, lower: Array, upper: Array, sweeps: int):
     """``argmin_du 0.5 du' Quu du + qu' du`` with ``lower <= du <= upper`` by projected Newton
     (exact for one action); returns ``du`` and the mask of free (unclamped) actions."""
     m = qu.shape[0]
-    du = jnp.clip(-jnp.linalg.solve(quu, qu), lower, upper)
+    du = jnp.clip(-_solve_pd(quu, qu), lower, upper)
     free = jnp.ones(m, bool)
     for _ in range(sweeps):
         grad = quu @ du + qu
@@ -37,7 +51,7 @@ def _box_qp(quu: Array, qu: Array, lower: Array, upper: Array, sweeps: int):
         both = free[:, None] & free[None, :]
         h = jnp.where(both, quu, jnp.eye(m))
         rhs = jnp.where(free, qu + quu @ jnp.where(free, 0.0, du), 0.0)
-        du = jnp.where(free, jnp.clip(-jnp.linalg.solve(h, rhs), lower, upper), du)
+        du = jnp.where(free, jnp.clip(-_solve_pd(h, rhs), lower, upper), du)
     return du, free
 
 
@@ -88,28 +102,34 @@ class ILQR(eqx.Module):
                 qxx = hk[:d, :d] + ak.T @ vxx @ ak
                 qux = hk[d:, :d] + bk.T @ vxx @ ak
                 quu = hk[d:, d:] + bk.T @ vxx @ bk
-                # Positive definite whatever the local model: clamp the eigenvalues, add mu.
-                w, q = jnp.linalg.eigh(0.5 * (quu + quu.T))
-                quu = (q * jnp.maximum(w, 1e-8)) @ q.T + mu * jnp.eye(w.shape[0])
+                # Positive definite whatever the local model: shift by Gershgorin's lower bound
+                # on the eigenvalues where it is not positive (exact for one action), add mu.
+                quu = 0.5 * (quu + quu.T)
+                eye = jnp.eye(quu.shape[0])
+                radius = jnp.abs(quu).sum(1) - jnp.abs(jnp.diag(quu))
+                lowest = jnp.min(jnp.diag(quu) - radius)
+                quu = quu + (jnp.maximum(1e-8 - lowest, 0.0) + mu) * eye
                 du, free = _box_qp(quu, qu, low - uk, high - uk, self.qp_sweeps)
                 both = free[:, None] & free[None, :]
-                hf = jnp.where(both, quu, jnp.eye(w.shape[0]))
-                gain = jnp.where(free[:, None], -jnp.linalg.solve(hf, qux), 0.0)
+                hf = jnp.where(both, quu, eye)
+                gain = jnp.where(free[:, None], -_solve_pd(hf, qux), 0.0)
                 vx = qx + gain.T @ quu @ du + gain.T @ qu + qux.T @ du
                 vxx = qxx + gain.T @ quu @ gain + gain.T @ qux + qux.T @ gain
                 return (vx, 0.5 * (vxx + vxx.T)), (du, gain)
 
             steps = jnp.arange(us.shape[0])
-            _, (ks, gains) = jax.lax.scan(backward, (vx, vxx), steps, reverse=True, unroll=True)
+            _, (ks, gains) = jax.lax.scan(backward, (vx, vxx), steps, reverse=True)
 
             def forward(alpha):
                 def one(x, inputs):
                     xk, uk, kk, gk = inputs
                     u = jnp.clip(uk + alpha * kk + gk @ (x - xk), low, high)
-                    return problem.dynamics(x, u), u
+                    nxt, reward, _ = problem.task.step(problem.params, x, u)
+                    return nxt, (nxt, u, problem.step_loss(problem.params, x, u, nxt, reward))
 
-                _, new_us = jax.lax.scan(one, x0, (xs[:-1], us, ks, gains), unroll=True)
-                new_xs, new_cost = problem.rollout(x0, new_us)
+                last, (new_xs, new_us, costs) = jax.lax.scan(one, x0, (xs[:-1], us, ks, gains))
+                new_cost = costs.sum() + problem.final_cost(last)
+                new_xs = jnp.concatenate([x0[None], new_xs])
                 return new_us, new_xs, jnp.where(jnp.isfinite(new_cost), new_cost, jnp.inf)
 
             cand_us, cand_xs, cand_cost = jax.vmap(forward)(jnp.asarray(_LINE_SEARCH))

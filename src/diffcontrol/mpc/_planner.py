@@ -71,7 +71,11 @@ class Planner(eqx.Module):
         # does not swing (a pendulum hanging at rest); the lowest finite cost wins.
         shape = (self.horizon, self.action_size)
         starts = jnp.stack(
-            [warm, jnp.broadcast_to(self.problem.low, shape), jnp.broadcast_to(self.problem.high, shape)]
+            [
+                warm,
+                jnp.broadcast_to(self.problem.low, shape),
+                jnp.broadcast_to(self.problem.high, shape),
+            ]
         )
         plans, infos = jax.vmap(self.solver.solve, (None, None, 0))(self.problem, state, starts)
         best = jnp.argmin(jnp.where(infos.finite, infos.cost, jnp.inf))

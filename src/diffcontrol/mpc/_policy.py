@@ -5,7 +5,6 @@ from __future__ import annotations
 from typing import Any
 
 import jax
-
 import jax.numpy as jnp
 import numpy as np
 
@@ -56,5 +55,3 @@ class PlannerPolicy:
         slow = sum(not r["converged"] for r in self.reports)
         bad = sum(not r["finite"] for r in self.reports)
         return f"{n} solves: {slow} not converged in the iteration budget, {bad} non-finite"
-
-

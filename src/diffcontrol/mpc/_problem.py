@@ -47,8 +47,7 @@ class Problem(eqx.Module):
             nxt, reward, _ = self.task.step(self.params, x, u)
             return nxt, (nxt, self.step_loss(self.params, x, u, nxt, reward))
 
-        # Unrolled: on a CPU a short scan's loop overhead costs more than its arithmetic.
-        last, (xs, costs) = jax.lax.scan(one, x0, actions, unroll=True)
+        last, (xs, costs) = jax.lax.scan(one, x0, actions)
         states = jnp.concatenate([x0[None], xs])
         return states, costs.sum() + self.final_cost(last)
 
