@@ -38,7 +38,7 @@ from jaxtyping import Array, Float, PyTree
 from .errors import ConfigError
 from .tasks._grid import GridAxis
 
-__all__ = ["GridAxis", "OptimumResult", "ValueTable", "optimal_return", "solve"]
+__all__ = ["GridAxis", "OptimumResult", "ValueTable", "greedy_rollout", "optimal_return", "solve"]
 
 
 class ValueTable(eqx.Module):
