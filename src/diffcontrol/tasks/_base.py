@@ -11,6 +11,7 @@ import numpy as np
 from jaxtyping import Array, PRNGKeyArray, PyTree
 
 from ..errors import ConfigError
+from ._grid import GridAxis
 
 StepLoss = Callable[[PyTree, Array, Array, Array, Array], Array]
 """``loss(params, state, action, next_state, reward) -> scalar``: the training loss of one step."""
@@ -282,6 +283,23 @@ class Task(_TaskBase):
                 ``diffcontrol.train(task, step_loss=...)``.
         """
         raise ConfigError(_no_builtin_loss(self, name, "step_loss"))
+
+    def state_grid(self, params: PyTree) -> tuple[GridAxis, ...] | None:
+        """The state space as a grid for grid methods, or ``None`` (the default): no grid.
+
+        ``diffcontrol.optimal`` solves a task that returns one by dynamic programming on that
+        grid (the reference optimum that controllers' returns are compared with). Return one
+        ``GridAxis`` per entry of the state (as ``reset`` and ``step`` lay it out), only where
+        the state is small (two entries: a grid of 801 x 801 points is cheap, one of four
+        dimensions is not) and every reachable state lies in the ranges (a periodic axis wraps,
+        a bounded one clamps). The actions are gridded between ``action_low`` and
+        ``action_high``, so a task that has a grid also has action bounds.
+
+        Args:
+            params: the physical parameters (the ranges may depend on them, e.g. a speed clip).
+        """
+        del params
+        return None
 
     def state_from_observation(self, observation: Array) -> Array:
         """The state that ``observe`` maps to ``observation`` (the inverse of ``observe``), so

@@ -10,6 +10,7 @@ import numpy as np
 from ..config import TrainConfig
 from ..systems import pendulum as pend
 from ._base import StepLoss, Task
+from ._grid import GridAxis
 
 
 class Pendulum(Task):
@@ -75,6 +76,11 @@ class Pendulum(Task):
             text.set_text(f"t={i * recording.dt:5.2f} s  u={u:+.2f}")
             yield fig
         close(fig)
+
+    def state_grid(self, params):
+        """``theta`` wraps around ``[-pi, pi)``; ``theta_dot`` lies in the speed clip."""
+        speed = float(np.asarray(params.max_speed))
+        return GridAxis(-np.pi, np.pi, periodic=True), GridAxis(-speed, speed)
 
     def state_from_observation(self, observation):
         # theta = atan2(sin, cos) in [-pi, pi]: the observation cannot tell theta from

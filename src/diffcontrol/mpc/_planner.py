@@ -1,0 +1,184 @@
+"""The receding-horizon controller: plan H actions through the model, apply the first, shift."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float, PyTree
+
+from ..errors import ConfigError
+from ._ilqr import ILQR
+from ._problem import Problem, SolveInfo
+from ._shooting import Shooting
+
+
+class Planner(eqx.Module):
+    """Model-predictive control of a task through its own differentiable simulator.
+
+    At every control step the planner solves the finite-horizon problem from the current
+    state, ``min sum_{k<H} loss(x_k, u_k) + terminal_weight * terminal_cost(x_H)`` with the
+    task's ``step`` as the model and its step loss (``task.step_loss(loss)``, for Pendulum the
+    Gymnasium cost) as the running cost, within the task's action bounds, and applies the first
+    action of the plan; the next solve starts from the plan shifted by one step (its last action
+    repeated). The solver is a value: ``ILQR()`` or ``Shooting(optax.adam(0.3))``. Every method
+    is pure and jittable (one solve is one compiled program with a fixed iteration count);
+    ``PlannerPolicy`` wraps a planner as a NumPy-facing controller for Gymnasium.
+
+    Where a solve returns a non-finite plan, the planner applies the (finite, clipped) warm
+    start instead and reports it in ``SolveInfo.finite``: never a NaN action.
+
+    Attributes:
+        task: a ``Task`` with action bounds (``action_low``/``action_high``).
+        solver: ``ILQR`` or ``Shooting`` (anything with ``solve(problem, x0, plan)``).
+        horizon: H, the actions planned at every step (>= 1).
+        problem: the model, costs and bounds (built from the arguments of ``make_planner``).
+    """
+
+    task: Any = eqx.field(static=True)
+    solver: Any
+    horizon: int = eqx.field(static=True)
+    problem: Problem
+    bound_starts: bool = eqx.field(static=True, default=False)
+
+    @property
+    def action_size(self) -> int:
+        return self.problem.low.shape[0]
+
+    def initial_plan(self) -> Float[Array, "H m"]:
+        """The first warm start of an episode: the middle of the bounds (zero torque)."""
+        mid = (self.problem.low + self.problem.high) / 2
+        return jnp.broadcast_to(mid, (self.horizon, self.action_size))
+
+    def plan(self, state: Array, warm: Float[Array, "H m"]) -> tuple[Array, SolveInfo]:
+        """The plan ``[H, m]`` from ``state`` starting at the guess ``warm``, and its report."""
+        if self.bound_starts:
+            plan, info = self._best_of_starts(state, warm)
+        else:
+            plan, info = self.solver.solve(self.problem, state, warm)
+        safe = jnp.clip(jnp.nan_to_num(warm), self.problem.low, self.problem.high)
+        ok = info.finite
+        return jnp.where(ok, plan, safe), info
+
+    def _best_of_starts(self, state: Array, warm: Array) -> tuple[Array, SolveInfo]:
+        # Three solves at once: from the warm start and from the two constant plans at the
+        # bounds (full torque either way), which escape the local optimum of a plan that
+        # does not swing (a pendulum hanging at rest); the lowest finite cost wins.
+        shape = (self.horizon, self.action_size)
+        starts = jnp.stack(
+            [
+                warm,
+                jnp.broadcast_to(self.problem.low, shape),
+                jnp.broadcast_to(self.problem.high, shape),
+            ]
+        )
+        plans, infos = jax.vmap(self.solver.solve, (None, None, 0))(self.problem, state, starts)
+        best = jnp.argmin(jnp.where(infos.finite, infos.cost, jnp.inf))
+        return plans[best], jax.tree.map(lambda leaf: leaf[best], infos)
+
+    def shift(self, plan: Float[Array, "H m"]) -> Float[Array, "H m"]:
+        """The next warm start: ``plan[1:]`` with its last action repeated."""
+        return jnp.concatenate([plan[1:], plan[-1:]])
+
+    def control(self, state: Array, warm: Array) -> tuple[Array, Array, SolveInfo]:
+        """One control step: ``(action, next warm start, report)``."""
+        plan, info = self.plan(state, warm)
+        return plan[0], self.shift(plan), info
+
+    def episode(self, state: Array, steps: int) -> tuple[Array, Array, Array, SolveInfo]:
+        """A closed-loop episode in the task's own simulator (``lax.scan``; jit it, ``vmap``
+        it over starts): ``(states [steps+1, d], actions [steps, m], rewards [steps],
+        reports stacked per step)``."""
+        params = self.problem.params
+
+        def one(carry, _):
+            x, warm = carry
+            u, warm, info = self.control(x, warm)
+            nxt, reward, _ = self.task.step(params, x, u)
+            return (nxt, warm), (nxt, u, reward, info)
+
+        _, (xs, us, rewards, infos) = jax.lax.scan(
+            one, (state, self.initial_plan()), None, length=steps
+        )
+        return jnp.concatenate([state[None], xs]), us, rewards, infos
+
+
+def _finite_nonneg(name: str, value: Any) -> float:
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{name}={value!r} must be a number") from None
+    if not math.isfinite(x) or x < 0:
+        raise ConfigError(f"{name}={value!r} must be finite and >= 0")
+    return x
+
+
+def make_planner(
+    task: Any,
+    solver: Any = None,
+    horizon: int = 20,
+    params: PyTree | None = None,
+    loss: str | None = None,
+    step_loss: Callable | None = None,
+    terminal_cost: Callable[[Array], Array] | None = None,
+    terminal_weight: float = 1.0,
+    bound_starts: bool = False,
+) -> Planner:
+    """A ``Planner`` for ``task``, with its settings checked.
+
+    Args:
+        task: a discrete-time ``Task`` with action bounds.
+        solver: ``ILQR()`` (the default) or ``Shooting(...)``.
+        horizon: H >= 1, actions planned per step.
+        params: the model's physical parameters (default ``task.default_params()``).
+        loss: the name of the task's built-in step loss (default its first, ``task.losses[0]``).
+        step_loss: a loss ``(params, state, action, next_state, reward) -> scalar`` instead.
+        terminal_cost: ``cost(state) -> scalar`` of the plan's last state (e.g. minus a value
+            function), or ``None``.
+        terminal_weight: its weight, finite and >= 0.
+        bound_starts: also solve from the two constant plans at the action bounds at every
+            step and keep the best of the three (three times the work; escapes local optima).
+
+    Raises:
+        ConfigError: a horizon < 1, a negative or non-finite weight or solver setting, a task
+            without action bounds or without the loss named.
+    """
+    solver = ILQR() if solver is None else solver
+    if isinstance(horizon, bool) or not isinstance(horizon, int | np.integer) or horizon < 1:
+        raise ConfigError(f"horizon={horizon!r} must be an integer >= 1 (actions planned per step)")
+    weight = _finite_nonneg("terminal_weight", terminal_weight)
+    if isinstance(solver, ILQR | Shooting):
+        if isinstance(solver.iterations, bool) or int(solver.iterations) < 1:
+            raise ConfigError(f"iterations={solver.iterations!r} must be >= 1")
+        _finite_nonneg("tol", solver.tol)
+    if isinstance(solver, ILQR) and not _finite_nonneg("mu", solver.mu) > 0:
+        raise ConfigError(f"mu={solver.mu!r} must be > 0 (the regularisation of Q_uu)")
+    if not hasattr(solver, "solve"):
+        raise ConfigError(f"solver={solver!r} is not a solver; use mpc.ILQR() or mpc.Shooting()")
+    if task.action_low is None or task.action_high is None:
+        raise ConfigError(f"task {task.name!r} has no action bounds; a planner needs them")
+    if step_loss is None:
+        if not task.losses and loss is None:
+            raise ConfigError(f"task {task.name!r} has no built-in loss; pass step_loss=...")
+        name = loss or task.losses[0]
+        if name not in task.losses:
+            raise ConfigError(f"loss={name!r} is not one of task {task.name!r}'s {task.losses}")
+        step_loss = task.step_loss(name)
+    params = task.default_params() if params is None else params
+    problem = Problem(
+        task=task,
+        step_loss=step_loss,
+        terminal_cost=terminal_cost,
+        params=params,
+        low=jnp.asarray(task.action_low, jnp.float32),
+        high=jnp.asarray(task.action_high, jnp.float32),
+        terminal_weight=jnp.asarray(weight, jnp.float32),
+    )
+    return Planner(
+        task=task, solver=solver, horizon=int(horizon), problem=problem, bound_starts=bound_starts
+    )

@@ -1,0 +1,88 @@
+"""The finite-horizon problem a planner solves at each control step, and what a solve reports."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Bool, Float, PyTree
+
+
+class Problem(eqx.Module):
+    """``min_u  sum_{k<H} loss(x_k, u_k) + terminal_weight * terminal_cost(x_H)`` subject to
+    ``x_{k+1} = f(x_k, u_k)`` from a given ``x_0`` and ``low <= u_k <= high``.
+
+    ``f`` and the per-step loss are the task's own ``step`` and step loss (for Pendulum the
+    Gymnasium dynamics and cost); the model's terminations are ignored (a planner treats the
+    plan as if the episode went on).
+    """
+
+    task: Any = eqx.field(static=True)
+    step_loss: Callable = eqx.field(static=True)
+    terminal_cost: Callable | None = eqx.field(static=True)
+    params: PyTree
+    low: Float[Array, " m"]
+    high: Float[Array, " m"]
+    terminal_weight: Float[Array, ""]
+
+    def dynamics(self, state: Array, action: Array) -> Array:
+        return self.task.step(self.params, state, action)[0]
+
+    def running_cost(self, state: Array, action: Array) -> Array:
+        nxt, reward, _ = self.task.step(self.params, state, action)
+        return self.step_loss(self.params, state, action, nxt, reward)
+
+    def final_cost(self, state: Array) -> Array:
+        if self.terminal_cost is None:
+            return jnp.zeros(())
+        return self.terminal_weight * self.terminal_cost(state)
+
+    def rollout(self, x0: Array, actions: Float[Array, "H m"]) -> tuple[Array, Array]:
+        """The states ``x_0 ... x_H`` ([H+1, d]) of a plan and its total cost."""
+
+        def one(x, u):
+            nxt, reward, _ = self.task.step(self.params, x, u)
+            return nxt, (nxt, self.step_loss(self.params, x, u, nxt, reward))
+
+        last, (xs, costs) = jax.lax.scan(one, x0, actions)
+        states = jnp.concatenate([x0[None], xs])
+        return states, costs.sum() + self.final_cost(last)
+
+    def cost(self, x0: Array, actions: Float[Array, "H m"]) -> Array:
+        return self.rollout(x0, actions)[1]
+
+
+class SolveInfo(eqx.Module):
+    """What one plan's solve reports (arrays, so that a closed-loop scan stacks them per step).
+
+    Attributes:
+        initial_cost: the warm start's cost.
+        cost: the returned plan's cost (never above ``initial_cost``: a solver returns the best
+            plan it saw).
+        last_improvement: the decrease of the cost in the solver's last iteration.
+        converged: the last iteration improved the cost by less than the solver's ``tol``
+            (relative to the cost); ``False`` means the fixed iteration budget ended while the
+            plan was still improving.
+        finite: the solver's plan was finite; where it was not, the planner applied the warm
+            start instead (never a NaN action).
+    """
+
+    initial_cost: Float[Array, ""]
+    cost: Float[Array, ""]
+    last_improvement: Float[Array, ""]
+    converged: Bool[Array, ""]
+    finite: Bool[Array, ""]
+
+
+def squash(z: Array, low: Array, high: Array) -> Array:
+    """``low + (high - low) (tanh z + 1) / 2``: any real ``z`` to an action within the bounds."""
+    return low + (high - low) * (jnp.tanh(z) + 1) / 2
+
+
+def unsquash(u: Array, low: Array, high: Array) -> Array:
+    """The inverse of ``squash``, with ``u`` kept just inside the bounds (tanh saturates)."""
+    s = jnp.clip(2 * (u - low) / (high - low) - 1, -0.999, 0.999)
+    return jnp.arctanh(s)
