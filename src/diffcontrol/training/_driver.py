@@ -16,7 +16,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import PyTree
+from jaxtyping import Array, PRNGKeyArray, PyTree
 
 from .. import _timing, io
 from ..checks import validate_task
@@ -69,7 +69,9 @@ def task_params(task: AnyTask, overrides: tuple[tuple[str, float], ...] = ()) ->
             )
         params = eqx.tree_at(lambda p, n=name: getattr(p, n), params, value)
     task.check_params(params)
-    return jax.tree.map(lambda x: jnp.asarray(x, dtype=float), params)
+    # Converted by NumPy (the same rounding), then placed: no compiled conversion programs.
+    dtype = jax.dtypes.canonicalize_dtype(float)
+    return jax.tree.map(lambda x: jax.device_put(np.asarray(x, dtype=dtype)), params)
 
 
 def resolve_config(task: AnyTask, recipe: str | None = None, **overrides: Any) -> Any:
@@ -188,10 +190,8 @@ def train(
     if custom and out_dir is not None and resume:
         say("note: resuming with a custom loss; it must be the same function as before")
 
-    key = jax.random.PRNGKey(config.seed)
-    k_train, k_eval = jax.random.split(key)
-    with interrupts_deferred():
-        ts = eqx.filter_jit(trainer.init)(k_train, params)  # one program, not op by op
+    with interrupts_deferred():  # one program (the keys too), not op by op
+        ts, k_eval = eqx.filter_jit(_start)(trainer, np.int32(config.seed), params)
     best = None  # the controller of the best evaluation point so far
 
     out = None
@@ -269,7 +269,7 @@ def train(
     elif best is None:
         best = trainer.pick(ts.controller, np.zeros(_population(config)))
 
-    total = jnp.asarray(config.updates, jnp.int32)
+    total = np.int32(config.updates)
     with interrupts_deferred():
         chunk = jax.jit(trainer.chunk).lower(ts, params, total).compile()
 
@@ -280,7 +280,7 @@ def train(
             stopped_early = True
             break
         new_ts, stats = chunk(ts, params, total)
-        done = int(new_ts.update - ts.update)  # updates past the budget were skipped
+        done = int(new_ts.update) - int(ts.update)  # updates past the budget were skipped
         losses = np.asarray(stats.loss)[:done]
         try:
             notes = trainer.check(ts, new_ts, losses)
@@ -356,6 +356,12 @@ def train(
     return TrainResult(
         task=task, config=config, params=params, controller=controller, metrics=metrics
     )
+
+
+def _start(trainer: Any, seed: Array, params: PyTree) -> tuple[Any, PRNGKeyArray]:
+    """The first training state and the evaluation key of the run with ``seed``."""
+    k_train, k_eval = jax.random.split(jax.random.PRNGKey(seed))
+    return trainer.init(k_train, params), k_eval
 
 
 @contextlib.contextmanager
