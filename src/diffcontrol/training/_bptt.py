@@ -297,7 +297,10 @@ class PopulationTrainer(eqx.Module):
     def pick(self, controllers: MLPController, returns: np.ndarray) -> MLPController:
         """The best member's controller."""
         i = self._best(np.asarray(returns))
-        return jax.tree.map(lambda x: x[i] if eqx.is_array(x) else x, controllers)
+        # Sliced by NumPy and placed back: no program compiled per weight array.
+        return jax.tree.map(
+            lambda x: jax.device_put(np.asarray(x)[i]) if eqx.is_array(x) else x, controllers
+        )
 
     def counts(self, ts: PopulationState) -> dict[str, Any]:
         one = self.base.counts(ts)  # reads ts.update only
