@@ -14,25 +14,65 @@ The public API, about twenty names (everything else lives in its module: ``diffc
 
 from __future__ import annotations
 
+import importlib as _importlib
 import os as _os
 from pathlib import Path as _Path
+from typing import TYPE_CHECKING
+
+from . import _gym_ids
+from .errors import ConfigError, DiffcontrolError
 
 __version__ = "0.1.0"
 
-from . import envs, wrappers  # noqa: E402
-from .checks import check_task  # noqa: E402
-from .config import ODETrainConfig, TrainConfig  # noqa: E402
-from .controllers import MLPController  # noqa: E402
-from .errors import ConfigError, DiffcontrolError  # noqa: E402
-from .evaluation import evaluate  # noqa: E402
-from .identify import fit, record  # noqa: E402
-from .runs import Run, open_run  # noqa: E402
-from .tasks import ContinuousTask, Task, register  # noqa: E402
-from .tasks import resolve as make  # noqa: E402
-from .training import TrainResult, train  # noqa: E402
+# The public names are imported when first used (PEP 562), so that `import diffcontrol` and
+# `diffcontrol --help` do not import JAX. The Gymnasium ids are registered at once (without
+# JAX: the environments are imported when one is made).
+_LAZY = {
+    "check_task": ("checks", "check_task"),
+    "ODETrainConfig": ("config", "ODETrainConfig"),
+    "TrainConfig": ("config", "TrainConfig"),
+    "MLPController": ("controllers", "MLPController"),
+    "evaluate": ("evaluation", "evaluate"),
+    "fit": ("identify", "fit"),
+    "record": ("identify", "record"),
+    "Run": ("runs", "Run"),
+    "open_run": ("runs", "open_run"),
+    "ContinuousTask": ("tasks", "ContinuousTask"),
+    "Task": ("tasks", "Task"),
+    "register": ("tasks", "register"),
+    "make": ("tasks", "resolve"),
+    "TrainResult": ("training", "TrainResult"),
+    "train": ("training", "train"),
+}
 
-envs.register_all()  # gymnasium.make("diffcontrol/<Name>-v0") for every registered task
-wrappers.register()  # gymnasium.make("diffcontrol/PendulumFriction-v0", g=..., friction=...)
+if TYPE_CHECKING:
+    from .checks import check_task
+    from .config import ODETrainConfig, TrainConfig
+    from .controllers import MLPController
+    from .evaluation import evaluate
+    from .identify import fit, record
+    from .runs import Run, open_run
+    from .tasks import ContinuousTask, Task, register
+    from .tasks import resolve as make
+    from .training import TrainResult, train
+
+_gym_ids.register()  # gymnasium.make("diffcontrol/<Name>-v0") for every built-in task
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        module, attribute = _LAZY[name]
+        value = getattr(_importlib.import_module(f".{module}", __name__), attribute)
+    elif not name.startswith("_") and _importlib.util.find_spec(f"{__name__}.{name}"):
+        value = _importlib.import_module(f".{name}", __name__)  # diffcontrol.envs, ...
+    else:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *__all__})
 
 
 def load(run_dir: str | _os.PathLike, task: Task | ContinuousTask | str | None = None):

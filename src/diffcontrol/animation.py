@@ -1,11 +1,16 @@
-"""Animated GIFs of recorded episodes, drawn with matplotlib and written with imageio."""
+"""Animated GIFs of recorded episodes, drawn with matplotlib and written with Pillow.
+
+A frame redraws only what moved (matplotlib's blitting: the artists a task changed since the
+last frame are drawn over a background drawn once), and the GIF is encoded with one palette
+for all frames (taken from a few of them), which is what makes it quick to write.
+"""
 
 from __future__ import annotations
 
+import io as _io
 from pathlib import Path
 from typing import Any
 
-import imageio.v3 as iio
 import matplotlib
 
 matplotlib.use("Agg")
@@ -35,22 +40,79 @@ def close(fig) -> None:
 
 
 def _write_gif(frames: list[np.ndarray], duration_ms: float, path: str | Path) -> Path:
-    """Encode RGB frames as a looping GIF (``duration_ms`` per frame) and write it atomically."""
-    data = iio.imwrite("<bytes>", np.stack(frames), extension=".gif", duration=duration_ms, loop=0)
-    write_bytes(path, data)
+    """Encode RGB frames as a looping GIF (``duration_ms`` per frame) and write it atomically.
+
+    One adaptive palette of up to 255 colours, from up to 8 frames spread over the clip, maps
+    every frame without dithering: flat drawings need no more, and encoding skips a
+    quantisation per frame.
+    """
+    from PIL import Image
+
+    sample = frames[:: max(1, len(frames) // 8)][:8]
+    palette = Image.fromarray(np.concatenate(sample, axis=0)).quantize(
+        colors=255, method=Image.Quantize.MEDIANCUT
+    )
+    images = [
+        Image.fromarray(f).quantize(palette=palette, dither=Image.Dither.NONE) for f in frames
+    ]
+    buffer = _io.BytesIO()
+    images[0].save(
+        buffer,
+        format="GIF",
+        save_all=True,
+        append_images=images[1:],
+        duration=max(1, round(duration_ms)),
+        loop=0,
+    )
+    write_bytes(path, buffer.getvalue())
     return Path(path)
 
 
-def animate(recording: Recording, task: Task, path: str | Path, max_frames: int = 250) -> Path:
+class _Frames:
+    """Renders the frames of one figure whose few artists change between frames: after the
+    first two full draws, the artists that changed (matplotlib marks them ``stale``) are
+    drawn over a saved background; a frame that changes anything else is drawn in full."""
+
+    def __init__(self) -> None:
+        self.fig: Any = None
+        self.idle: set[Any] = set()  # stale after a full draw too: not drawn (e.g. axis off)
+        self.moving: list[tuple[Any, Any]] = []
+        self.background: Any = None
+
+    def render(self, fig: Any) -> np.ndarray:
+        canvas = fig.canvas
+        changed = [
+            (ax, a) for ax in fig.axes for a in ax.get_children() if a.stale and a not in self.idle
+        ]
+        if fig is self.fig and self.background is not None and set(changed) <= set(self.moving):
+            canvas.restore_region(self.background)
+            for ax, artist in self.moving:
+                ax.draw_artist(artist)
+        elif fig is self.fig and self.background is None and changed:
+            self.moving = sorted(changed, key=lambda pair: pair[1].get_zorder())
+            for _, artist in self.moving:  # drawn apart from the background from now on
+                artist.set_animated(True)
+            canvas.draw()
+            self.background = canvas.copy_from_bbox(fig.bbox)
+            for ax, artist in self.moving:
+                ax.draw_artist(artist)
+        else:
+            for _, artist in self.moving:
+                artist.set_animated(False)
+            self.fig, self.moving, self.background = fig, [], None
+            canvas.draw()
+            self.idle = {a for ax in fig.axes for a in ax.get_children() if a.stale}
+        return np.asarray(canvas.buffer_rgba())[..., :3].copy()
+
+
+def animate(recording: Recording, task: Task, path: str | Path, max_frames: int = 150) -> Path:
     """Write an animated GIF of ``recording`` (played at real time, subsampled to at most
     ``max_frames`` frames)."""
     if not task.can_draw:
         raise ValueError(f"task {task.name!r} cannot draw itself (it defines no frames())")
     every = max(1, int(np.ceil(recording.states.shape[0] / max_frames)))
-    frames = []
-    for fig in task.frames(recording, every):
-        fig.canvas.draw()
-        frames.append(np.asarray(fig.canvas.buffer_rgba())[..., :3].copy())
+    render = _Frames().render
+    frames = [render(fig) for fig in task.frames(recording, every)]
     duration_ms = 1000.0 * recording.dt * every
     return _write_gif(frames, duration_ms, path)
 
@@ -108,7 +170,7 @@ def animate_swingup(recording: Any, path: str | Path, fps: int = 25) -> Path:
     (arrow,) = ax.plot([], [], color="C0", lw=2)
     text = ax.text(x_lo + 0.05, 1.1, "", fontsize=8, family="monospace")
     peak = max(float(np.max(np.abs(force))), 1e-9)
-    frames = []
+    frames, render = [], _Frames().render
     indices = list(range(0, len(t), every))
     indices += [len(t) - 1] * int(round(1.0 / (every * dt)))  # hold the end for about 1 s
     for i in indices:
@@ -119,7 +181,6 @@ def animate_swingup(recording: Any, path: str | Path, fps: int = 25) -> Path:
         bob.set_data([tip[0]], [tip[1]])
         arrow.set_data([x, x + 0.8 * force[i] / peak], [-0.22, -0.22])
         text.set_text(f"t={t[i]:5.2f} s  F={force[i]:+7.2f} N")
-        fig.canvas.draw()
-        frames.append(np.asarray(fig.canvas.buffer_rgba())[..., :3].copy())
+        frames.append(render(fig))
     plt.close(fig)
     return _write_gif(frames, 1000.0 * every * dt, path)

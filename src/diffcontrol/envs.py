@@ -36,41 +36,22 @@ import numpy as np
 from gymnasium import spaces
 
 from . import tasks as _tasks
+from ._gym_ids import NAMESPACE, VERSION, _entry, env_id, env_name, register_env, supports
 from .errors import ConfigError
-from .tasks import ContinuousTask, Task
+from .tasks import Task
 
-NAMESPACE = "diffcontrol"
-VERSION = 0
-
-
-def env_name(task: Task) -> str:
-    """The ``Name`` of ``diffcontrol/<Name>-v0`` for ``task`` (``task.env_name`` or derived)."""
-    if getattr(task, "env_name", None):
-        return str(task.env_name)
-    return "".join(part.capitalize() for part in task.name.replace("_", "-").split("-"))
-
-
-def env_id(task: Task | str) -> str:
-    """The Gymnasium id of ``task`` (an instance or a registered name): ``diffcontrol/<Name>-v0``."""
-    if isinstance(task, str):
-        task = _tasks.make(task)
-    return f"{NAMESPACE}/{env_name(task)}-v{VERSION}"
-
-
-def supports(task: Any) -> bool:
-    """Whether ``task`` can be stepped as a Gymnasium environment by ``TaskEnv`` (every
-    discrete-time task can)."""
-    return isinstance(task, Task)
-
-
-def _entry(task: Any) -> tuple[str, int] | None:
-    """The environment class and the episode length (steps) for ``task``, if it has one."""
-    if supports(task):
-        return f"{__name__}:TaskEnv", task.episode_length
-    if isinstance(task, ContinuousTask):
-        return f"{__name__}:ContinuousTaskEnv", task.default_config().saves - 1
-    return None
-
+__all__ = [
+    "NAMESPACE",
+    "VERSION",
+    "ContinuousTaskEnv",
+    "TaskEnv",
+    "env_id",
+    "env_name",
+    "make_env",
+    "register_all",
+    "register_env",
+    "supports",
+]
 
 _COMPILED: dict[str, tuple[Any, Any]] = {}
 
@@ -155,47 +136,10 @@ class TaskEnv(gymnasium.Env):
         return np.asarray(obs, np.float32), float(reward), bool(terminated), False, {}
 
 
-def register_env(task: Any) -> str:
-    """Register ``task`` as ``diffcontrol/<Name>-v0`` (again, if already there); returns the id.
-
-    Raises:
-        ConfigError: the task's kind cannot be a Gymnasium environment.
-    """
-    entry = _entry(task)
-    if entry is None:
-        raise ConfigError(
-            f"{task!r} is neither a Task nor a ContinuousTask, so it has no Gymnasium environment"
-        )
-    entry_point, steps = entry
-    eid = env_id(task)
-    if eid in gymnasium.registry:
-        del gymnasium.registry[eid]
-    gymnasium.register(
-        id=eid,
-        entry_point=entry_point,
-        kwargs={"task": task.name},
-        max_episode_steps=steps,
-        reward_threshold=getattr(task, "reward_threshold", None),
-    )
-    return eid
-
-
 def register_all() -> list[str]:
-    """Register every registered task as a Gymnasium environment, and every task registered
-    from now on at once (``diffcontrol.register``). Returns the ids registered now."""
-    ids = []
-    for name in _tasks.names():
-        task = _tasks.make(name)
-        if _entry(task) is not None:
-            ids.append(register_env(task))
-    if _register_new not in _tasks._ON_REGISTER:
-        _tasks._ON_REGISTER.append(_register_new)
-    return ids
-
-
-def _register_new(task: Any) -> None:
-    if _entry(task) is not None:
-        register_env(task)
+    """Register every registered task as a Gymnasium environment (again: a task registered
+    with ``diffcontrol.register`` is registered at once). Returns the ids."""
+    return [register_env(t) for t in map(_tasks.make, _tasks.names()) if _entry(t) is not None]
 
 
 # ---------------------------------------------------------------------------------------------

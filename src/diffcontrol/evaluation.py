@@ -362,8 +362,11 @@ def simulate_continuous(
     params = task.default_params() if params is None else params
     n = int(round(horizon * rate_hz)) + 1
     with jax.enable_x64(True):
-        ctrl = jax.tree.map(lambda x: jnp.asarray(x, jnp.float64), controller)
-        p64 = jax.tree.map(lambda x: jnp.asarray(x, jnp.float64), params)
+        # Widened by NumPy (exactly) and placed: no conversion program per array.
+        def wide(x):
+            return jax.device_put(np.asarray(x, np.float64))
+
+        ctrl, p64 = jax.tree.map(wide, controller), jax.tree.map(wide, params)
 
         @jax.jit
         def run(ctrl, p, ts):

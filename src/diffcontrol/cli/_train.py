@@ -119,4 +119,6 @@ def cmd_train(args: argparse.Namespace) -> int:
     print(outcome.summary)
     if outcome.files:
         print(f"wrote {', '.join(str(Path(args.out) / f) for f in outcome.files)}")
+    if outcome.timings:
+        print(outcome.timings)
     return 0

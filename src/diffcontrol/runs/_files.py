@@ -9,7 +9,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from .. import io
+from .. import _timing, io
 from ..errors import ModelFileError, UnknownTaskError
 from ..tasks import AnyTask, resolve
 
@@ -76,6 +76,7 @@ def save_run(
     animation: bool = True,
     real: dict | None = None,
     progress: Callable[[str], None] | None = None,
+    process_total: bool = False,
 ) -> tuple[Run, list[str]]:
     """Write a trained controller's run files into ``out_dir``: ``model.json``, the final
     evaluation in ``metrics.json`` and the task's pictures.
@@ -87,6 +88,8 @@ def save_run(
         animation: write the task's animation (``rollout.gif``) where it has one.
         real: the system to judge it on instead of the task's own (see ``Run.real``).
         progress: called with a line when the evaluation is done.
+        process_total: record the process's age in ``metrics["timings"]["total"]`` (the
+            command line, whose process is the run).
 
     Returns:
         The ``Run`` and the names of the files written.
@@ -96,27 +99,33 @@ def save_run(
     say = progress or (lambda line: None)
     metrics = dict(result.metrics)
     metrics.setdefault("created", io.now_iso())
+    timings = metrics["timings"] = dict(metrics.get("timings") or {})
     doc = io.model_document(result.task, result.controller, result.config, metrics)
     io.write_json(out / MODEL_FILE, doc)
     task, params = _judged(result.task, result.params, real)
     run = Run(task, result.controller, result.config, params, doc, metrics, real)
     if final_eval != 0 or not task.final_eval_skippable:
         t0 = time.perf_counter()
-        ev = task.evaluate_run(run, episodes=final_eval, seed=0)
+        with _timing.phase(timings, "evaluate"):
+            ev = task.evaluate_run(run, episodes=final_eval, seed=0)
         if ev is not None:
             metrics[ev.key] = {**ev.to_json(), "seconds": time.perf_counter() - t0}
             metrics["final_evaluation"] = ev.key
             where = " on the real system" if real else ""
             say(f"final evaluation{where}: {ev.summary()}")
             run.metrics["headline"] = ev.headline()
-    io.write_json(out / METRICS_FILE, {k: v for k, v in metrics.items() if k != "headline"})
-    from .. import plots
+    with _timing.phase(timings, "write"):
+        from .. import plots
 
-    plots.learning_curve(
-        metrics, out / "learning_curve.png", getattr(task, "reward_threshold", None)
-    )
-    files = [MODEL_FILE, METRICS_FILE, "learning_curve.png"]
-    files += task.write_figures(run, out, animation=animation)
+        plots.learning_curve(
+            metrics, out / "learning_curve.png", getattr(task, "reward_threshold", None)
+        )
+        files = [MODEL_FILE, METRICS_FILE, "learning_curve.png"]
+        files += task.write_figures(run, out, animation=animation)
+    if process_total:
+        timings["total"] = _timing.process_seconds()
+    # metrics.json last: its timings include the pictures
+    io.write_json(out / METRICS_FILE, {k: v for k, v in metrics.items() if k != "headline"})
     return run, files
 
 

@@ -29,11 +29,13 @@ class RunInterrupted(Interrupted):
 @dataclasses.dataclass
 class RunOutcome:
     """What ``train_run`` did: the run (``None`` if it was finished before), the files it
-    wrote, and the one-line summary of ``diffcontrol train``."""
+    wrote, the one-line summary of ``diffcontrol train`` and its last line, where the time
+    went (``metrics["timings"]``)."""
 
     run: Run | None
     files: list[str]
     summary: str
+    timings: str = ""
 
 
 def train_run(
@@ -81,8 +83,10 @@ def train_run(
             be kept).
         RunInterrupted: Ctrl-C; the message says how to continue.
     """
-    from .. import _jax_setup
+    from .. import _jax_setup, _timing
     from ..training import resolve_config, train
+
+    started = _timing.process_seconds()  # the interpreter, the imports, the command line
 
     say = progress or (lambda line: None)
     note = note or (lambda line: print(line, file=sys.stderr))
@@ -163,12 +167,20 @@ def train_run(
         **_jax_setup.cache_events(),
     }
     metrics["command"] = command
+    if started is not None:
+        metrics["timings"] = {"import": started, **metrics["timings"]}
     metrics["created"] = io.now_iso()
     if model_info:
         metrics["model"] = model_info
     try:
         run, files = save_run(
-            result, out, final_eval=final_eval, animation=animation, real=real, progress=say
+            result,
+            out,
+            final_eval=final_eval,
+            animation=animation,
+            real=real,
+            progress=say,
+            process_total=True,
         )
     except KeyboardInterrupt:
         raise RunInterrupted(
@@ -182,7 +194,7 @@ def train_run(
         f"{metrics['simulated_episodes']:.4g} simulated episodes ({metrics['simulated_steps']} "
         f"steps)" + (f"; {headline}" if headline else "") + (" on the real system" if real else "")
     )
-    return RunOutcome(run, files, summary)
+    return RunOutcome(run, files, summary, _timing.describe(run.metrics["timings"]))
 
 
 def _builtin_names() -> set[str]:

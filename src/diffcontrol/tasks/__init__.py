@@ -13,6 +13,7 @@ import importlib.metadata
 import os
 import sys
 
+from .. import _gym_ids
 from ..errors import UnknownTaskError
 from ._base import ContinuousTask, StepLoss, Task, TrajectoryLoss
 from .acrobot import Acrobot
@@ -31,10 +32,6 @@ AnyTask = Task | ContinuousTask
 _REGISTRY: dict[str, AnyTask] = {}
 
 
-_ON_REGISTER: list = []
-"""Called with every task registered (``diffcontrol.envs`` adds its Gymnasium registration)."""
-
-
 def register(task: AnyTask) -> AnyTask:
     """Add a task instance to the registry under ``task.name`` and make it a Gymnasium
     environment (``diffcontrol/<Name>-v0``) at once; returns it.
@@ -45,8 +42,8 @@ def register(task: AnyTask) -> AnyTask:
     if task.name in _REGISTRY and type(_REGISTRY[task.name]) is not type(task):
         raise ValueError(f"a different task is already registered as {task.name!r}")
     _REGISTRY[task.name] = task
-    for hook in _ON_REGISTER:
-        hook(task)
+    if _gym_ids._entry(task) is not None:
+        _gym_ids.register_env(task)
     return task
 
 
@@ -151,7 +148,6 @@ for _task in (
     MountainCarContinuous(),
 ):
     register(_task)
-
 __all__ = [
     "AnyTask",
     "Task",

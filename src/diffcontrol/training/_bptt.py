@@ -217,8 +217,8 @@ class Trainer(eqx.Module):
 
     def check(self, old: TrainState, new: TrainState, losses: np.ndarray) -> list[str]:
         """Raise ``TrainingDiverged`` if the loss or the weights became non-finite."""
-        weights = eqx.filter(new.controller, eqx.is_inexact_array)
-        weights_ok = all(bool(jnp.all(jnp.isfinite(x))) for x in jax.tree.leaves(weights))
+        weights = eqx.filter(new.controller, eqx.is_inexact_array)  # NumPy: nothing compiled
+        weights_ok = all(np.isfinite(np.asarray(x)).all() for x in jax.tree.leaves(weights))
         if not (np.all(np.isfinite(losses)) and weights_ok):
             bad = int(old.update) + int(np.argmax(~np.isfinite(losses))) + 1
             cfg = self.config
@@ -297,7 +297,10 @@ class PopulationTrainer(eqx.Module):
     def pick(self, controllers: MLPController, returns: np.ndarray) -> MLPController:
         """The best member's controller."""
         i = self._best(np.asarray(returns))
-        return jax.tree.map(lambda x: x[i] if eqx.is_array(x) else x, controllers)
+        # Sliced by NumPy and placed back: no program compiled per weight array.
+        return jax.tree.map(
+            lambda x: jax.device_put(np.asarray(x)[i]) if eqx.is_array(x) else x, controllers
+        )
 
     def counts(self, ts: PopulationState) -> dict[str, Any]:
         one = self.base.counts(ts)  # reads ts.update only
@@ -317,14 +320,14 @@ class PopulationTrainer(eqx.Module):
         """Raise ``TrainingDiverged`` when every member diverged; a note for each that did."""
         weights = eqx.filter(new.controller, eqx.is_inexact_array)
         finite = np.ones(self.population, bool)
-        for leaf in jax.tree.leaves(weights):
-            finite &= np.asarray(jnp.all(jnp.isfinite(leaf.reshape(self.population, -1)), axis=1))
+        for leaf in jax.tree.leaves(weights):  # by NumPy: no programs compiled for the check
+            finite &= np.isfinite(np.asarray(leaf).reshape(self.population, -1)).all(axis=1)
         if not finite.any():
             return self.base.check(old, new, np.full_like(losses, np.nan))
         was = eqx.filter(old.controller, eqx.is_inexact_array)
         before = np.ones(self.population, bool)
         for leaf in jax.tree.leaves(was):
-            before &= np.asarray(jnp.all(jnp.isfinite(leaf.reshape(self.population, -1)), axis=1))
+            before &= np.isfinite(np.asarray(leaf).reshape(self.population, -1)).all(axis=1)
         lost = np.flatnonzero(before & ~finite)
         return [f"population member {i} diverged; the others train on" for i in lost]
 

@@ -16,9 +16,9 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import PyTree
+from jaxtyping import Array, PRNGKeyArray, PyTree
 
-from .. import io
+from .. import _timing, io
 from ..checks import validate_task
 from ..controllers import MLPController
 from ..errors import ConfigError, TrainingDiverged
@@ -69,7 +69,9 @@ def task_params(task: AnyTask, overrides: tuple[tuple[str, float], ...] = ()) ->
             )
         params = eqx.tree_at(lambda p, n=name: getattr(p, n), params, value)
     task.check_params(params)
-    return jax.tree.map(lambda x: jnp.asarray(x, dtype=float), params)
+    # Converted by NumPy (the same rounding), then placed: no compiled conversion programs.
+    dtype = jax.dtypes.canonicalize_dtype(float)
+    return jax.tree.map(lambda x: jax.device_put(np.asarray(x, dtype=dtype)), params)
 
 
 def resolve_config(task: AnyTask, recipe: str | None = None, **overrides: Any) -> Any:
@@ -142,7 +144,10 @@ def train(
     Returns:
         A ``TrainResult`` whose controller is the one of the best evaluation point when
         ``config.keep_best`` (the default), else the last; ``metrics`` holds
-        ``train_seconds`` (wall clock, compilation and evaluation included), ``compile_seconds``, ``simulated_steps``,
+        ``train_seconds`` (wall clock, compilation and evaluation included), ``compile_seconds``
+        (every program traced, lowered and compiled or loaded from the persistent cache),
+        ``timings`` (this call's ``compile``, ``compile_programs`` and ``train`` without
+        compilation: ``diffcontrol._timing``), ``simulated_steps``,
         ``simulated_episodes`` (in the task's standard episode length; closed-loop solves for
         continuous-time tasks, whose ``simulated_steps`` are solver steps), the ``curve``, and
         ``returned_update`` with ``final_eval_return`` (the returned controller's), and
@@ -159,7 +164,9 @@ def train(
         SolverFailed: every ODE solve of a continuous-time run failed (say why and what to
             change, e.g. raise max_steps).
     """
+    _timing.watch_compiles()
     t_start = time.perf_counter()
+    compiled_before, programs_before = _timing.compile_seconds(), _timing.compiled_programs()
     config = config or task.default_config()
     expected = type(task.default_config())
     if not isinstance(config, expected):
@@ -183,10 +190,8 @@ def train(
     if custom and out_dir is not None and resume:
         say("note: resuming with a custom loss; it must be the same function as before")
 
-    key = jax.random.PRNGKey(config.seed)
-    k_train, k_eval = jax.random.split(key)
-    with interrupts_deferred():
-        ts = eqx.filter_jit(trainer.init)(k_train, params)  # one program, not op by op
+    with interrupts_deferred():  # one program (the keys too), not op by op
+        ts, k_eval = eqx.filter_jit(_start)(trainer, np.int32(config.seed), params)
     best = None  # the controller of the best evaluation point so far
 
     out = None
@@ -207,24 +212,28 @@ def train(
             (ts, best), meta = io.load_checkpoint(ckpt, (ts, like_best))
             say(f"resuming {task.name} from update {int(ts.update)} ({ckpt})")
 
-    # Compile once, ahead of time, so that compile time is measured apart from training time.
+    # Compile once, ahead of time (every compilation is timed apart by ``_timing``).
     # The evaluation first: a loss or a solve that fails on the untrained controller is
     # reported before the (longer) compilation of the training chunk.
-    t0 = time.perf_counter()
     with interrupts_deferred():
         evaluate = jax.jit(trainer.evaluate).lower(ts.controller, params, k_eval).compile()
-    compile_seconds = time.perf_counter() - t0
 
     curve: list[dict[str, Any]] = list(meta["curve"])
     seconds_before = float(meta["seconds_before"])
     eval_seconds = 0.0
     callback_seconds = 0.0  # time spent in on_point, left out of the training time
+    callback_compile = 0.0  # compilation in on_point, left out of the compile time
+
+    def compiled() -> float:
+        """This call's compilation so far (every program: ``_timing``)."""
+        return _timing.compile_seconds() - compiled_before - callback_compile
+
     best_index = int(meta["best_index"])
     last_returns = None
     diagnostics = Diagnostics(say, config.updates, int(ts.update), meta.get("warnings"))
 
     def record(ts: Any, loss: float, grad_norm: float) -> dict[str, Any]:
-        nonlocal eval_seconds, best, best_index, last_returns, callback_seconds
+        nonlocal eval_seconds, best, best_index, last_returns, callback_seconds, callback_compile
         t_eval = time.perf_counter()
         returns = np.asarray(evaluate(ts.controller, params, k_eval))
         eval_seconds += time.perf_counter() - t_eval
@@ -247,9 +256,10 @@ def train(
             best, best_index = trainer.pick(ts.controller, returns), len(curve) - 1
         say(_progress_line(point, config.updates))
         if on_point is not None:
-            t_cb = time.perf_counter()
+            t_cb, c_cb = time.perf_counter(), _timing.compile_seconds()
             on_point(point, trainer.pick(ts.controller, returns))
             callback_seconds += time.perf_counter() - t_cb
+            callback_compile += _timing.compile_seconds() - c_cb
         return point
 
     if not curve:
@@ -259,11 +269,9 @@ def train(
     elif best is None:
         best = trainer.pick(ts.controller, np.zeros(_population(config)))
 
-    t0 = time.perf_counter()
-    total = jnp.asarray(config.updates, jnp.int32)
+    total = np.int32(config.updates)
     with interrupts_deferred():
         chunk = jax.jit(trainer.chunk).lower(ts, params, total).compile()
-    compile_seconds += time.perf_counter() - t0
 
     stopped_early = False
     target = config.target_return
@@ -272,7 +280,7 @@ def train(
             stopped_early = True
             break
         new_ts, stats = chunk(ts, params, total)
-        done = int(new_ts.update - ts.update)  # updates past the budget were skipped
+        done = int(new_ts.update) - int(ts.update)  # updates past the budget were skipped
         losses = np.asarray(stats.loss)[:done]
         try:
             notes = trainer.check(ts, new_ts, losses)
@@ -298,8 +306,7 @@ def train(
                     + time.perf_counter()
                     - t_start
                     - callback_seconds,
-                    "compile_seconds_before": float(meta["compile_seconds_before"])
-                    + compile_seconds,
+                    "compile_seconds_before": float(meta["compile_seconds_before"]) + compiled(),
                     "warnings": diagnostics.warnings,
                 },
             )
@@ -314,12 +321,19 @@ def train(
         controller = trainer.pick(ts.controller, last_returns)
     diagnostics.finish(config, curve, chosen["update"])
     counts = trainer.counts(ts)
+    compile_seconds = compiled()
     metrics = {
         "task": task.name,
         "gym_id": task.gym_id,
         "seed": config.seed,
         "train_seconds": wall,
         "compile_seconds": float(meta["compile_seconds_before"]) + compile_seconds,
+        # this call's part of the run's time (runs.save_run adds evaluate and write)
+        "timings": {
+            "compile": compile_seconds,
+            "compile_programs": _timing.compiled_programs() - programs_before,
+            "train": wall - (seconds_before + compile_seconds),
+        },
         "eval_seconds_in_training": eval_seconds,
         "callback_seconds": callback_seconds,
         "updates": int(ts.update),
@@ -342,6 +356,12 @@ def train(
     return TrainResult(
         task=task, config=config, params=params, controller=controller, metrics=metrics
     )
+
+
+def _start(trainer: Any, seed: Array, params: PyTree) -> tuple[Any, PRNGKeyArray]:
+    """The first training state and the evaluation key of the run with ``seed``."""
+    k_train, k_eval = jax.random.split(jax.random.PRNGKey(seed))
+    return trainer.init(k_train, params), k_eval
 
 
 @contextlib.contextmanager

@@ -250,7 +250,10 @@ class ODETrainer(eqx.Module):
     def pick(self, controller: MLPController, returns: np.ndarray) -> MLPController:
         """The member with the best return (the first if none is finite)."""
         i = int(np.argmax(np.where(np.isfinite(returns), returns, -np.inf)))
-        return jax.tree.map(lambda x: x[i] if eqx.is_array(x) else x, controller)
+        # Sliced by NumPy and placed back: no program compiled per weight array.
+        return jax.tree.map(
+            lambda x: jax.device_put(np.asarray(x)[i]) if eqx.is_array(x) else x, controller
+        )
 
     def counts(self, ts: ODETrainState) -> dict[str, Any]:
         return {

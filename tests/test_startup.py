@@ -1,0 +1,80 @@
+"""Start-up: the command line's help and the package's import do not import JAX, and the
+public names are still there when used."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+HEAVY = ("jax", "equinox", "diffrax", "matplotlib", "imageio", "stable_baselines3", "torch")
+COMMANDS = ("list", "train", "evaluate", "animate", "aim", "compare", "record", "fit", "loop")
+
+
+def _imported_after(code: str) -> set[str]:
+    """The heavy top-level modules imported in a fresh interpreter after running ``code``."""
+    probe = f"{code}\nimport sys\nprint(sorted({{m.split('.')[0] for m in sys.modules}}))"
+    out = subprocess.run(
+        [sys.executable, "-c", probe], capture_output=True, text=True, check=True
+    ).stdout
+    return set(eval(out.strip().splitlines()[-1])) & set(HEAVY)  # noqa: S307 (our own print)
+
+
+def test_import_and_every_help_without_jax():
+    code = (
+        "import contextlib, io\n"
+        "import diffcontrol\n"
+        "from diffcontrol.cli import main\n"
+        f"for argv in [['--help'], *[[c, '--help'] for c in {COMMANDS!r}]]:\n"
+        "    with contextlib.redirect_stdout(io.StringIO()) as out:\n"
+        "        try:\n"
+        "            main(argv)\n"
+        "        except SystemExit as e:\n"
+        "            assert e.code == 0, (argv, e.code)\n"
+        "    assert 'usage:' in out.getvalue(), argv\n"
+    )
+    assert _imported_after(code) == set()
+
+
+def test_gymnasium_ids_registered_by_import_without_jax():
+    code = (
+        "import diffcontrol, gymnasium\n"
+        "assert 'diffcontrol/CartPole-v0' in gymnasium.registry\n"
+        "assert 'diffcontrol/PendulumFriction-v0' in gymnasium.registry\n"
+    )
+    assert _imported_after(code) == set()
+
+
+def test_public_names_load_when_used():
+    import diffcontrol
+
+    for name in diffcontrol.__all__:
+        assert getattr(diffcontrol, name) is not None, name
+    from diffcontrol import TrainConfig, envs, make, train  # noqa: F401
+
+    assert make("cartpole").name == "cartpole"
+    assert diffcontrol.tasks.make("pendulum").name == "pendulum"  # a submodule, when used
+    with pytest.raises(AttributeError):
+        diffcontrol.no_such_name  # noqa: B018
+
+
+def test_builtin_gymnasium_ids_match_the_tasks():
+    """The ids registered without JAX at import are those the tasks themselves give."""
+    import gymnasium
+
+    from diffcontrol import _gym_ids, envs, tasks
+
+    ids = set(envs.register_all())
+    table = {row[0]: row for row in _gym_ids.BUILTIN if row[2] is not None}
+    own = [tasks.make(n) for n in tasks.names()]
+    builtin = {envs.env_id(t) for t in own if type(t).__module__.startswith("diffcontrol.tasks.")}
+    assert set(table) == builtin & ids
+    for env_id, (_, entry_point, task, steps, threshold) in table.items():
+        spec = gymnasium.registry[env_id]
+        assert (spec.entry_point, spec.kwargs, spec.max_episode_steps, spec.reward_threshold) == (
+            entry_point,
+            {"task": task},
+            steps,
+            threshold,
+        ), env_id
