@@ -29,7 +29,7 @@ from .identify import fit, record  # noqa: E402
 from .runs import Run, open_run  # noqa: E402
 from .tasks import ContinuousTask, Task, register  # noqa: E402
 from .tasks import resolve as make  # noqa: E402
-from .training import TrainResult, train  # noqa: E402
+from .training import TrainResult, sweep, train  # noqa: E402
 
 envs.register_all()  # gymnasium.make("diffcontrol/<Name>-v0") for every registered task
 wrappers.register()  # gymnasium.make("diffcontrol/PendulumFriction-v0", g=..., friction=...)
@@ -93,5 +93,6 @@ __all__ = [
     "open_run",
     "record",
     "register",
+    "sweep",
     "train",
 ]
