@@ -385,10 +385,8 @@ def _run_program(
     wall = time.perf_counter() - t_start
     results = []
     for i, c in enumerate(configs):
-        controller = jax.tree.map(lambda x: x[i] if eqx.is_array(x) else x, best)
         chosen = curves[i][best_index[i]] if c.keep_best else curves[i][-1]
-        if not c.keep_best:
-            controller = jax.tree.map(lambda x: x[i] if eqx.is_array(x) else x, ts.controller)
+        controller = _member(best if c.keep_best else ts.controller, i)
         done_updates = int(ts.update[i])
         steps = done_updates * c.window * c.batch
         metrics = {
@@ -419,6 +417,11 @@ def _run_program(
             TrainResult(task=task, config=c, params=params, controller=controller, metrics=metrics)
         )
     return results
+
+
+def _member(stacked: Any, i: int) -> Any:
+    """Member ``i`` of a stack of controllers."""
+    return jax.tree.map(lambda x: x[i] if eqx.is_array(x) else x, stacked)
 
 
 def _finite_members(controllers: Any, n: int) -> np.ndarray:
