@@ -149,7 +149,9 @@ def main() -> None:
               f"{s['separate_seconds_per_run_warm_cache']:.1f} s each, x64 = "
               f"{s['separate_seconds_64_estimated']:.0f} s -> {s['speedup_warm']:.1f}x "
               f"({s['speedup_cold']:.1f}x against the cold sweep); target >= 20x")  # fmt: skip
-        print("member                         returned update (alone, sweep)  return (alone, sweep)")
+        print(
+            "member                         returned update (alone, sweep)  return (alone, sweep)"
+        )
         for r in s["compared"]:
             print(f"{r['member']:<30} {str(r['returned_update']):<32} {r['eval_return']}")
     if args.only in (None, "population"):
@@ -161,9 +163,9 @@ def main() -> None:
             print(f"{r['members']:>7}  {r['steps_per_second']:>14,.0f}  {per:8.2f}x")
     if args.only == "devices":
         code = (
-            "import json, sys; sys.path.insert(0, %r); from sweep import population_scaling; "
+            f"import json, sys; sys.path.insert(0, {str(HERE)!r}); from sweep import population_scaling; "
             "print(json.dumps([population_scaling((64,), 1)[0], population_scaling((64,), 2)[0]]))"
-        ) % str(HERE)
+        )
         env = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=2"}
         out = subprocess.run([sys.executable, "-c", code], env=env, check=True,
                              capture_output=True, text=True).stdout  # fmt: skip

@@ -77,6 +77,8 @@ def add_parsers(sub: Any) -> None:
          "on seeds 0..N-1 (default 100), or random targets for aiming tasks (default 1000); "
          "0 skips"),
         ("--no-animation", FLAG, False, None, "skip the GIF (saves a few seconds)"),
+        ("--devices", a.positive_int, None, "N", "split the batch of simulations over N local "
+         "devices (data parallel; default 1)"),
         ("--model", str, None, "FIT_DIR", "train through the model fitted by `diffcontrol fit` in "
          "FIT_DIR instead of the nominal simulator (fitted parameters, or the hybrid/neural "
          "model), and evaluate on the system its data was recorded from (e.g. "
@@ -112,6 +114,7 @@ def cmd_train(args: argparse.Namespace) -> int:
             resume=args.resume,
             final_eval=args.final_eval,
             animation=not args.no_animation,
+            devices=args.devices,
             compile_cache=not args.no_compile_cache,
             progress=a.say(args),
             command=args.command_line,

@@ -47,6 +47,7 @@ def train_run(
     resume: bool = False,
     final_eval: int | None = None,
     animation: bool = True,
+    devices: int | None = None,
     compile_cache: bool = True,
     progress: Callable[[str], None] | None = None,
     note: Callable[[str], None] | None = None,
@@ -69,6 +70,7 @@ def train_run(
             ``run.json``; a finished run is left untouched.
         final_eval: the final evaluation's size (``None``: the task's default; 0 skips).
         animation: whether to write the animation.
+        devices: split the batch over this many local devices (``train``'s ``devices``).
         compile_cache: use JAX's persistent compilation cache.
         progress: called with each progress line.
         note: called with warnings meant for stderr.
@@ -101,6 +103,7 @@ def train_run(
     model = model or invocation.get("model")
     final_eval = invocation.get("final_eval") if final_eval is None else final_eval
     animation = animation and invocation.get("animation") is not False
+    devices = devices or invocation.get("devices")
     spec, the_task = task, resolve(task)
 
     config_cls = type(the_task.default_config())
@@ -140,10 +143,18 @@ def train_run(
             "checkpoint is exact for the computed solve"
         )
     invocation = {"task": spec, "model": model, "final_eval": final_eval, "animation": animation}
+    if devices:
+        invocation["devices"] = devices
     named = "" if spec in _builtin_names() else f" {spec}"
     try:
         result = train(
-            the_task, config, out_dir=out, resume=resume, progress=say, invocation=invocation
+            the_task,
+            config,
+            out_dir=out,
+            resume=resume,
+            progress=say,
+            invocation=invocation,
+            devices=devices,
         )
     except BaseException as e:
         kept = resume or not release_claim(out)  # nothing to resume: give the dir back

@@ -24,6 +24,7 @@ from ..controllers import MLPController
 from ..errors import ConfigError, TrainingDiverged
 from ..tasks import AnyTask, ContinuousTask, StepLoss, TrajectoryLoss
 from ._bptt import make_trainer
+from ._devices import batch_placement, check_devices, divisible, placer
 from ._diagnostics import Diagnostics
 from ._ode import make_ode_trainer
 
@@ -111,6 +112,7 @@ def train(
     progress: Callable[[str], None] | None = None,
     on_point: Callable[[dict[str, Any], MLPController], None] | None = None,
     invocation: dict[str, Any] | None = None,
+    devices: int | None = None,
 ) -> TrainResult:
     """Train a controller for ``task`` by differentiating through its simulator.
 
@@ -138,6 +140,9 @@ def train(
             only for the points after the resume.
         invocation: what else ``run.json`` records so that a resume needs nothing but the
             directory (the command line's task, fitted model, final evaluation, animation).
+        devices: split the batch of simulations over this many local devices (data
+            parallelism; discrete-time tasks; the batch must divide evenly). The result is
+            one device's up to the order of floating-point sums.
 
     Returns:
         A ``TrainResult`` whose controller is the one of the best evaluation point when
@@ -183,10 +188,19 @@ def train(
     if custom and out_dir is not None and resume:
         say("note: resuming with a custom loss; it must be the same function as before")
 
+    devices = check_devices(devices)
+    if devices > 1:
+        if isinstance(task, ContinuousTask):
+            raise ConfigError(
+                f"task {task.name!r} is continuous-time: its solves run on one device "
+                "(devices > 1 splits the batch of discrete-time tasks)"
+            )
+        divisible(config.batch, devices, "batch", "--batch")
     key = jax.random.PRNGKey(config.seed)
     k_train, k_eval = jax.random.split(key)
     with interrupts_deferred():
         ts = eqx.filter_jit(trainer.init)(k_train, params)  # one program, not op by op
+    ts_sharding, whole = batch_placement(ts, devices, 1 if _population(config) > 1 else 0)
     best = None  # the controller of the best evaluation point so far
 
     out = None
@@ -207,12 +221,16 @@ def train(
             (ts, best), meta = io.load_checkpoint(ckpt, (ts, like_best))
             say(f"resuming {task.name} from update {int(ts.update)} ({ckpt})")
 
+    if ts_sharding is not None:  # data parallel: simulations split, the rest replicated
+        ts, params, k_eval = placer(ts_sharding)(ts), placer(whole)(params), placer(whole)(k_eval)
+        best = best if best is None else placer(whole)(best)
     # Compile once, ahead of time, so that compile time is measured apart from training time.
     # The evaluation first: a loss or a solve that fails on the untrained controller is
     # reported before the (longer) compilation of the training chunk.
     t0 = time.perf_counter()
     with interrupts_deferred():
-        evaluate = jax.jit(trainer.evaluate).lower(ts.controller, params, k_eval).compile()
+        evaluate = jax.jit(trainer.evaluate, **_outputs(whole))
+        evaluate = evaluate.lower(ts.controller, params, k_eval).compile()
     compile_seconds = time.perf_counter() - t0
 
     curve: list[dict[str, Any]] = list(meta["curve"])
@@ -262,7 +280,8 @@ def train(
     t0 = time.perf_counter()
     total = jnp.asarray(config.updates, jnp.int32)
     with interrupts_deferred():
-        chunk = jax.jit(trainer.chunk).lower(ts, params, total).compile()
+        chunk = jax.jit(trainer.chunk, **_outputs(ts_sharding and (ts_sharding, whole)))
+        chunk = chunk.lower(ts, params, total).compile()
     compile_seconds += time.perf_counter() - t0
 
     stopped_early = False
@@ -336,6 +355,7 @@ def train(
         "config": config.to_json(),
         "jax_version": jax.__version__,
         "device": str(jax.devices()[0].platform),
+        "devices": devices,
     }
     if out is not None:  # the controller, loadable at once (result.save adds the rest)
         io.write_json(out / "model.json", io.model_document(task, controller, config, metrics))
@@ -382,6 +402,11 @@ def _check_head(task: AnyTask, head: str) -> None:
         raise ConfigError(
             f"head {head!r} needs action bounds, and task {task.name!r} has none; use linear"
         )
+
+
+def _outputs(shardings: Any) -> dict[str, Any]:
+    """``jax.jit``'s keyword for the outputs' placement, when there is one to keep."""
+    return {} if shardings is None else {"out_shardings": shardings}
 
 
 def _population(config: Any) -> int:

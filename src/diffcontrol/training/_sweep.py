@@ -33,6 +33,7 @@ from ..config import TrainConfig
 from ..errors import ConfigError
 from ..tasks import ContinuousTask, StepLoss, Task
 from ._bptt import Trainer, builtin_loss_name, make_optimizer
+from ._devices import check_devices, mesh_placements, placer
 from ._driver import TrainResult, _check_head, interrupts_deferred, task_params
 
 SWEPT_IN_PROGRAM = ("seed", "learning_rate")
@@ -200,11 +201,7 @@ def check_members(task: Task, configs: Sequence[TrainConfig], devices: int | Non
                 f"{c.population}; a sweep is itself a population of runs"
             )
         _check_head(task, c.head)
-    available = len(jax.local_devices())
-    if devices is not None and not 1 <= devices <= available:
-        raise ConfigError(
-            f"devices must be between 1 and the {available} local device(s), got {devices!r}"
-        )
+    check_devices(devices)
 
 
 def _differing(configs: Sequence[TrainConfig]) -> list[str]:
@@ -229,11 +226,11 @@ def _member_devices(members: int, devices: int | None) -> int:
     default) the largest count of local devices that does."""
     if devices is not None:
         if members % devices:
-            near = sorted({d for d in range(1, len(jax.local_devices()) + 1) if members % d == 0})
+            fits = [d for d in range(1, len(jax.local_devices()) + 1) if members % d == 0]
             raise ConfigError(
-                f"{members} members cannot be split evenly over {devices} devices; use "
-                f"--devices {' or '.join(str(d) for d in near[-2:])}, or a member count that "
-                f"{devices} divides"
+                f"{members} sweep members cannot be split evenly over {devices} devices; use "
+                f"--devices {fits[-1]} (or any of {', '.join(map(str, fits))}), or a multiple "
+                f"of {devices} members"
             )
         return devices
     return max(d for d in range(1, len(jax.local_devices()) + 1) if members % d == 0)
@@ -433,13 +430,6 @@ def _finite_members(controllers: Any, n: int) -> np.ndarray:
 
 
 def _placement(devices: int) -> tuple[Callable[[PyTree], PyTree], Callable[[PyTree], PyTree]]:
-    """Two placements on a 1-D mesh of ``devices`` local devices: split arrays along their
-    leading (members) axis, and replicate; with one device, leave arrays where they are."""
-    if devices == 1:
-        return (lambda tree: tree), (lambda tree: tree)
-    from jax.sharding import Mesh, NamedSharding, PartitionSpec
-
-    mesh = Mesh(np.array(jax.local_devices()[:devices]), ("members",))
-    split = NamedSharding(mesh, PartitionSpec("members"))
-    whole = NamedSharding(mesh, PartitionSpec())
-    return (lambda tree: jax.device_put(tree, split)), (lambda tree: jax.device_put(tree, whole))
+    """Split along the leading (members) axis, and replicate, over ``devices`` devices."""
+    split, whole = mesh_placements(devices)
+    return placer(split), placer(whole)
