@@ -4,10 +4,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import subprocess
-import sys
-import textwrap
 
 import jax
 import numpy as np
@@ -199,74 +195,3 @@ def test_failed_sweep_gives_the_directory_back(tmp_path, capsys):
     assert "continuous-time" in capsys.readouterr().err
     assert main(["sweep", "--out", str(out), "--resume"]) == 2
     assert "no sweep to resume" in capsys.readouterr().err
-
-
-@pytest.mark.slow
-def test_members_sharded_over_devices_match_one_device(tmp_path):
-    """8 simulated CPU devices give each member the controller one device gives."""
-    script = textwrap.dedent(
-        f"""
-        import jax, numpy as np
-        import diffcontrol as dc
-        from diffcontrol.training import grid, sweep
-        assert len(jax.devices()) == 8
-        task = dc.make("cartpole")
-        configs = grid(task.default_config().replace(**{TINY!r}), range(8), {{}})
-        one, eight = sweep(task, configs, devices=1), sweep(task, configs)
-        assert eight.members[0].metrics["sweep"]["devices"] == 8
-        diff = max(
-            float(np.max(np.abs(np.asarray(x) - np.asarray(y))))
-            for a, b in zip(one.members, eight.members)
-            for x, y in zip(jax.tree.leaves(a.controller), jax.tree.leaves(b.controller))
-        )
-        print("diff", diff)
-        assert diff < 1e-4
-        """
-    )
-    env = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=8"}
-    proc = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True)
-    assert proc.returncode == 0, proc.stderr[-2000:]
-
-
-@pytest.mark.slow
-def test_batch_split_over_devices_matches_one_device(tmp_path):
-    """Data-parallel training: 8 simulated CPU devices give the controller one device gives,
-    for a single run and for a population; a batch they do not divide is one line."""
-    script = textwrap.dedent(
-        """
-        import jax, numpy as np
-        import diffcontrol as dc
-        from diffcontrol.errors import ConfigError
-        task = dc.make("pendulum")
-        cfg = task.default_config().replace(updates=20, eval_every=10, batch=16, window=10,
-                                            eval_episodes=8, hidden=(16,))
-        def diff(a, b):
-            return max(float(np.max(np.abs(np.asarray(x) - np.asarray(y))))
-                       for x, y in zip(jax.tree.leaves(a.controller), jax.tree.leaves(b.controller)))
-        for c in (cfg, cfg.replace(population=2)):
-            one, eight = dc.train(task, c), dc.train(task, c, devices=8)
-            assert eight.metrics["devices"] == 8
-            assert diff(one, eight) < 1e-4, diff(one, eight)
-            assert abs(one.metrics["final_eval_return"] - eight.metrics["final_eval_return"]) < 1e-2
-        try:
-            dc.train(task, cfg.replace(batch=12), devices=8)
-        except ConfigError as e:
-            assert "use --batch 8 or 16" in str(e), e
-        else:
-            raise AssertionError("batch 12 over 8 devices was accepted")
-        """
-    )
-    env = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=8"}
-    proc = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True)
-    assert proc.returncode == 0, proc.stderr[-2000:]
-
-
-def test_more_devices_than_there_are_is_one_line(tmp_path, capsys):
-    out = tmp_path / "run"
-    n = len(jax.local_devices()) + 1
-    assert (
-        main(["train", "cartpole", "--out", str(out), "--devices", str(n), "--updates", "1"]) == 2
-    )
-    err = capsys.readouterr().err
-    assert f"got {n}" in err and len(err.strip().splitlines()) == 1
-    assert not out.exists()

@@ -77,8 +77,13 @@ def add_parsers(sub: Any) -> None:
          "on seeds 0..N-1 (default 100), or random targets for aiming tasks (default 1000); "
          "0 skips"),
         ("--no-animation", FLAG, False, None, "skip the GIF (saves a few seconds)"),
-        ("--devices", a.positive_int, None, "N", "split the batch of simulations over N local "
-         "devices (data parallel; default 1)"),
+        ("--devices", a.positive_int, None, "N", "split the batch of simulations over N "
+         "devices (data parallel; default 1, or every device of the hosts below)"),
+        ("--coordinator", str, None, "HOST:PORT", "run on several hosts: process 0's address "
+         "(every host runs the same command with its --process-id; process 0 writes DIR)"),
+        ("--processes", a.positive_int, 1, "N", "the number of hosts (processes) of the run"),
+        ("--process-id", a.nonneg_int, 0, "I", "this host's index, 0 ... N-1"),
+        ("--join-timeout", a.positive_float, 60.0, "S", "give up joining the hosts after S s"),
         ("--model", str, None, "FIT_DIR", "train through the model fitted by `diffcontrol fit` in "
          "FIT_DIR instead of the nominal simulator (fitted parameters, or the hybrid/neural "
          "model), and evaluate on the system its data was recorded from (e.g. "
@@ -115,6 +120,8 @@ def cmd_train(args: argparse.Namespace) -> int:
             final_eval=args.final_eval,
             animation=not args.no_animation,
             devices=args.devices,
+            hosts=args.coordinator
+            and (args.coordinator, args.processes, args.process_id, args.join_timeout),
             compile_cache=not args.no_compile_cache,
             progress=a.say(args),
             command=args.command_line,

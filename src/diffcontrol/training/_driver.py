@@ -24,7 +24,7 @@ from ..controllers import MLPController
 from ..errors import ConfigError, TrainingDiverged
 from ..tasks import AnyTask, ContinuousTask, StepLoss, TrajectoryLoss
 from ._bptt import make_trainer
-from ._devices import batch_placement, check_devices, divisible, placer
+from ._devices import batch_placement, check_devices, divisible, gathered, is_writer, placer
 from ._diagnostics import Diagnostics
 from ._ode import make_ode_trainer
 
@@ -214,7 +214,7 @@ def train(
         run = {"format": "diffcontrol-run", "task": task.name, "config": config.to_json()}
         if invocation:
             run["invocation"] = invocation
-        out = io.prepare_run_dir(out_dir, run, resume)
+        out = io.prepare_run_dir(out_dir, run, resume) if is_writer() else Path(out_dir)
         ckpt = out / CHECKPOINT_FILE
         if resume and ckpt.exists():
             like_best = trainer.pick(ts.controller, np.zeros(_population(config)))
@@ -307,9 +307,11 @@ def train(
                 ts, float(np.nanmean(losses)), float(np.nanmean(np.asarray(stats.grad_norm)[:done]))
             )
         if out is not None:
+            whole_state = gathered((ts, best))  # every process takes part; process 0 writes
+        if out is not None and is_writer():
             io.save_checkpoint(
                 out / CHECKPOINT_FILE,
-                (ts, best),
+                whole_state,
                 {
                     "curve": curve,
                     "best_index": best_index,
@@ -356,8 +358,9 @@ def train(
         "jax_version": jax.__version__,
         "device": str(jax.devices()[0].platform),
         "devices": devices,
+        "processes": jax.process_count(),
     }
-    if out is not None:  # the controller, loadable at once (result.save adds the rest)
+    if out is not None and is_writer():  # the controller, loadable at once
         io.write_json(out / "model.json", io.model_document(task, controller, config, metrics))
     return TrainResult(
         task=task, config=config, params=params, controller=controller, metrics=metrics
