@@ -90,7 +90,7 @@ def test_each_member_stops_early_on_its_own():
         (lambda: sweep(dc.make("cartpole-swingup"), [BASE]), "continuous-time"),
         (lambda: sweep(TASK, [BASE.replace(population=2)]), "population 1"),
         (lambda: sweep(TASK, []), "at least one"),
-        (lambda: sweep(TASK, [BASE], devices=99), "local device"),
+        (lambda: sweep(TASK, [BASE], devices=99), r"got 99"),
         (lambda: grid(BASE, [0], {"nope": [1]}), "cannot sweep 'nope'"),
         (lambda: grid(BASE, [0], {"learning_rate": []}), "non-empty list"),
         (lambda: grid(BASE, [], {}), "at least one seed"),
