@@ -42,6 +42,7 @@ _LAZY = {
     "register": ("tasks", "register"),
     "make": ("tasks", "resolve"),
     "TrainResult": ("training", "TrainResult"),
+    "sweep": ("training", "sweep"),
     "train": ("training", "train"),
 }
 
@@ -133,5 +134,6 @@ __all__ = [
     "open_run",
     "record",
     "register",
+    "sweep",
     "train",
 ]

@@ -384,3 +384,28 @@ def help_of(name: str, cls: type = TrainConfig) -> str:
         if f.name == name:
             return f.metadata["help"]
     raise KeyError(name)
+
+
+def parse_field_value(config: Any, name: str, text: str) -> Any:
+    """The value of field ``name`` of ``config`` written as ``text`` (command-line form:
+    ``3e-3``, ``64x64`` for layer widths, ``yes``/``no``), of the field's declared type.
+
+    Raises:
+        ConfigError: ``text`` is not a value of that type.
+    """
+    declared = next(str(f.type) for f in dataclasses.fields(config) if f.name == name)
+    try:
+        if declared == "int":
+            return int(text)
+        if declared == "float":
+            return float(text)
+        if declared == "bool":
+            return {"yes": True, "true": True, "no": False, "false": False}[text.lower()]
+        if declared == "tuple[int, ...]":
+            return tuple(int(w) for w in text.split("x"))
+        return text
+    except (ValueError, KeyError):
+        form = {"int": "an integer", "float": "a number", "bool": "yes or no"}
+        raise ConfigError(
+            f"{name} takes {form.get(declared, 'layer widths such as 64x64')}, got {text!r}"
+        ) from None

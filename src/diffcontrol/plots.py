@@ -164,3 +164,39 @@ def swingup(recording: Any, path: str | Path, title: str = "") -> Path:
     )
     fig.tight_layout()
     return _save(fig, path)
+
+
+def sweep_plot(
+    rows: list[dict[str, Any]], swept: list[str], best: int, task: str, path: str | Path
+) -> Path:
+    """A sweep's returns: one point per member against its first swept setting other than the
+    seed (its index when only seeds are swept), one colour per seed; the best member starred."""
+    x_name = next((n for n in swept if n != "seed"), None)
+    fig, ax = plt.subplots(figsize=(7, 4))
+    seeds = sorted({r["seed"] for r in rows})
+    for k, seed in enumerate(seeds):
+        pts = [(i, r) for i, r in enumerate(rows) if r["seed"] == seed]
+        xs = [r[x_name] if x_name else i for i, r in pts]
+        ys = [r["eval_return"] if r["eval_return"] is not None else np.nan for _, r in pts]
+        ax.plot(
+            xs,
+            ys,
+            "o",
+            color=f"C{k % 10}",
+            alpha=0.8,
+            label=f"seed {seed}" if len(seeds) <= 10 else None,
+        )
+    b = rows[best]
+    ax.plot(
+        [b[x_name] if x_name else best], [b["eval_return"]], "*", ms=16, color="C3", label="best"
+    )
+    if x_name and all(isinstance(r[x_name], (int, float)) and r[x_name] > 0 for r in rows):
+        values = [r[x_name] for r in rows]
+        if max(values) / min(values) >= 10:
+            ax.set_xscale("log")
+    ax.set_xlabel(x_name or "member")
+    ax.set_ylabel("returned eval return (simulator)")
+    ax.set_title(f"{task}: sweep of {len(rows)} runs")
+    ax.legend(loc="best", fontsize=8)
+    fig.tight_layout()
+    return _save(fig, path)

@@ -30,12 +30,14 @@ def build_parser() -> argparse.ArgumentParser:
     sub.required = True
     for module in (_runs, _train, _compare, _data, _fit):
         module.add_parsers(sub)
+    _train.add_sweep_parser(sub)
     return parser
 
 
 COMMANDS = {
     "list": _runs.cmd_list,
     "train": _train.cmd_train,
+    "sweep": _train.cmd_sweep,
     "evaluate": _runs.cmd_evaluate,
     "animate": _runs.cmd_animate,
     "aim": _runs.cmd_aim,

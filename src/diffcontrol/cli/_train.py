@@ -77,6 +77,13 @@ def add_parsers(sub: Any) -> None:
          "on seeds 0..N-1 (default 100), or random targets for aiming tasks (default 1000); "
          "0 skips"),
         ("--no-animation", FLAG, False, None, "skip the GIF (saves a few seconds)"),
+        ("--devices", a.positive_int, None, "N", "split the batch of simulations over N "
+         "devices (data parallel; default 1, or every device of the hosts below)"),
+        ("--coordinator", str, None, "HOST:PORT", "run on several hosts: process 0's address "
+         "(every host runs the same command with its --process-id; process 0 writes DIR)"),
+        ("--processes", a.positive_int, 1, "N", "the number of hosts (processes) of the run"),
+        ("--process-id", a.nonneg_int, 0, "I", "this host's index, 0 ... N-1"),
+        ("--join-timeout", a.positive_float, 60.0, "S", "give up joining the hosts after S s"),
         ("--model", str, None, "FIT_DIR", "train through the model fitted by `diffcontrol fit` in "
          "FIT_DIR instead of the nominal simulator (fitted parameters, or the hybrid/neural "
          "model), and evaluate on the system its data was recorded from (e.g. "
@@ -112,6 +119,9 @@ def cmd_train(args: argparse.Namespace) -> int:
             resume=args.resume,
             final_eval=args.final_eval,
             animation=not args.no_animation,
+            devices=args.devices,
+            hosts=args.coordinator
+            and (args.coordinator, args.processes, args.process_id, args.join_timeout),
             compile_cache=not args.no_compile_cache,
             progress=a.say(args),
             command=args.command_line,
@@ -121,4 +131,62 @@ def cmd_train(args: argparse.Namespace) -> int:
         print(f"wrote {', '.join(str(Path(args.out) / f) for f in outcome.files)}")
     if outcome.timings:
         print(outcome.timings)
+    return 0
+
+
+def add_sweep_parser(sub: Any) -> None:
+    p = sub.add_parser(
+        "sweep",
+        help="train a grid of runs (seeds x settings) as one vmapped program",
+        description=(
+            "Train every combination of --seeds and --set values of TASK as one compiled, "
+            "vmapped program (sharded over the local devices), and write one run directory per "
+            "member (read by evaluate/animate/load), sweep.txt (the table) and sweep.png; the "
+            "best member also gets the final evaluation. Discrete-time tasks."
+        ),
+    )
+    # fmt: off
+    add(p,
+        ("task", str, None, "TASK", "(optional with --resume) " + a.TASK_HELP),
+        ("--out", str, REQUIRED, "DIR", "output directory (new or empty)"),
+        ("--seeds", str, "0-7", "LIST", "training seeds, e.g. 0-63 or 0,3,7 (default 0-7)"),
+        ("--set", [str], None, "NAME=V1,V2", "sweep a setting over these values (repeatable; "
+         "layer widths as 64x64), e.g. --set learning_rate=1e-3,3e-3"),
+        ("--devices", a.positive_int, None, "N", "local devices to shard the members over "
+         "(default: all that divide the member count)"),
+        ("--recipe", str, None, "NAME", "start from a named set of settings of the task"),
+        ("--resume", FLAG, False, None, "train the members of the sweep in DIR not yet written"),
+        ("--final-eval", a.nonneg_int, None, "N", "the best member's final evaluation size"),
+        a.NO_COMPILE_CACHE, a.QUIET)
+    add(p.add_argument_group("settings of every member (see `diffcontrol train --help`)"),
+        *_field_specs(TrainConfig, skip={"seed"}))
+    # fmt: on
+
+
+def cmd_sweep(args: argparse.Namespace) -> int:
+    from .. import _jax_setup, tasks
+    from ..errors import ConfigError
+    from ..runs import _sweep as s
+
+    task = args.task or (s.stored_sweep(args.out)["task"] if args.resume else None)
+    if task is None:
+        raise ConfigError("name the TASK to sweep (or --resume the sweep in --out)")
+    seeds, values = s.parse_seeds(args.seeds), {}
+    if not args.resume:
+        values = s.parse_values(args.set or [], tasks.resolve(task).default_config())
+    if not args.no_compile_cache:
+        _jax_setup.enable_compile_cache()
+    _, files = s.sweep_dir(
+        args.out,
+        task,
+        seeds=seeds,
+        values=values,
+        recipe=args.recipe,
+        devices=args.devices,
+        settings={f: getattr(args, f) for f in _DISCRETE - {"seed", "params"}},
+        resume=args.resume,
+        final_eval=args.final_eval,
+        progress=a.say(args),
+    )
+    print(f"wrote {args.out}: sweep.txt, sweep.png and {len(files) - 3} run directories")
     return 0

@@ -17,6 +17,7 @@ from ._files import (
     release_claim,
     save_run,
 )
+from ._sweep import SWEEP_FILE, stored_sweep, sweep_dir
 from ._train import RunInterrupted, RunOutcome, describe, fitted_training, train_run
 from ._use import aim_dir, animate_dir, evaluate_dir
 
@@ -26,6 +27,7 @@ __all__ = [
     "Run",
     "RunInterrupted",
     "RunOutcome",
+    "SWEEP_FILE",
     "aim_dir",
     "animate_dir",
     "describe",
@@ -36,5 +38,7 @@ __all__ = [
     "read_run_file",
     "release_claim",
     "save_run",
+    "stored_sweep",
+    "sweep_dir",
     "train_run",
 ]

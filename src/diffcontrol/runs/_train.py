@@ -49,6 +49,8 @@ def train_run(
     resume: bool = False,
     final_eval: int | None = None,
     animation: bool = True,
+    devices: int | None = None,
+    hosts: tuple[str, int, int, float] | None = None,
     compile_cache: bool = True,
     progress: Callable[[str], None] | None = None,
     note: Callable[[str], None] | None = None,
@@ -71,6 +73,11 @@ def train_run(
             ``run.json``; a finished run is left untouched.
         final_eval: the final evaluation's size (``None``: the task's default; 0 skips).
         animation: whether to write the animation.
+        devices: split the batch over this many devices (``train``'s ``devices``; default
+            one, or all devices of all hosts in a multi-host run).
+        hosts: ``(coordinator "HOST:PORT", processes, process_id, timeout_s)``: join a multi-host run
+            first (``jax.distributed.initialize``). Every process runs the same call; process
+            0 writes the run directory (resuming needs it on a file system all hosts see).
         compile_cache: use JAX's persistent compilation cache.
         progress: called with each progress line.
         note: called with warnings meant for stderr.
@@ -85,9 +92,12 @@ def train_run(
     """
     from .. import _jax_setup, _timing
     from ..training import resolve_config, train
+    from ..training._devices import is_writer, join_hosts
 
     started = _timing.process_seconds()  # the interpreter, the imports, the command line
 
+    if hosts is not None:
+        join_hosts(*hosts)
     say = progress or (lambda line: None)
     note = note or (lambda line: print(line, file=sys.stderr))
     out = Path(out_dir)
@@ -105,6 +115,7 @@ def train_run(
     model = model or invocation.get("model")
     final_eval = invocation.get("final_eval") if final_eval is None else final_eval
     animation = animation and invocation.get("animation") is not False
+    devices = devices or invocation.get("devices")
     spec, the_task = task, resolve(task)
 
     config_cls = type(the_task.default_config())
@@ -144,13 +155,21 @@ def train_run(
             "checkpoint is exact for the computed solve"
         )
     invocation = {"task": spec, "model": model, "final_eval": final_eval, "animation": animation}
+    if devices:
+        invocation["devices"] = devices
     named = "" if spec in _builtin_names() else f" {spec}"
     try:
         result = train(
-            the_task, config, out_dir=out, resume=resume, progress=say, invocation=invocation
+            the_task,
+            config,
+            out_dir=out,
+            resume=resume,
+            progress=say,
+            invocation=invocation,
+            devices=devices,
         )
     except BaseException as e:
-        kept = resume or not release_claim(out)  # nothing to resume: give the dir back
+        kept = resume or not is_writer() or not release_claim(out)  # give the dir back
         if not isinstance(e, KeyboardInterrupt):
             raise
         if not kept:
@@ -172,6 +191,8 @@ def train_run(
     metrics["created"] = io.now_iso()
     if model_info:
         metrics["model"] = model_info
+    if not is_writer():  # process 0 of the hosts writes the files
+        return RunOutcome(None, [], f"process {hosts[2]} of {hosts[1]}: done")
     try:
         run, files = save_run(
             result,

@@ -48,9 +48,13 @@ class UpdateStats(eqx.Module):
     grad_norm: Float[Array, ""]
 
 
-def make_optimizer(config: TrainConfig) -> optax.GradientTransformation:
-    """Adam with the configured schedule, after optional global-norm gradient clipping."""
-    lr = config.learning_rate
+def make_optimizer(config: TrainConfig, learning_rate: Any = None) -> optax.GradientTransformation:
+    """Adam with the configured schedule, after optional global-norm gradient clipping.
+
+    ``learning_rate`` (default ``config.learning_rate``) may be a traced value: a sweep builds
+    the same chain inside ``optax.inject_hyperparams`` with one learning rate per member.
+    """
+    lr = config.learning_rate if learning_rate is None else learning_rate
     final = lr * config.lr_final_fraction
     if config.lr_schedule == "constant":
         schedule: optax.Schedule | float = lr

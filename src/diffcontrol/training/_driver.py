@@ -24,6 +24,7 @@ from ..controllers import MLPController
 from ..errors import ConfigError, TrainingDiverged
 from ..tasks import AnyTask, ContinuousTask, StepLoss, TrajectoryLoss
 from ._bptt import make_trainer
+from ._devices import batch_placement, check_devices, divisible, gathered, is_writer, placer
 from ._diagnostics import Diagnostics
 from ._ode import make_ode_trainer
 
@@ -113,6 +114,7 @@ def train(
     progress: Callable[[str], None] | None = None,
     on_point: Callable[[dict[str, Any], MLPController], None] | None = None,
     invocation: dict[str, Any] | None = None,
+    devices: int | None = None,
 ) -> TrainResult:
     """Train a controller for ``task`` by differentiating through its simulator.
 
@@ -140,6 +142,9 @@ def train(
             only for the points after the resume.
         invocation: what else ``run.json`` records so that a resume needs nothing but the
             directory (the command line's task, fitted model, final evaluation, animation).
+        devices: split the batch of simulations over this many local devices (data
+            parallelism; discrete-time tasks; the batch must divide evenly). The result is
+            one device's up to the order of floating-point sums.
 
     Returns:
         A ``TrainResult`` whose controller is the one of the best evaluation point when
@@ -190,8 +195,17 @@ def train(
     if custom and out_dir is not None and resume:
         say("note: resuming with a custom loss; it must be the same function as before")
 
+    devices = check_devices(devices)
+    if devices > 1:
+        if isinstance(task, ContinuousTask):
+            raise ConfigError(
+                f"task {task.name!r} is continuous-time: its solves run on one device "
+                "(devices > 1 splits the batch of discrete-time tasks)"
+            )
+        divisible(config.batch, devices, "batch", "--batch")
     with interrupts_deferred():  # one program (the keys too), not op by op
         ts, k_eval = eqx.filter_jit(_start)(trainer, np.int32(config.seed), params)
+    ts_sharding, whole = batch_placement(ts, devices, 1 if _population(config) > 1 else 0)
     best = None  # the controller of the best evaluation point so far
 
     out = None
@@ -205,18 +219,22 @@ def train(
         run = {"format": "diffcontrol-run", "task": task.name, "config": config.to_json()}
         if invocation:
             run["invocation"] = invocation
-        out = io.prepare_run_dir(out_dir, run, resume)
+        out = io.prepare_run_dir(out_dir, run, resume) if is_writer() else Path(out_dir)
         ckpt = out / CHECKPOINT_FILE
         if resume and ckpt.exists():
             like_best = trainer.pick(ts.controller, np.zeros(_population(config)))
             (ts, best), meta = io.load_checkpoint(ckpt, (ts, like_best))
             say(f"resuming {task.name} from update {int(ts.update)} ({ckpt})")
 
+    if ts_sharding is not None:  # data parallel: simulations split, the rest replicated
+        ts, params, k_eval = placer(ts_sharding)(ts), placer(whole)(params), placer(whole)(k_eval)
+        best = best if best is None else placer(whole)(best)
     # Compile once, ahead of time (every compilation is timed apart by ``_timing``).
     # The evaluation first: a loss or a solve that fails on the untrained controller is
     # reported before the (longer) compilation of the training chunk.
     with interrupts_deferred():
-        evaluate = jax.jit(trainer.evaluate).lower(ts.controller, params, k_eval).compile()
+        evaluate = jax.jit(trainer.evaluate, **_outputs(whole))
+        evaluate = evaluate.lower(ts.controller, params, k_eval).compile()
 
     curve: list[dict[str, Any]] = list(meta["curve"])
     seconds_before = float(meta["seconds_before"])
@@ -271,7 +289,8 @@ def train(
 
     total = np.int32(config.updates)
     with interrupts_deferred():
-        chunk = jax.jit(trainer.chunk).lower(ts, params, total).compile()
+        chunk = jax.jit(trainer.chunk, **_outputs(ts_sharding and (ts_sharding, whole)))
+        chunk = chunk.lower(ts, params, total).compile()
 
     stopped_early = False
     target = config.target_return
@@ -296,9 +315,11 @@ def train(
                 ts, float(np.nanmean(losses)), float(np.nanmean(np.asarray(stats.grad_norm)[:done]))
             )
         if out is not None:
+            whole_state = gathered((ts, best))  # every process takes part; process 0 writes
+        if out is not None and is_writer():
             io.save_checkpoint(
                 out / CHECKPOINT_FILE,
-                (ts, best),
+                whole_state,
                 {
                     "curve": curve,
                     "best_index": best_index,
@@ -350,8 +371,10 @@ def train(
         "config": config.to_json(),
         "jax_version": jax.__version__,
         "device": str(jax.devices()[0].platform),
+        "devices": devices,
+        "processes": jax.process_count(),
     }
-    if out is not None:  # the controller, loadable at once (result.save adds the rest)
+    if out is not None and is_writer():  # the controller, loadable at once
         io.write_json(out / "model.json", io.model_document(task, controller, config, metrics))
     return TrainResult(
         task=task, config=config, params=params, controller=controller, metrics=metrics
@@ -402,6 +425,11 @@ def _check_head(task: AnyTask, head: str) -> None:
         raise ConfigError(
             f"head {head!r} needs action bounds, and task {task.name!r} has none; use linear"
         )
+
+
+def _outputs(shardings: Any) -> dict[str, Any]:
+    """``jax.jit``'s keyword for the outputs' placement, when there is one to keep."""
+    return {} if shardings is None else {"out_shardings": shardings}
 
 
 def _population(config: Any) -> int:

@@ -1,0 +1,324 @@
+"""Sweeping into a directory: what ``diffcontrol sweep`` does, as one library call.
+
+A sweep directory holds ``sweep.json`` (the task, the base settings, the seeds and swept
+values; ``"complete"`` once every member is written), one run directory per member (named by
+its index and swept values; ``diffcontrol evaluate`` and ``diffcontrol.load`` read each), the
+table ``sweep.txt`` and the plot ``sweep.png``. The best member (by its returned in-simulator
+evaluation return) also gets the task's final evaluation and pictures.
+
+Resuming trains only the members whose directories are not complete: a member is the unit of
+work that is kept (an interrupted program's members start again; members are independent, so
+their results are the same to noise).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+from .. import io
+from ..errors import ConfigError, RunDirectoryError
+from ..tasks import resolve
+from ._files import METRICS_FILE, MODEL_FILE, mark_complete, read_run_file, save_run
+
+SWEEP_FILE = "sweep.json"
+SWEEP_FORMAT = "diffcontrol-sweep"
+
+
+def member_name(index: int, config: Any, swept: Sequence[str]) -> str:
+    """The directory name of member ``index``: its index and swept values."""
+    parts = [f"{index:03d}"]
+    for name in swept:
+        value = getattr(config, name)
+        parts.append(f"{name}{value:g}" if isinstance(value, float) else f"{name}{value}")
+    return "-".join(parts).replace("/", "_")
+
+
+def sweep_dir(
+    out_dir: str | Path,
+    task: str,
+    *,
+    seeds: Sequence[int] = (0,),
+    values: dict[str, Sequence[Any]] | None = None,
+    settings: dict[str, Any] | None = None,
+    recipe: str | None = None,
+    devices: int | None = None,
+    resume: bool = False,
+    final_eval: int | None = None,
+    progress: Callable[[str], None] | None = None,
+) -> tuple[Any, list[str]]:
+    """Train a grid of runs of ``task`` as one program and write them into ``out_dir``.
+
+    Args:
+        out_dir: the sweep directory (new or empty; with ``resume``, the sweep to continue).
+        task: a registered task name or an import path ``module:Class``.
+        seeds: the training seeds.
+        values: setting name -> values to try (e.g. ``{"learning_rate": [1e-3, 3e-3]}``).
+        settings: overrides of the base settings (``None`` values skipped).
+        recipe: a named set of settings of the task to start from.
+        devices: local devices to shard the members over (default: all that divide them).
+        resume: continue the sweep in ``out_dir`` with its own settings (``seeds``,
+            ``values``, ``settings`` and ``recipe`` are then not used): only the members not
+            yet written are trained.
+        final_eval: the best member's final evaluation size (``None``: the task's default).
+        progress: called with each progress line.
+
+    Returns:
+        The ``SweepResult`` of the members trained now (``None`` if none were left) and the
+        names of the files and directories written.
+
+    Raises:
+        ConfigError, RunDirectoryError: bad settings, or a directory that holds something else.
+    """
+    from ..training import resolve_config
+    from ..training._sweep import check_members, grid, sweep
+
+    say = progress or (lambda line: None)
+    out = Path(out_dir)
+    the_task = resolve(task)
+    if resume:  # the sweep's own settings, from its directory alone
+        stored = stored_sweep(out)
+        base = type(the_task.default_config()).from_json(stored["config"])
+        seeds, values = stored["seeds"], stored["values"]
+    else:
+        base = resolve_config(the_task, recipe, **(settings or {}))
+    configs = grid(base, seeds, values)
+    swept = ["seed", *(values or {})]
+    doc = {
+        "format": SWEEP_FORMAT,
+        "task": the_task.name,
+        "config": base.to_json(),
+        "seeds": list(seeds),
+        "values": {k: list(v) for k, v in (values or {}).items()},
+        "members": [member_name(i, c, swept) for i, c in enumerate(configs)],
+    }
+    check_members(the_task, configs, devices)
+    _claim(out, doc, resume)
+    todo = [i for i, name in enumerate(doc["members"]) if not _complete(out / name)]
+    if resume:
+        say(f"resuming the sweep in {out}: {len(todo)} of {len(configs)} member(s) left")
+    result = None
+    named = "" if ":" not in task else f" {task}"
+    try:
+        if todo:
+            say(
+                f"sweeping {the_task.name}: {len(todo)} member(s) ({', '.join(swept)}) x "
+                f"{base.updates} updates -> {out}"
+            )
+            result = sweep(the_task, [configs[i] for i in todo], devices=devices, progress=say)
+            for i, member in zip(todo, result.members, strict=True):
+                _write_member(out / doc["members"][i], member, task)
+    except BaseException as e:
+        written = any(_complete(out / name) for name in doc["members"])
+        if not written:  # nothing kept: give the directory back
+            (out / SWEEP_FILE).unlink(missing_ok=True)
+            if not any(out.iterdir()):
+                out.rmdir()
+        if not isinstance(e, KeyboardInterrupt):
+            raise
+        from ._train import RunInterrupted
+
+        if not written:
+            raise RunInterrupted(
+                "interrupted before any member was written; nothing was kept"
+            ) from None
+        raise RunInterrupted(
+            f"interrupted; the members written are kept in {out}. Train the others with: "
+            f"diffcontrol sweep{named} --out {out} --resume"
+        ) from None
+    rows = [_row(out / name, configs[i], swept) for i, name in enumerate(doc["members"])]
+    best = max(range(len(rows)), key=lambda i: _rank(rows[i]["eval_return"]))
+    best_dir = out / doc["members"][best]
+    if not (best_dir / "learning_curve.png").exists():
+        from ..runs import open_run
+
+        run = open_run(best_dir, the_task, real=None)
+        member = _as_result(run)
+        save_run(member, best_dir, final_eval=final_eval, animation=False, progress=say)
+    table = _table(rows, swept, best)
+    io.write_bytes(out / "sweep.txt", (table + "\n").encode())
+    from ..plots import sweep_plot
+
+    sweep_plot(rows, swept, best, the_task.name, out / "sweep.png")
+    io.write_json(out / SWEEP_FILE, {**doc, "best": doc["members"][best], "complete": True})
+    say(table)
+    return result, [SWEEP_FILE, "sweep.txt", "sweep.png", *doc["members"]]
+
+
+def _claim(out: Path, doc: dict, resume: bool) -> None:
+    """Create ``out`` with its ``sweep.json`` (exclusively), or check it holds this sweep."""
+    path = out / SWEEP_FILE
+    if resume:
+        if not path.is_file():
+            raise RunDirectoryError(f"{out} holds no sweep to resume; start one without --resume")
+        stored = io.read_json(path, "sweep file")
+        same = isinstance(stored, dict) and all(
+            stored.get(k) == doc[k] for k in ("format", "task", "config", "seeds", "values")
+        )
+        if not same:
+            raise RunDirectoryError(
+                f"{out} holds a different sweep; resume it with its own settings "
+                f"(`diffcontrol sweep --out {out} --resume` alone) or choose another --out"
+            )
+        return
+    if out.exists() and (not out.is_dir() or any(out.iterdir())):
+        raise RunDirectoryError(f"--out {out} exists and is not an empty directory; choose another")
+    out.mkdir(parents=True, exist_ok=True)
+    try:
+        io.write_json_new(path, doc)
+    except FileExistsError:
+        raise RunDirectoryError(f"another process claimed {out}; choose another --out") from None
+
+
+def stored_sweep(out_dir: str | Path) -> dict:
+    """The settings of the sweep in ``out_dir`` (to resume it from its directory alone)."""
+    path = Path(out_dir) / SWEEP_FILE
+    if not path.is_file():
+        raise RunDirectoryError(f"{out_dir} holds no sweep to resume; start one without --resume")
+    doc = io.read_json(path, "sweep file")
+    ok = (
+        isinstance(doc, dict)
+        and doc.get("format") == SWEEP_FORMAT
+        and isinstance(doc.get("config"), dict)
+        and isinstance(doc.get("seeds"), list)
+        and isinstance(doc.get("values"), dict)
+        and isinstance(doc.get("task"), str)
+    )
+    if not ok:
+        raise RunDirectoryError(f"{path} is not a diffcontrol sweep file; choose another --out")
+    return doc
+
+
+def _complete(member_dir: Path) -> bool:
+    try:
+        run = read_run_file(member_dir)
+    except Exception:  # noqa: BLE001 - a damaged member is trained again
+        return False
+    return bool(run and run.get("complete")) and (member_dir / MODEL_FILE).is_file()
+
+
+def _write_member(member_dir: Path, result: Any, task_spec: str) -> None:
+    """A member's run directory: ``run.json`` (complete), ``model.json``, ``metrics.json``."""
+    member_dir.mkdir(parents=True, exist_ok=True)
+    metrics = {**result.metrics, "created": io.now_iso()}
+    io.write_json(
+        member_dir / io.RUN_FILE,
+        {
+            "format": "diffcontrol-run",
+            "task": result.task.name,
+            "config": result.config.to_json(),
+            "invocation": {"task": task_spec, "sweep": str(member_dir.parent)},
+        },
+    )
+    io.write_json(
+        member_dir / MODEL_FILE,
+        io.model_document(result.task, result.controller, result.config, metrics),
+    )
+    io.write_json(member_dir / METRICS_FILE, metrics)
+    mark_complete(member_dir)
+
+
+def _as_result(run: Any) -> Any:
+    from ..training import TrainResult
+
+    return TrainResult(
+        task=run.task,
+        config=run.config,
+        params=run.params,
+        controller=run.controller,
+        metrics=run.metrics,
+    )
+
+
+def _row(member_dir: Path, config: Any, swept: Sequence[str]) -> dict[str, Any]:
+    metrics = io.read_json(member_dir / METRICS_FILE, "metrics")
+    return {
+        "dir": member_dir.name,
+        **{name: getattr(config, name) for name in swept},
+        "returned_update": metrics.get("returned_update"),
+        "eval_return": metrics.get("final_eval_return"),
+        "stopped_early": metrics.get("stopped_early"),
+        "diverged": metrics.get("diverged"),
+    }
+
+
+def _rank(value: Any) -> float:
+    return value if isinstance(value, (int, float)) and math.isfinite(value) else -math.inf
+
+
+def _table(rows: list[dict[str, Any]], swept: Sequence[str], best: int) -> str:
+    head = ["member", *swept, "returned update", "eval return (simulator)", ""]
+    body = []
+    for i, r in enumerate(rows):
+        value = r["eval_return"]
+        body.append(
+            [
+                r["dir"],
+                *(f"{r[n]:g}" if isinstance(r[n], float) else str(r[n]) for n in swept),
+                str(r["returned_update"]),
+                f"{value:.2f}" if isinstance(value, (int, float)) else "-",
+                ("best " if i == best else "")
+                + ("early stop" if r["stopped_early"] else "diverged" if r["diverged"] else ""),
+            ]
+        )
+    widths = [max(len(row[j]) for row in [head, *body]) for j in range(len(head))]
+    return "\n".join(
+        "  ".join(c.ljust(w) for c, w in zip(row, widths, strict=True)).rstrip()
+        for row in [head, *body]
+    )
+
+
+def parse_seeds(text: str) -> list[int]:
+    """Seeds from ``"0-63"``, ``"0,3,7"`` or ``"0-3,8"`` (ranges include both ends).
+
+    Raises:
+        ConfigError: not such a list, a negative or huge seed, or a repeated one.
+    """
+    seeds: list[int] = []
+    try:
+        for part in text.split(","):
+            lo, _, hi = part.strip().partition("-")
+            first, last = int(lo), int(hi) if hi else int(lo)
+            if not 0 <= first <= last < 2**31 or last - first > 100_000:
+                raise ValueError
+            seeds += range(first, last + 1)
+    except ValueError:
+        raise ConfigError(
+            f"--seeds takes seeds and ranges such as 0-63 or 0,3,7 (0 <= seed < 2^31), got {text!r}"
+        ) from None
+    if len(set(seeds)) != len(seeds):
+        raise ConfigError(f"--seeds {text!r} names a seed twice; name each once")
+    return seeds
+
+
+def parse_values(items: Sequence[str], config: Any) -> dict[str, list[Any]]:
+    """Swept settings from ``NAME=V1,V2,...`` items (layer widths as ``64x64``), each value
+    of the setting's own type, checked by the config.
+
+    Raises:
+        ConfigError: an unknown setting, a value of the wrong type, or a setting given twice.
+    """
+    import dataclasses
+
+    from ..config import parse_field_value
+
+    fields = {f.name: f for f in dataclasses.fields(config)}
+    values: dict[str, list[Any]] = {}
+    for item in items:
+        name, eq, text = item.partition("=")
+        name = name.strip().replace("-", "_")
+        if not eq or name not in fields or name in ("seed", "params"):
+            known = ", ".join(n for n in fields if n not in ("seed", "params"))
+            raise ConfigError(
+                f"--set takes NAME=V1,V2 with NAME one of {known} (seeds go in --seeds), "
+                f"got {item!r}"
+            )
+        if name in values:
+            raise ConfigError(f"--set {name} is given twice; list all its values in one --set")
+        options = [parse_field_value(config, name, v.strip()) for v in text.split(",")]
+        for v in options:
+            config.replace(**{name: v})  # the config's own checks, with their messages
+        values[name] = options
+    return values

@@ -1,0 +1,435 @@
+"""Sweeps: many training runs of one task (seeds x settings) as one compiled program.
+
+A sweep's members are whole, independent runs: member ``i`` is what ``train(task,
+configs[i])`` would do (the same keys, the same updates, its own keep-best and early stop),
+but all members that share a program's shapes step together under ``vmap`` in one compiled
+chunk (PureJaxRL's way), sharded over the local devices when there are several. What may
+differ inside one program is listed in ``SWEPT_IN_PROGRAM`` (the seed, and the learning rate,
+which sits in the optimiser's state through ``optax.inject_hyperparams``); members that differ
+in anything else (a width, a batch size) form one program per distinct setting, run one after
+the other.
+
+Results are those of the separate runs up to the order of floating-point operations (a
+batched matrix product may sum in another order): the same returns to noise, not bit for bit.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+import time
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+from jaxtyping import PyTree
+
+from ..config import TrainConfig
+from ..errors import ConfigError
+from ..tasks import ContinuousTask, StepLoss, Task
+from ._bptt import Trainer, builtin_loss_name, make_optimizer
+from ._devices import check_devices, mesh_placements, placer
+from ._driver import TrainResult, _check_head, interrupts_deferred, task_params
+
+SWEPT_IN_PROGRAM = ("seed", "learning_rate")
+"""Settings whose values may differ between the members of one compiled program."""
+
+
+def grid(
+    config: TrainConfig, seeds: Sequence[int], values: dict[str, Sequence[Any]] | None = None
+) -> list[TrainConfig]:
+    """The configs of a grid sweep: every seed with every combination of ``values``.
+
+    Args:
+        config: the settings every member starts from (e.g. ``task.default_config()``).
+        seeds: the training seeds.
+        values: setting name -> the values to try (e.g. ``{"learning_rate": [1e-3, 3e-3]}``).
+
+    Returns:
+        The member configs, settings outermost and seeds innermost.
+
+    Raises:
+        ConfigError: an unknown setting, an empty list, or a value the setting refuses.
+    """
+    values = dict(values or {})
+    fields = {f.name for f in dataclasses.fields(config)}
+    for name, options in values.items():
+        if name not in fields or name == "seed":
+            raise ConfigError(
+                f"cannot sweep {name!r}: not a setting of {type(config).__name__} "
+                "(seeds go in seeds=, --seeds)"
+            )
+        if isinstance(options, str) or not isinstance(options, Sequence) or not options:
+            raise ConfigError(f"sweep values of {name!r} must be a non-empty list, got {options!r}")
+    seeds = list(seeds)
+    if not seeds:
+        raise ConfigError("a sweep needs at least one seed")
+    names = list(values)
+    members = []
+    for combo in itertools.product(*(values[n] for n in names)):
+        changed = config.replace(**dict(zip(names, combo, strict=True)))
+        members += [changed.replace(seed=s) for s in seeds]
+    return members
+
+
+@dataclasses.dataclass
+class SweepResult:
+    """What ``sweep`` returns: one ``TrainResult`` per member, in the order of the configs."""
+
+    task: Task
+    members: list[TrainResult]
+    metrics: dict[str, Any]
+
+    @property
+    def best(self) -> int:
+        """The index of the member with the best returned in-simulator evaluation return."""
+        returns = [m.metrics["final_eval_return"] for m in self.members]
+        return int(np.argmax(np.where(np.isfinite(returns), returns, -np.inf)))
+
+    def table(self, swept: Sequence[str] = ()) -> str:
+        """A plain-text table: one row per member (its swept settings, the returned update
+        and in-simulator return), the best marked with ``*``."""
+        swept = list(swept) or self.metrics.get("swept", ["seed"])
+        head = ["#", *swept, "returned update", "eval return", "stopped"]
+        rows = []
+        for i, m in enumerate(self.members):
+            cfg = m.config
+            rows.append(
+                [
+                    f"{i}{'*' if i == self.best else ''}",
+                    *(_short(getattr(cfg, n)) for n in swept),
+                    str(m.metrics["returned_update"]),
+                    f"{m.metrics['final_eval_return']:.2f}",
+                    "early"
+                    if m.metrics["stopped_early"]
+                    else "diverged"
+                    if m.metrics.get("diverged")
+                    else "",
+                ]
+            )
+        widths = [max(len(r[j]) for r in [head, *rows]) for j in range(len(head))]
+        lines = [
+            "  ".join(c.rjust(w) for c, w in zip(r, widths, strict=True)) for r in [head, *rows]
+        ]
+        return "\n".join(lines)
+
+
+def _short(value: Any) -> str:
+    return f"{value:g}" if isinstance(value, float) else str(value)
+
+
+def sweep(
+    task: Task,
+    configs: Sequence[TrainConfig],
+    *,
+    step_loss: StepLoss | None = None,
+    devices: int | None = None,
+    progress: Callable[[str], None] | None = None,
+) -> SweepResult:
+    """Train every config of ``configs`` on ``task`` as a vmapped population of whole runs.
+
+    Args:
+        task: a discrete-time task (continuous-time tasks train a population of their own:
+            ``ODETrainConfig.population``).
+        configs: the members' settings, e.g. from ``grid``; ``population`` must be 1.
+        step_loss: a training loss replacing the task's built-in one, as in ``train``.
+        devices: how many local devices to shard the members over (default: as many as
+            divide each program's member count).
+        progress: called with one line per evaluation point.
+
+    Returns:
+        A ``SweepResult``; member ``i``'s ``TrainResult`` has the metrics ``train`` gives
+        (``train_seconds`` is the wall time of its program, shared by its members).
+
+    Raises:
+        ConfigError: a continuous-time task, a member with ``population > 1``, a device count
+            that is not available or does not divide the members.
+    """
+    configs = list(configs)
+    check_members(task, configs, devices)
+    say = progress or (lambda line: None)
+    # One program per setting that changes shapes or control flow.
+    groups: dict[TrainConfig, list[int]] = {}
+    for i, c in enumerate(configs):
+        groups.setdefault(c.replace(seed=0, learning_rate=1.0), []).append(i)
+    results: list[TrainResult | None] = [None] * len(configs)
+    t0 = time.perf_counter()
+    for g, members in enumerate(groups.values()):
+        if len(groups) > 1:
+            say(f"program {g + 1}/{len(groups)}: {len(members)} member(s)")
+        group = [configs[i] for i in members]
+        for i, result in zip(
+            members, _run_program(task, group, step_loss, devices, say), strict=True
+        ):
+            results[i] = result
+    swept = ["seed", *_differing(configs)]
+    metrics = {
+        "task": task.name,
+        "members": len(configs),
+        "programs": len(groups),
+        "swept": swept,
+        "seconds": time.perf_counter() - t0,
+    }
+    return SweepResult(task=task, members=list(results), metrics=metrics)
+
+
+def check_members(task: Task, configs: Sequence[TrainConfig], devices: int | None = None) -> None:
+    """Refuse what ``sweep`` cannot train, before anything is compiled.
+
+    Raises:
+        ConfigError: see ``sweep``.
+    """
+    if isinstance(task, ContinuousTask):
+        raise ConfigError(
+            f"task {task.name!r} is continuous-time; sweep its seeds with "
+            "ODETrainConfig.population (--population) or run `diffcontrol train` per setting"
+        )
+    if not configs:
+        raise ConfigError("a sweep needs at least one member config")
+    expected = type(task.default_config())
+    for c in configs:
+        if not isinstance(c, expected):
+            raise ConfigError(f"sweep members of {task.name!r} are {expected.__name__}s, got {c!r}")
+        if c.population != 1:
+            raise ConfigError(
+                f"a sweep member trains one controller (population 1), got population "
+                f"{c.population}; a sweep is itself a population of runs"
+            )
+        _check_head(task, c.head)
+    check_devices(devices)
+
+
+def _differing(configs: Sequence[TrainConfig]) -> list[str]:
+    """The settings (other than the seed) whose values differ between members."""
+    first = configs[0]
+    return [
+        f.name
+        for f in dataclasses.fields(first)
+        if f.name != "seed"
+        and any(not _same(getattr(c, f.name), getattr(first, f.name)) for c in configs)
+    ]
+
+
+def _same(a: Any, b: Any) -> bool:
+    return a == b or (
+        isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b)
+    )
+
+
+def _member_devices(members: int, devices: int | None) -> int:
+    """The device count to shard ``members`` over: ``devices`` if it divides them, else (by
+    default) the largest count of local devices that does."""
+    if devices is not None:
+        if members % devices:
+            fits = [d for d in range(1, len(jax.local_devices()) + 1) if members % d == 0]
+            raise ConfigError(
+                f"{members} sweep members cannot be split evenly over {devices} devices; use "
+                f"--devices {fits[-1]} (or any of {', '.join(map(str, fits))}), or a multiple "
+                f"of {devices} members"
+            )
+        return devices
+    return max(d for d in range(1, len(jax.local_devices()) + 1) if members % d == 0)
+
+
+def _run_program(
+    task: Task,
+    configs: list[TrainConfig],
+    step_loss: StepLoss | None,
+    devices: int | None,
+    say: Callable[[str], None],
+) -> list[TrainResult]:
+    """The members of one program: same shapes, different seeds and learning rates."""
+    t_start = time.perf_counter()
+    cfg = configs[0]
+    _check_head(task, cfg.head)
+    params = task_params(task, cfg.params)
+    from ..checks import validate_task
+
+    validate_task(task, params)
+    if step_loss is None:
+        step_loss = task.step_loss(builtin_loss_name(task, cfg.loss, "step_loss"))
+
+    def factory(learning_rate):
+        return make_optimizer(cfg, learning_rate)
+
+    trainer = Trainer(
+        task=task,
+        config=cfg,
+        step_loss=step_loss,
+        optimizer=optax.inject_hyperparams(factory)(learning_rate=cfg.learning_rate),
+        horizon=cfg.horizon or task.episode_length,
+    )
+    n = len(configs)
+    keys = jnp.stack([jax.random.split(jax.random.PRNGKey(c.seed)) for c in configs])
+    k_train, k_eval = keys[:, 0], keys[:, 1]
+    lrs = jnp.asarray([c.learning_rate for c in configs], jnp.float32)
+
+    def init(k, lr):
+        ts = trainer.init(k, params)
+        return eqx.tree_at(lambda t: t.opt_state.hyperparams["learning_rate"], ts, lr)
+
+    ndev = _member_devices(n, devices)
+    shard, replicate = _placement(ndev)
+    params = replicate(params)
+    t0 = time.perf_counter()
+    evaluate = jax.jit(jax.vmap(trainer.evaluate, in_axes=(0, None, 0)))
+    chunk = jax.jit(jax.vmap(trainer.chunk, in_axes=(0, None, 0)))
+    totals = np.full(n, cfg.updates, np.int32)
+    with interrupts_deferred():
+        ts = eqx.filter_jit(jax.vmap(init))(shard(k_train), shard(lrs))
+        if ndev == 1:  # compiled ahead, to measure compilation apart from training
+            evaluate = evaluate.lower(ts.controller, params, k_eval).compile()
+            chunk = chunk.lower(ts, params, jnp.asarray(totals)).compile()
+    compile_seconds = time.perf_counter() - t0
+
+    curves: list[list[dict[str, Any]]] = [[] for _ in range(n)]
+    best_index = np.zeros(n, int)
+    best = None
+    stopped = np.zeros(n, bool)  # early stop (target reached)
+    diverged = np.zeros(n, bool)
+    target = cfg.target_return
+
+    def record(ts, losses: np.ndarray, grads: np.ndarray, active: np.ndarray) -> None:
+        nonlocal best
+        returns = np.asarray(evaluate(ts.controller, params, shard(k_eval)))
+        updates = np.asarray(ts.update)
+        finished = np.asarray(ts.finished_episodes)
+        finished_sum = np.asarray(ts.finished_return_sum)
+        seconds = time.perf_counter() - t_start
+        improved = np.zeros(n, bool)
+        for i in np.flatnonzero(active):
+            mean, std = trainer.summarize(returns[i])
+            steps = int(updates[i]) * cfg.window * cfg.batch
+            fin = int(finished[i])
+            curves[i].append(
+                {
+                    "update": int(updates[i]),
+                    "simulated_steps": steps,
+                    "simulated_episodes": steps / task.episode_length,
+                    "seconds": seconds,
+                    "loss": float(losses[i]),
+                    "grad_norm": float(grads[i]),
+                    "eval_return": mean,
+                    "eval_return_std": std,
+                    "train_episodes_finished": fin,
+                    "train_return_mean": float(finished_sum[i]) / fin if fin else math.nan,
+                }
+            )
+            so_far = curves[i][best_index[i]]["eval_return"]
+            if len(curves[i]) == 1 or math.isnan(so_far) or mean >= so_far:
+                improved[i], best_index[i] = True, len(curves[i]) - 1
+        mask = jnp.asarray(improved)
+        best = (
+            ts.controller
+            if best is None
+            else jax.tree.map(
+                lambda new, old: (
+                    jnp.where(mask.reshape((-1,) + (1,) * (new.ndim - 1)), new, old)
+                    if eqx.is_array(new)
+                    else new
+                ),
+                ts.controller,
+                best,
+            )
+        )
+        means = np.array([c[-1]["eval_return"] for c in curves])
+        top = int(np.nanargmax(np.where(diverged, np.nan, means))) if not diverged.all() else 0
+        running = int(np.sum(~(stopped | diverged) & (updates < cfg.updates)))
+        say(
+            f"[{100.0 * updates.max() / max(cfg.updates, 1):5.1f}%] update {updates.max():>5}/"
+            f"{cfg.updates}  members {n} ({running} training)  best eval return "
+            f"{means[top]:9.2f} (#{top})  median {np.nanmedian(means):9.2f}  {seconds:6.1f} s"
+        )
+
+    nan = np.full(n, math.nan)
+    record(ts, nan, nan, np.ones(n, bool))
+    while True:
+        last = np.array([c[-1]["eval_return"] for c in curves])
+        if not math.isnan(target):
+            stopped |= ~diverged & (last >= target)
+        updates = np.asarray(ts.update)
+        totals = np.where(stopped | diverged, updates, cfg.updates).astype(np.int32)
+        if np.all(updates >= totals):
+            break
+        new, stats = chunk(ts, params, shard(jnp.asarray(totals)))
+        losses, grads = np.asarray(stats.loss), np.asarray(stats.grad_norm)
+        done = np.asarray(new.update) - updates
+        active = done > 0
+        with np.errstate(all="ignore"):
+            loss_mean = np.array(
+                [np.nanmean(losses[i, : done[i]]) if done[i] else math.nan for i in range(n)]
+            )
+            grad_mean = np.array(
+                [np.nanmean(grads[i, : done[i]]) if done[i] else math.nan for i in range(n)]
+            )
+        finite = _finite_members(new.controller, n)
+        lost = active & ~(np.isfinite(loss_mean) & finite)
+        for i in np.flatnonzero(lost):
+            say(
+                f"note: member {i} (seed {configs[i].seed}, learning rate "
+                f"{configs[i].learning_rate:g}) diverged near update {int(updates[i]) + 1}; "
+                "the others train on"
+            )
+        diverged |= lost
+        ts = new
+        record(ts, loss_mean, grad_mean, active & ~lost)
+
+    wall = time.perf_counter() - t_start
+    results = []
+    for i, c in enumerate(configs):
+        chosen = curves[i][best_index[i]] if c.keep_best else curves[i][-1]
+        controller = _member(best if c.keep_best else ts.controller, i)
+        done_updates = int(ts.update[i])
+        steps = done_updates * c.window * c.batch
+        metrics = {
+            "task": task.name,
+            "gym_id": task.gym_id,
+            "seed": c.seed,
+            "train_seconds": wall,
+            "compile_seconds": compile_seconds,
+            "updates": done_updates,
+            "simulated_steps": steps,
+            "simulated_episodes": steps / task.episode_length,
+            "episode_length": task.episode_length,
+            "stopped_early": bool(stopped[i]),
+            "diverged": bool(diverged[i]),
+            "returned_update": chosen["update"],
+            "final_eval_return": chosen["eval_return"],
+            "final_eval_return_std": chosen["eval_return_std"],
+            "eval_episodes": c.eval_episodes,
+            "num_parameters": controller.num_parameters,
+            "curve": curves[i],
+            "warnings": [],
+            "config": c.to_json(),
+            "jax_version": jax.__version__,
+            "device": str(jax.devices()[0].platform),
+            "sweep": {"member": i, "members": n, "devices": ndev},
+        }
+        results.append(
+            TrainResult(task=task, config=c, params=params, controller=controller, metrics=metrics)
+        )
+    return results
+
+
+def _member(stacked: Any, i: int) -> Any:
+    """Member ``i`` of a stack of controllers."""
+    return jax.tree.map(lambda x: x[i] if eqx.is_array(x) else x, stacked)
+
+
+def _finite_members(controllers: Any, n: int) -> np.ndarray:
+    """Which members' weights are all finite."""
+    ok = np.ones(n, bool)
+    for leaf in jax.tree.leaves(eqx.filter(controllers, eqx.is_inexact_array)):
+        ok &= np.asarray(jnp.all(jnp.isfinite(leaf.reshape(n, -1)), axis=1))
+    return ok
+
+
+def _placement(devices: int) -> tuple[Callable[[PyTree], PyTree], Callable[[PyTree], PyTree]]:
+    """Split along the leading (members) axis, and replicate, over ``devices`` devices."""
+    split, whole = mesh_placements(devices)
+    return placer(split), placer(whole)
