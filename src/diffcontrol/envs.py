@@ -326,5 +326,6 @@ def make_env(env_id: str, env_kwargs: dict | None = None) -> gymnasium.Env:
             f"unknown Gymnasium environment {env_id!r} ({' '.join(str(e).split())}); {near}"
             '`python -c "import gymnasium; gymnasium.pprint_registry()"` lists the known ones'
         ) from None
-    except TypeError as e:
-        raise ConfigError(f"{env_id} does not take the arguments {env_kwargs} ({e})") from None
+    except (TypeError, ValueError, AttributeError) as e:  # an argument of the wrong kind
+        msg = " ".join(str(e).split())[:200]
+        raise ConfigError(f"{env_id} does not take the arguments {env_kwargs} ({msg})") from None
