@@ -370,3 +370,17 @@ def test_an_environment_a_fitted_model_names_is_made_before_training(capsys, fit
     out = tmp_path / "out"
     _one_line(capsys, ["train", "pendulum", "--model", fit, "--out", out], "does not take")
     assert not out.exists()
+
+
+def test_an_environment_of_another_size_or_a_missing_module_or_place(
+    capsys, pendulum_run, tmp_path
+):
+    _one_line(capsys, ["evaluate", pendulum_run, "--env", "CartPole-v1"], "size 3")
+    _one_line(
+        capsys,
+        ["record", "no_such_module_q:X-v0", "--episodes", "1", "--out", tmp_path / "q.csv"],
+        "no_such_module_q",
+    )
+    _one_line(
+        capsys, ["loop", "pendulum", "--out", "/proc/no/such", "--rounds", "1"], "/proc/no"
+    )

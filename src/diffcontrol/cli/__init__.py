@@ -76,7 +76,8 @@ def main(argv: list[str] | None = None) -> int:
             raise
         where = f" ({e.filename})" if e.filename else ""
         hint = "continue with --resume" if args.command == "train" else "run it again"
-        msg = f"{e.strerror}{where}; make room or choose another place, then {hint}"
+        room = "make room or " if e.errno in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG) else ""
+        msg = f"{e.strerror}{where}; {room}choose another place, then {hint}"
         print(f"diffcontrol {args.command}: error: {msg}", file=sys.stderr)
         return EXIT_USAGE
 
@@ -101,3 +102,4 @@ def _terminate_as_interrupt() -> Iterator[None]:
 
 
 _FILE_SYSTEM_ERRORS = {errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EFBIG}
+_FILE_SYSTEM_ERRORS |= {errno.ENOENT, errno.ENOTDIR, errno.EPERM, errno.ENAMETOOLONG}
