@@ -357,9 +357,9 @@ class ODETrainConfig(_Config):
             )
         for name in ("rtol", "atol"):
             value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise ConfigError(
-                    f"{name} must be a positive tolerance such as 1e-3 or 1e-6, got {value!r}"
+            if not (math.isfinite(value) and 0 < value < 1):  # a tolerance of 100 % or more
+                raise ConfigError(  # lets the solver take any step: no solve at all
+                    f"{name} must be a tolerance in (0, 1) such as 1e-3 or 1e-6, got {value!r}"
                 )
         if self.solver not in SOLVER_NAMES:
             raise ConfigError(

@@ -270,5 +270,12 @@ def make_env(env_id: str, env_kwargs: dict | None = None) -> gymnasium.Env:
             f"unknown Gymnasium environment {env_id!r} ({' '.join(str(e).split())}); {near}"
             '`python -c "import gymnasium; gymnasium.pprint_registry()"` lists the known ones'
         ) from None
-    except TypeError as e:
-        raise ConfigError(f"{env_id} does not take the arguments {env_kwargs} ({e})") from None
+    except ImportError as e:  # the module before ':' of an id the user named
+        raise ConfigError(
+            f"cannot make the environment {env_id!r}: {type(e).__name__}: "
+            f"{' '.join(str(e).split())[:200]}; check the module path (run from the directory "
+            "that holds it, or install its package)"
+        ) from None
+    except (TypeError, ValueError, AttributeError) as e:  # an argument of the wrong kind
+        msg = " ".join(str(e).split())[:200]
+        raise ConfigError(f"{env_id} does not take the arguments {env_kwargs} ({msg})") from None

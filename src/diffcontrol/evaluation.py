@@ -95,6 +95,7 @@ def evaluate(
     env, label = _env(task, real)
     returns, lengths = [], []
     try:
+        _check_fits(policy, env, label)
         for i in range(episodes):
             obs, _ = env.reset(seed=seed + i)
             total, n, done = 0.0, 0, False
@@ -108,6 +109,17 @@ def evaluate(
     finally:
         env.close()
     return EvalResult(label, seed, np.asarray(returns), np.asarray(lengths))
+
+
+def _check_fits(policy: Any, env: Any, label: str) -> None:
+    """A controller and an environment of different observation sizes (``--env`` of another
+    system) are refused in one line before the first episode."""
+    from .errors import ConfigError
+
+    try:
+        policy(env.observation_space.sample())
+    except ValueError as e:  # the policy names the size it takes
+        raise ConfigError(f"the controller cannot act in {label}: {e}") from None
 
 
 def _env(task: Task, real: tuple[str, dict | None] | None) -> tuple[Any, str]:

@@ -45,6 +45,7 @@ import json
 import math
 import os
 import tempfile
+import uuid
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -135,6 +136,32 @@ def write_json_new(path: str | os.PathLike, obj: Any) -> None:
             os.unlink(tmp)
 
 
+def write_new(path: str | os.PathLike, write: Any) -> Any:
+    """Create the new file ``path`` with ``write(tmp_path)`` (any writer; ``tmp_path`` keeps the
+    suffix) such that of two processes racing for it exactly one succeeds, and the other's
+    work is refused rather than silently replacing the first (a hard link cannot replace).
+
+    Returns:
+        What ``write`` returned.
+
+    Raises:
+        RunDirectoryError: ``path`` was created meanwhile.
+    """
+    path = Path(path)
+    tmp = path.with_name(f".{path.stem}.{uuid.uuid4().hex[:12]}.new{path.suffix}")
+    try:
+        result = write(tmp)
+        os.link(tmp, path)
+    except FileExistsError:
+        raise RunDirectoryError(
+            f"{path} was created by another process meanwhile; choose a new file name"
+        ) from None
+    finally:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+    return result
+
+
 def _finite(obj: Any) -> Any:
     if isinstance(obj, float):
         return obj if math.isfinite(obj) else None
@@ -147,24 +174,57 @@ def _finite(obj: Any) -> Any:
     return obj
 
 
+def parse_json(text: str | bytes) -> Any:
+    """``json.loads``, with every way a hostile text breaks it as one ``ValueError`` of one
+    line: malformed JSON, nesting deeper than the interpreter's stack (``RecursionError``), an
+    integer of more digits than Python converts, bytes that are not UTF-8."""
+    try:
+        return json.loads(text)
+    except RecursionError:
+        raise ValueError("nested too deeply to be one of ours") from None
+    except ValueError as e:  # JSONDecodeError, UnicodeDecodeError, the int digit limit
+        raise ValueError(" ".join(str(e).split())[:200]) from None
+
+
+def read_limited(path: Path, limit: int, what: str) -> bytes:
+    """The bytes of ``path``, refused past ``limit``: read ``limit + 1`` at most, so that a
+    device or a pipe named as a file (``/dev/zero``) cannot exhaust the memory.
+
+    Raises:
+        ModelFileError: the file is larger than ``limit``.
+    """
+    with open(path, "rb") as f:
+        data = f.read(limit + 1)
+    if len(data) > limit:
+        raise ModelFileError(
+            f"{what} {path} is larger than {limit // 2**20} MiB; it is not one diffcontrol writes"
+        )
+    return data
+
+
 def read_json(path: str | os.PathLike, what: str = "file") -> Any:
-    """Read JSON, turning a missing or malformed file into a ``ModelFileError``."""
+    """Read JSON, turning a missing, oversized or malformed file into a ``ModelFileError``."""
     path = Path(path)
     try:
-        if path.stat().st_size > MAX_JSON_BYTES:
-            raise ModelFileError(
-                f"{what} {path} is larger than {MAX_JSON_BYTES // 2**20} MiB; it is not one "
-                "diffcontrol writes"
-            )
-        return json.loads(path.read_text())
+        return parse_json(read_limited(path, MAX_JSON_BYTES, what))
     except FileNotFoundError:
         raise ModelFileError(f"{what} {path} does not exist") from None
     except IsADirectoryError:
         raise ModelFileError(f"{what} {path} is a directory, not a file") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+    except ModelFileError:
+        raise
+    except ValueError as e:
         raise ModelFileError(f"{what} {path} is not valid JSON ({e}); re-create it") from None
-    except RecursionError:
-        raise ModelFileError(f"{what} {path} is nested too deeply to be one of ours") from None
+
+
+def scalar_arguments(kwargs: Any) -> bool:
+    """Whether ``kwargs`` (read from a file) maps names to JSON scalars only: finite numbers,
+    text, true or false, what an environment's keyword arguments can be."""
+    return isinstance(kwargs, dict) and all(
+        isinstance(k, str)
+        and (isinstance(v, str | bool) or (isinstance(v, int | float) and math.isfinite(v)))
+        for k, v in kwargs.items()
+    )
 
 
 def now_iso() -> str:
@@ -277,7 +337,7 @@ def _check_model(doc: Any, path: Path) -> None:
             v = np.asarray(obs[name], float)
             if v.shape != (size,) or not np.all(np.isfinite(v)):
                 raise bad(f"observation {name} is not {size} finite numbers")
-        if not isinstance(act["size"], int) or act["size"] < 1:
+        if not isinstance(act["size"], int) or isinstance(act["size"], bool) or act["size"] < 1:
             raise bad(f"the action size {act['size']!r} is not a positive integer")
         if act["head"] in ("tanh", "sigmoid"):
             for name in ("low", "high"):
@@ -289,6 +349,9 @@ def _check_model(doc: Any, path: Path) -> None:
         if not net["layers"]:
             raise bad("the network has no layers")
         if "features" in obs:
+            names = (obs["features"], obs["state"])
+            if not all(isinstance(n, list) and all(isinstance(x, str) for x in n) for n in names):
+                raise bad("observation features and state must be lists of names")
             if len(obs["features"]) != size:
                 raise bad("observation features do not match its size")
             for feature in obs["features"]:
@@ -297,8 +360,9 @@ def _check_model(doc: Any, path: Path) -> None:
             w, b = np.asarray(layer["weight"], float), np.asarray(layer["bias"], float)
             if w.ndim != 2 or w.shape[1] != size or b.shape != (w.shape[0],):
                 raise bad(f"layer {i} has weight {w.shape} and bias {b.shape}, inconsistent")
-            if not (np.all(np.isfinite(w)) and np.all(np.isfinite(b))):
-                raise bad(f"layer {i} holds non-finite weights")
+            with np.errstate(over="ignore"):  # the JAX controller runs in float32
+                if not (np.all(np.isfinite(w.astype(np.float32))) and np.all(np.isfinite(b))):
+                    raise bad(f"layer {i} holds weights that are not finite in float32")
             size = w.shape[0]
         if size != act["size"]:
             raise bad(f"the network outputs {size} values but the action has {act['size']}")
@@ -570,7 +634,7 @@ def load_checkpoint(path: str | os.PathLike, like: Any) -> tuple[Any, dict]:
 
     try:
         with np.load(path, allow_pickle=False) as data:
-            header = json.loads(bytes(data["header"]).decode())
+            header = parse_json(bytes(data["header"]))
             if (
                 header.get("format") != CHECKPOINT_FORMAT
                 or header.get("version") != CHECKPOINT_VERSION

@@ -9,9 +9,14 @@ argument types and the one-line-error parser.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import errno
 import os
+import signal
 import sys
+import threading
+from collections.abc import Iterator
+from typing import Any
 
 from ..errors import DiffcontrolError, Interrupted
 from . import _compare, _data, _fit, _runs, _train
@@ -54,9 +59,13 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     args.command_line = " ".join(["diffcontrol", *argv])  # to continue a long command
     try:
-        return COMMANDS[args.command](args)
+        with _terminate_as_interrupt():
+            return COMMANDS[args.command](args)
     except Interrupted as e:
         print(f"\n{e}", file=sys.stderr)
+        return 130
+    except KeyboardInterrupt:  # a command with nothing to resume: its writes are atomic
+        print(f"\ndiffcontrol {args.command}: interrupted; nothing was written", file=sys.stderr)
         return 130
     except BrokenPipeError:  # `diffcontrol list | head`: the reader has had enough
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
@@ -69,9 +78,30 @@ def main(argv: list[str] | None = None) -> int:
             raise
         where = f" ({e.filename})" if e.filename else ""
         hint = "continue with --resume" if args.command == "train" else "run it again"
-        msg = f"{e.strerror}{where}; make room or choose another place, then {hint}"
+        room = "make room or " if e.errno in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG) else ""
+        msg = f"{e.strerror}{where}; {room}choose another place, then {hint}"
         print(f"diffcontrol {args.command}: error: {msg}", file=sys.stderr)
         return EXIT_USAGE
 
 
+@contextlib.contextmanager
+def _terminate_as_interrupt() -> Iterator[None]:
+    """SIGTERM (``kill``, a job scheduler's stop) takes the path of Ctrl-C: a
+    ``KeyboardInterrupt``, so that it ends with the same line and resume command, leaves no
+    partial file, and is held while XLA compiles (``training.interrupts_deferred``)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def interrupt(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, interrupt)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
 _FILE_SYSTEM_ERRORS = {errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EFBIG}
+_FILE_SYSTEM_ERRORS |= {errno.ENOENT, errno.ENOTDIR, errno.EPERM, errno.ENAMETOOLONG}

@@ -16,6 +16,8 @@ import sys
 from collections.abc import Callable
 from typing import Any, NoReturn
 
+from ..config import MAX_COUNT, MAX_WIDTH
+
 EXIT_USAGE = 2
 FLAG = "store_true"
 REQUIRED = object()
@@ -62,8 +64,22 @@ def _number(cast: Callable, expected: str, ok: Callable, must: str) -> Callable[
     return parse
 
 
-positive_int = _number(int, "a positive integer", lambda v: v > 0, "a positive integer")
-nonneg_int = _number(int, "an integer >= 0", lambda v: v >= 0, ">= 0")
+# Every integer has an upper bound, so that no flag can ask for more than a run can hold
+# (MAX_COUNT: counts and seeds, 32-bit in the trainers; MAX_WIDTH: episodes, batches).
+_COUNT, _WIDTH = MAX_COUNT, MAX_WIDTH
+positive_int = _number(
+    int, "a positive integer", lambda v: 0 < v <= _COUNT, f"a positive integer (at most {_COUNT:,})"
+)
+nonneg_int = _number(
+    int, "an integer >= 0", lambda v: 0 <= v <= _COUNT, f">= 0 (at most {_COUNT:,})"
+)
+seed = nonneg_int
+episodes = _number(
+    int, "a positive integer", lambda v: 0 < v <= _WIDTH, f"a positive integer (at most {_WIDTH:,})"
+)
+episodes_or_0 = _number(
+    int, "an integer >= 0", lambda v: 0 <= v <= _WIDTH, f">= 0 (at most {_WIDTH:,})"
+)
 finite_float = _number(float, "a number", math.isfinite, "a finite number")
 positive_float = _number(float, "a number", lambda v: 0 < v < math.inf, "a finite positive number")
 nonneg_float = _number(float, "a number", lambda v: 0 <= v < math.inf, "a finite number >= 0")

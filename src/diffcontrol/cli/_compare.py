@@ -29,7 +29,7 @@ def add_parsers(sub: Any) -> None:
     add(p,
         ("task", str, REQUIRED, "TASK", "cartpole, pendulum or trebuchet"),
         ("--out", str, None, "DIR", "output directory (default runs/compare-TASK)"),
-        ("--seeds", a.positive_int, 3, "N", "training seeds (default 3)"),
+        ("--seeds", a.episodes, 3, "N", "training seeds (default 3)"),
         ("--methods", a.names, None, "M,M",
          "a subset of the methods, e.g. diffcontrol,ppo (default: all for the task)"),
         ("--rl-steps", a.positive_int, None, "N",
@@ -39,8 +39,8 @@ def add_parsers(sub: Any) -> None:
         ("--eval-every", a.positive_int, None, "STEPS", "RL evaluation interval in environment "
          "steps (default: cartpole 2000, pendulum 1000, trebuchet 1000); diffcontrol is "
          "evaluated at its own evaluation points"),
-        ("--eval-episodes", a.positive_int, 20, "N", "episodes per evaluation point (default 20)"),
-        ("--final-episodes", a.positive_int, 100, "N",
+        ("--eval-episodes", a.episodes, 20, "N", "episodes per evaluation point (default 20)"),
+        ("--final-episodes", a.episodes, 100, "N",
          "episodes for each method's returned controller (default 100)"),
         ("--eval-seed", a.nonneg_int, 1000, "S",
          "first reset seed of the evaluation episodes (default 1000)"),

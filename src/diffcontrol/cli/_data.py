@@ -31,10 +31,10 @@ def add_parsers(sub: Any) -> None:
     add(p,
         ("env_id", str, REQUIRED, "ENV_ID", "a Gymnasium environment id or a task name"),
         ("--task", str, None, "TASK", "the task whose real system ENV_ID is"),
-        ("--episodes", a.positive_int, REQUIRED, "N", "episodes (throws)"),
+        ("--episodes", a.episodes, REQUIRED, "N", "episodes (throws)"),
         ("--controller", str, None, "DIR",
          "a run directory (or model.json) of `diffcontrol train`; random actions if omitted"),
-        ("--seed", int, 0, "S", "first reset seed (0)"),
+        ("--seed", a.seed, 0, "S", "first reset seed (0)"),
         a.env_arg("a numeric keyword argument of gymnasium.make (e.g. g=9.0), or a parameter of "
                   "a task's own system (e.g. drag_coefficient=1.5); repeatable"),
         ("--noise-m", a.nonneg_float, None, "SD",

@@ -33,7 +33,7 @@ def add_parsers(sub: Any) -> None:
         ("--env", str, None, "ENV_ID", "evaluate in this Gymnasium environment instead (e.g. "
          "diffcontrol/PendulumFriction-v0)"),
         a.env_arg("a numeric argument of --env (repeatable), e.g. g=12"),
-        ("--episodes", a.positive_int, None, "N",
+        ("--episodes", a.episodes, None, "N",
          "episodes (default 100), or random targets for aiming tasks (default 1000)"),
         ("--seed", a.nonneg_int, 0, "S",
          "first reset seed, or the seed of the random targets (default 0)"),

@@ -73,7 +73,7 @@ def add_parsers(sub: Any) -> None:
          "start from a named set of settings, e.g. 'original' for the 2019 Flux recipe"),
         ("--resume", FLAG, False, None, "continue the interrupted run in DIR from its last "
          "checkpoint, with the settings of its run.json (a finished run is left as it is)"),
-        ("--final-eval", a.nonneg_int, None, "N", "evaluate after training: Gymnasium episodes "
+        ("--final-eval", a.episodes_or_0, None, "N", "evaluate after training: Gymnasium episodes "
          "on seeds 0..N-1 (default 100), or random targets for aiming tasks (default 1000); "
          "0 skips"),
         ("--no-animation", FLAG, False, None, "skip the GIF (saves a few seconds)"),
@@ -88,6 +88,9 @@ def add_parsers(sub: Any) -> None:
          "FIT_DIR instead of the nominal simulator (fitted parameters, or the hybrid/neural "
          "model), and evaluate on the system its data was recorded from (e.g. "
          "diffcontrol/PendulumFriction-v0 with its arguments)"),
+        ("--env", str, None, "ENV_ID", "with --model: the real system's Gymnasium id, where the "
+         "fitted model's data names one in a module of yours (module:Env-v0); diffcontrol "
+         "imports a module only when you name it"),
         a.NO_COMPILE_CACHE,
         a.QUIET,
     )
@@ -116,6 +119,7 @@ def cmd_train(args: argparse.Namespace) -> int:
             settings={name: getattr(args, name) for name in _SETTINGS},
             params=tuple(args.param or ()),
             model=args.model,
+            env_id=args.env,
             resume=args.resume,
             final_eval=args.final_eval,
             animation=not args.no_animation,

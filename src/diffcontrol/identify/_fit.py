@@ -46,7 +46,37 @@ def fit(task: Any, data: Any, model: str = "params", **settings: Any) -> FitResu
     route = task.model_route()
     steps, lr = route.defaults.get(model, (None, None))
     settings = {"steps": steps, "learning_rate": lr, **settings}
-    return route.fit(task, data, model, **{k: v for k, v in settings.items() if v is not None})
+    result = route.fit(task, data, model, **{k: v for k, v in settings.items() if v is not None})
+    return _within_ranges(task, result)
+
+
+def _within_ranges(task: Any, result: FitResult) -> FitResult:
+    """A grey box whose fitted value of a ``nonnegative_params`` parameter came out below 0
+    (a friction fitted from data with none: the noise pulls it either way) is held at its
+    bound 0, and the message says so: ``train --model`` then accepts what ``fit`` wrote (the
+    task's ``check_params`` refuses a negative friction). Positive parameters are fitted as
+    ``exp(z)`` and cannot leave their range."""
+    below = [
+        n for n in result.names if n in task.nonnegative_params and result.values.get(n, 0.0) < 0
+    ]
+    if not below or result.model_type != "params":
+        return result
+    import equinox as eqx
+    import numpy as np
+
+    params = eqx.tree_at(
+        lambda p: tuple(getattr(p, n) for n in below),
+        result.params,
+        tuple(np.zeros_like(np.asarray(getattr(result.params, n))) for n in below),
+    )
+    held = ", ".join(f"{n} (fitted {result.values[n]:.3g})" for n in below)
+    return dataclasses.replace(
+        result,
+        model=params,
+        params=params,
+        values={**result.values, **{n: 0.0 for n in below}},
+        message=f"{result.message}; held at the bound 0: {held}",
+    )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -117,6 +147,11 @@ def fit_dir(
     settings = {"steps": steps, "learning_rate": lr, "window": 10, "hidden": (32, 32)}
     settings = {**settings, "seed": 0, "lm_steps": 20, **given, "holdout": holdout}
     data = route.read(data_file)
+    meta = getattr(data, "metadata", None) or {}
+    if isinstance(meta.get("params"), dict) and not meta.get("env_id"):
+        from .fitted import real_params  # what train --model will judge on: checked now
+
+        real_params(task, {"params": meta["params"]})
     out = Path(out)
     check_fit_dir(out, force)
     train, held_out = split(route, data, holdout)
@@ -133,17 +168,19 @@ def fit_dir(
     except OSError as e:
         raise RunDirectoryError(f"cannot create --out {out} ({e.strerror})") from None
     body, held_lines = route.outputs(task, result, data, train, held_out, data_file, settings, out)
-    doc = save_fit(out, task, result, body, seconds)
+    doc = save_fit(out, task, result, body, seconds, force=force)
     return FitDir(
         result, doc, report(body.get("parameters", {}), result, out, seconds, held_lines), seconds
     )
 
 
-def save_fit(out: str | Path, task: Any, result: FitResult, body: dict, seconds: float) -> dict:
+def save_fit(
+    out: str | Path, task: Any, result: FitResult, body: dict, seconds: float, force: bool = True
+) -> dict:
     """Write ``out/fitted.json``: the format's head, ``body`` (the route's model, settings,
     data and prediction errors) with how the fit ended, and when and by what; returns it."""
     from .. import __version__
-    from ..io import now_iso, write_json
+    from ..io import now_iso, write_json, write_json_new
 
     head = {"format": FITTED_FORMAT, "version": 1, "task": task.name, "model": result.model_type}
     ended = {
@@ -156,7 +193,16 @@ def save_fit(out: str | Path, task: Any, result: FitResult, body: dict, seconds:
     }
     body = {**body, "fit": {**body.get("fit", {}), **ended}}
     doc = {**head, **body, "created": now_iso(), "diffcontrol_version": __version__}
-    write_json(Path(out) / FITTED_FILE, doc)
+    path = Path(out) / FITTED_FILE
+    if force:
+        write_json(path, doc)
+    else:  # of two fits racing for one --out, one writes and the other is told
+        try:
+            write_json_new(path, doc)
+        except FileExistsError:
+            raise RunDirectoryError(
+                f"{path} was written by another process meanwhile; choose another --out"
+            ) from None
     return doc
 
 

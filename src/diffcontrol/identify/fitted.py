@@ -19,6 +19,7 @@ from typing import Any
 import equinox as eqx
 
 from ..errors import ConfigError, ModelFileError
+from ..io import scalar_arguments
 from ._shooting import MODEL_TYPES, NETWORK_MODELS
 from .hybrid import HybridModel, NeuralModel
 from .network import correction_from_dict
@@ -98,16 +99,51 @@ def fitted_model(task: Any, doc: dict[str, Any]) -> HybridModel | NeuralModel | 
     return cls(physics, correction)
 
 
-def real_system(doc: dict) -> dict | None:
+def real_system(doc: dict, trusted: str | None = None) -> dict | None:
     """The system a fitted model's data came from: ``{"env_id", "env_kwargs"}`` for data
     recorded from a Gymnasium environment, ``{"params"}`` (the physical parameters of a
-    simulated system, from the data's metadata), or None."""
+    simulated system, from the data's metadata), or None. ``trusted``: an id the user named
+    (``--env``), which may be imported; it must be the data's own.
+
+    Raises:
+        ModelFileError: ``data`` (or its metadata) is not a JSON object.
+        ConfigError: an environment id or arguments that are not usable (``checked_env``).
+    """
+    where = doc.get("_path", "the fitted model")
     data = doc.get("data") or {}
+    if not isinstance(data, dict) or not isinstance(data.get("metadata") or {}, dict):
+        raise ModelFileError(f"{where}: 'data' must be a JSON object; re-create it with fit")
+    if trusted and data.get("env_id") != trusted:
+        raise ConfigError(
+            f"--env {trusted} is not the system the data of {where} came from "
+            f"({data.get('env_id')!r}); name that one, or fit data of {trusted}"
+        )
     if data.get("env_id"):
-        env_id = checked_env_id(data["env_id"], doc.get("_path", "the fitted model"))
-        return {"env_id": env_id, "env_kwargs": data.get("env_kwargs") or {}}
+        env_id, env_kwargs = checked_env(data["env_id"], data.get("env_kwargs"), where, trusted)
+        return {"env_id": env_id, "env_kwargs": env_kwargs}
     params = (data.get("metadata") or {}).get("params")
     return {"params": params} if isinstance(params, dict) else None
+
+
+def checked_env(
+    env_id: Any, env_kwargs: Any, where: str = "a file", trusted: str | None = None
+) -> tuple[str, dict]:
+    """An environment id and its keyword arguments read from a file: the id as
+    ``checked_env_id``, the arguments a JSON object of names to finite numbers (what
+    ``--env-arg`` can give), so that nothing a file holds reaches ``gymnasium.make`` but
+    numbers.
+
+    Raises:
+        ConfigError: one line naming the file and the bad value.
+    """
+    env_id = env_id if trusted and env_id == trusted else checked_env_id(env_id, where)
+    env_kwargs = {} if env_kwargs is None else env_kwargs
+    if not scalar_arguments(env_kwargs):
+        raise ConfigError(
+            f"{where} gives the environment arguments {env_kwargs!r}, not names with finite "
+            "numbers (or text, true, false); re-create the file, or pass --env and --env-arg"
+        )
+    return env_id, dict(env_kwargs)
 
 
 def checked_env_id(env_id: Any, where: str = "a file") -> str:
@@ -121,6 +157,8 @@ def checked_env_id(env_id: Any, where: str = "a file") -> str:
     if not isinstance(env_id, str) or not env_id:
         raise ConfigError(f"{where} names the environment {env_id!r}, not an id; pass --env")
     module, sep, _ = env_id.partition(":")
+    if env_id.count(":") > 1:
+        raise ConfigError(f"{where} names the environment {env_id!r}, not an id; pass --env")
     if sep and module not in sys.modules:
         raise ConfigError(
             f"{where} names the environment {env_id!r}, whose module {module!r} would have to "
@@ -140,4 +178,12 @@ def real_params(task: Any, real: dict | None) -> Any:
     task's own simulator with other parameters), else None."""
     if not real or "params" not in real:
         return None
-    return fitted_physics(task, {"task": task.name, "all_parameters": real["params"]})
+    values = real["params"]
+    if not isinstance(values, dict) or not all(
+        isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+        for v in values.values()
+    ):
+        raise ModelFileError(f"the real system's parameters {values!r} are not finite numbers")
+    params = fitted_physics(task, {"task": task.name, "all_parameters": values})
+    task.check_params(params)  # the ranges, as for --param
+    return params

@@ -19,6 +19,7 @@ import gymnasium
 import numpy as np
 from gymnasium import spaces
 
+from .. import io
 from ..envs import make_env
 from ..errors import ConfigError
 from ..io import now_iso
@@ -341,7 +342,10 @@ def record_data(
             **o,
         )
     try:
-        write_trajectories(path, data)
+        if force:
+            write_trajectories(path, data)
+        else:  # of two recordings racing for a new file, one wins and the other is told
+            io.write_new(path, lambda tmp: write_trajectories(tmp, data))
     except OSError as e:
         raise DataFileError(
             f"cannot write --out {path} ({e.strerror}); choose a writable --out"

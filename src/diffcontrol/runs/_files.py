@@ -153,6 +153,13 @@ def open_run(
         task = _task_of(doc)
     elif isinstance(task, str):
         task = resolve(task)
+    for what, key in (("observation", "observation_size"), ("action", "action_size")):
+        size, own = doc[what]["size"], getattr(task, key, None)
+        if isinstance(own, int) and size != own:  # a model of another system: refused here
+            raise ModelFileError(
+                f"{path} holds a controller of {what} size {size}, but task {task.name!r} has "
+                f"{what}s of size {own}; open it with its own task (--task)"
+            )
     config = task.default_config()
     if (directory / io.RUN_FILE).exists():
         stored = io.read_json(directory / io.RUN_FILE, "run file").get("config")
@@ -171,10 +178,13 @@ def open_run(
     if real is True:
         model = metrics.get("model")
         real = model.get("real_system") if isinstance(model, dict) else None
+        if real is not None and not isinstance(real, dict):
+            raise ModelFileError(f"{directory / METRICS_FILE}: 'real_system' is not an object")
         if real and "env_id" in real:  # read from a file: used only if it imports nothing
-            from ..identify.fitted import checked_env_id
+            from ..identify.fitted import checked_env
 
-            checked_env_id(real["env_id"], str(directory / METRICS_FILE))
+            env = checked_env(real["env_id"], real.get("env_kwargs"), str(directory / METRICS_FILE))
+            real = {"env_id": env[0], "env_kwargs": env[1]}
     from ..training import task_params
 
     task, params = _judged(task, task_params(task, config.params), real or None)

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from .. import io
-from ..errors import ConfigError, Interrupted
+from ..errors import ConfigError, Interrupted, TrainingDiverged
 from ..tasks import AnyTask, names, resolve
 from ._files import Run, mark_complete, read_run_file, release_claim, save_run
 
@@ -46,6 +46,7 @@ def train_run(
     settings: dict[str, Any] | None = None,
     params: tuple[tuple[str, float], ...] = (),
     model: str | Path | None = None,
+    env_id: str | None = None,
     resume: bool = False,
     final_eval: int | None = None,
     animation: bool = True,
@@ -69,6 +70,9 @@ def train_run(
         params: physical parameter overrides ``(name, value)`` (they win over a grey box's).
         model: a directory written by ``diffcontrol fit``: train through that model, judge on
             the system its data came from.
+        env_id: with ``model``, the Gymnasium id of the real system when the fitted model's
+            data names one in a module that is not imported (``module:Env-v0``): named here,
+            by the user, it may be imported; a file's id never is.
         resume: continue the run in ``out_dir``; everything not given comes from its
             ``run.json``; a finished run is left untouched.
         final_eval: the final evaluation's size (``None``: the task's default; 0 skips).
@@ -113,6 +117,12 @@ def train_run(
                 f"diffcontrol train {task} --out {out} --resume"
             )
     model = model or invocation.get("model")
+    if env_id and not model:
+        raise ConfigError("--env names the real system of a fitted model: give --model too")
+    if env_id is None and invocation.get("env"):  # run.json's: used if it imports nothing
+        from ..identify.fitted import checked_env_id
+
+        env_id = checked_env_id(invocation["env"], str(out / io.RUN_FILE))
     final_eval = invocation.get("final_eval") if final_eval is None else final_eval
     animation = animation and invocation.get("animation") is not False
     devices = devices or invocation.get("devices")
@@ -131,12 +141,13 @@ def train_run(
         )
     fitted_params, real, model_info = (), None, None
     if model:
-        the_task, fitted_params, real, model_info = fitted_training(the_task, model, params)
+        the_task, fitted_params, real, model_info = fitted_training(the_task, model, params, env_id)
         (inform or print)(model_info.pop("note"))
     if fitted_params or params:
         overrides["params"] = (*fitted_params, *params)  # params win
-    if stored is not None and recipe is None and not overrides:
-        config = config_cls.from_json(stored["config"])
+    if stored is not None and recipe is None:  # run.json's settings, then what was given
+        config = config_cls.from_json(stored["config"])  # (a fitted model's params included)
+        config = config.replace(**overrides) if overrides else config
     else:
         config = resolve_config(the_task, recipe, **overrides)
 
@@ -157,7 +168,13 @@ def train_run(
     invocation = {"task": spec, "model": model, "final_eval": final_eval, "animation": animation}
     if devices:
         invocation["devices"] = devices
+    if env_id:
+        invocation["env"] = env_id
     named = "" if spec in _builtin_names() else f" {spec}"
+    # the command that continues this run: run.json gives all but a module to import
+    resume_command = f"diffcontrol train{named} --out {out} --resume" + (
+        f" --env {env_id}" if env_id and ":" in env_id else ""
+    )
     try:
         result = train(
             the_task,
@@ -169,7 +186,14 @@ def train_run(
             devices=devices,
         )
     except BaseException as e:
-        kept = resume or not is_writer() or not release_claim(out)  # give the dir back
+        # nothing to resume (no run.json yet, or one without a checkpoint): say so
+        kept = (
+            resume or not is_writer() or (not release_claim(out) and (out / io.RUN_FILE).is_file())
+        )
+        if isinstance(e, TrainingDiverged) and kept and not resume:  # other settings: new dir
+            raise type(e)(
+                f"{e}; train with the changed settings into a new --out ({out} keeps this run)"
+            ) from None
         if not isinstance(e, KeyboardInterrupt):
             raise
         if not kept:
@@ -177,8 +201,7 @@ def train_run(
                 "interrupted before the first checkpoint; nothing was kept"
             ) from None
         raise RunInterrupted(
-            f"interrupted; the last checkpoint is in {out}. Continue with: "
-            f"diffcontrol train{named} --out {out} --resume"
+            f"interrupted; the last checkpoint is in {out}. Continue with: {resume_command}"
         ) from None
     metrics = result.metrics
     metrics["compile_cache"] = {
@@ -205,8 +228,7 @@ def train_run(
         )
     except KeyboardInterrupt:
         raise RunInterrupted(
-            f"interrupted while writing the run's files; finish them with: "
-            f"diffcontrol train{named} --out {out} --resume"
+            f"interrupted while writing the run's files; finish them with: {resume_command}"
         ) from None
     mark_complete(out)
     headline = run.metrics.get("headline")
@@ -239,7 +261,7 @@ def describe(task: AnyTask, config: Any, out: Path | str) -> str:
 
 
 def fitted_training(
-    task: AnyTask, fit_dir: str | Path, params: Any = None
+    task: AnyTask, fit_dir: str | Path, params: Any = None, env_id: str | None = None
 ) -> tuple[AnyTask, tuple, dict | None, dict]:
     """What training through the model that ``diffcontrol fit`` wrote in ``fit_dir`` needs.
 
@@ -259,7 +281,11 @@ def fitted_training(
 
     doc = read_fitted(fit_dir)
     fitted_physics(task, doc)  # refuses a model of another task
-    real = real_system(doc)
+    real = real_system(doc, trusted=env_id)
+    if real and "env_id" in real:  # the final evaluation's environment, made before training
+        from ..envs import make_env
+
+        make_env(real["env_id"], real["env_kwargs"]).close()
     info = {"dir": str(fit_dir), "kind": doc["model"], "real_system": real}
     if doc["model"] == "params":
         info["note"] = f"training through the fitted parameters in {fit_dir}"

@@ -65,9 +65,11 @@ def animate_dir(
     episode; ``target`` and ``wind`` are an aiming task's. Returns the path and what it shows."""
     run = open_run(run_dir, task=task)
     path = Path(out) if out else Path(run_dir) / "rollout.gif"
-    if out:
-        io.check_new_file(path, ".gif")
-    return path, run.task.animate_run(run, path, seed=seed, target=target, wind=wind)
+    if not out:
+        return path, run.task.animate_run(run, path, seed=seed, target=target, wind=wind)
+    io.check_new_file(path, ".gif")
+    draw = lambda tmp: run.task.animate_run(run, tmp, seed=seed, target=target, wind=wind)  # noqa: E731
+    return path, io.write_new(path, draw)  # never replaces a file made meanwhile
 
 
 def aim_dir(

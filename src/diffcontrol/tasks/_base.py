@@ -93,9 +93,17 @@ class _TaskBase(abc.ABC):
                 )
         import jax
 
-        for leaf in jax.tree.leaves(params):
+        for path, leaf in jax.tree_util.tree_leaves_with_path(params):
             if np.any(np.isnan(np.asarray(leaf, float))):
                 raise ConfigError(f"the parameters of task {self.name!r} hold NaN")
+            with np.errstate(over="ignore"):  # the simulator runs in float32
+                if not np.all(np.isfinite(np.asarray(leaf, np.float32))):
+                    name = jax.tree_util.keystr(path).lstrip(".")
+                    raise ConfigError(
+                        f"parameter {name}={np.asarray(leaf)} of task {self.name!r} is beyond "
+                        "float32 (|x| < 3.4e38), in which the simulator runs; choose a "
+                        "physical value"
+                    )
 
     def load_policy(self, doc: dict) -> Any:
         """The NumPy policy of a ``model.json`` document (what ``diffcontrol.load`` returns).

@@ -56,7 +56,11 @@ def trebuchet_params(env_args: list[tuple[str, float]]) -> tb.TrebuchetParams:
             f"--env-arg {bad[0]}: the trebuchet has no parameter {bad[0]!r}; choose among "
             f"{', '.join(known)} (e.g. --env-arg drag_coefficient=1.5 --env-arg wind_factor=1.5)"
         )
-    return tb.TrebuchetParams(**{name: float(value) for name, value in env_args})
+    params = tb.TrebuchetParams(**{name: float(value) for name, value in env_args})
+    from . import make
+
+    make("trebuchet").check_params(params)  # the task's ranges, as for --param
+    return params
 
 
 def params_dict(params: tb.TrebuchetParams) -> dict[str, float]:

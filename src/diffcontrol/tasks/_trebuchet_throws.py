@@ -29,7 +29,6 @@ trebuchet's physics to them.
 
 from __future__ import annotations
 
-import json
 import os
 import zipfile
 from pathlib import Path
@@ -46,6 +45,7 @@ from ..identify.data._files import (
     npz_arrays,
     readable_suffix,
 )
+from ..io import parse_json
 from .trebuchet import THROW_COLUMNS
 
 COLUMNS = (*THROW_COLUMNS[0], *THROW_COLUMNS[1])
@@ -237,11 +237,11 @@ def _file_format(path: Path, suffix: str) -> Any:
         if suffix == ".csv":
             with open(path, encoding="utf-8-sig") as f:
                 first = f.readline()
-            header = json.loads(first[1:]) if first.startswith("#") else None
+            header = parse_json(first[1:]) if first.startswith("#") else None
         else:
             with np.load(path, allow_pickle=False) as npz:
                 raw = npz_arrays(npz, ("header",), path)["header"] if "header" in npz else None
-            header = None if raw is None else json.loads(raw.tobytes().decode())
+            header = None if raw is None else parse_json(raw.tobytes())
     except (OSError, ValueError, UnicodeDecodeError, zipfile.BadZipFile, EOFError):
         return None
     return header.get("format") if isinstance(header, dict) else None
@@ -272,7 +272,10 @@ def _read_old(path: Path, suffix: str) -> TrajectoryData:
             arrays = npz_arrays(npz, names, path)
     except (OSError, ValueError, zipfile.BadZipFile, EOFError) as e:
         raise DataFileError(f"{path} is not a readable .npz ({e}); write it again") from None
-    header = json.loads(arrays.pop("header").tobytes().decode())
+    try:
+        header = parse_json(arrays.pop("header").tobytes())
+    except ValueError as e:
+        raise DataFileError(f"{path}: the header array is not JSON ({e}); write it again") from None
     meta = check_header(header, path, OLD_FORMAT, OLD_VERSION)
     columns = header.get("columns", list(OLD_COLUMNS))
     if not isinstance(columns, list) or not all(isinstance(c, str) for c in columns):

@@ -71,6 +71,10 @@ class Acrobot(Task):
     0-999 it scores about -82 and the trained controllers -82 to -84 (docs/benchmarks.md).
     """
 
+    positive_params = (
+        "link_length_1", "link_length_2", "link_mass_1", "link_mass_2", "link_com_pos_1",
+        "link_com_pos_2", "link_moi", "dt", "max_vel_1", "max_vel_2",
+    )  # fmt: skip
     name = "acrobot"
     summary = (
         "Acrobot-v1 swing-up: a 3-way straight-through choice of torque (exact Gymnasium dynamics)"

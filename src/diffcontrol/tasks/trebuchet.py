@@ -76,6 +76,11 @@ class TrebuchetAiming(Task):
     state_labels = ("target (m)", "wind (m/s)", "distance (m)")
     action_labels = ("release angle (deg)", "counterweight (lb)")
 
+    positive_params = (
+        "pivot_height", "long_arm", "short_arm", "weight_arm", "sling_length",
+        "projectile_radius", "projectile_mass", "arm_mass", "counterweight_inertia", "dt",
+    )  # fmt: skip
+    nonnegative_params = ("air_density", "drag_coefficient")
     fit_parameter_names = ("drag_coefficient", "wind_factor")
     """What the nominal trebuchet does not know: fitted from recorded throws by default."""
 

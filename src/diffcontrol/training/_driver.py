@@ -304,7 +304,8 @@ def train(
         try:
             notes = trainer.check(ts, new_ts, losses)
         except TrainingDiverged as e:
-            where = f"; the last good checkpoint is in {out}" if out else ""
+            kept = out is not None and (out / CHECKPOINT_FILE).exists()
+            where = f"; the last good checkpoint is in {out}" if kept else ""
             raise type(e)(f"{e}{where}") from None
         for note in notes:
             say("note: " + note)
@@ -389,20 +390,24 @@ def _start(trainer: Any, seed: Array, params: PyTree) -> tuple[Any, PRNGKeyArray
 
 @contextlib.contextmanager
 def interrupts_deferred() -> Iterator[None]:
-    """Hold Ctrl-C (SIGINT) while XLA compiles and deliver it as ``KeyboardInterrupt`` once
-    the compiler has returned: an interrupt inside the compiler can crash the process instead
-    of ending it with the resume hint. Only the main thread can take signals; elsewhere this
+    """Hold Ctrl-C (SIGINT) and SIGTERM while XLA compiles and deliver them as
+    ``KeyboardInterrupt`` once the compiler has returned: an interrupt inside the compiler can
+    crash the process instead of ending it with the resume hint. Only the main thread can take signals; elsewhere this
     does nothing."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     pending: list[int] = []
-    previous = signal.signal(signal.SIGINT, lambda signum, frame: pending.append(signum))
+    signums = (signal.SIGINT, signal.SIGTERM)  # SIGTERM takes Ctrl-C's path (the CLI's)
+    previous = [signal.signal(s, lambda signum, frame: pending.append(signum)) for s in signums]
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for s, handler in zip(signums, previous):
+            signal.signal(s, handler)
     if pending:
+        if signal.SIGTERM in pending and previous[1] in (signal.SIG_DFL, None):
+            signal.raise_signal(signal.SIGTERM)  # no handler of ours: end as SIGTERM would
         raise KeyboardInterrupt
 
 

@@ -14,9 +14,12 @@ from typing import Any
 import numpy as np
 
 from ...errors import DataFileError
-from ...io import _finite, write_bytes
+from ...io import _finite, parse_json, read_limited, scalar_arguments, write_bytes
 from ._format import FORMAT, VERSION, parse_column, validate
 from ._table import TrajectoryData
+
+MAX_CSV_BYTES = 2**30
+"""The largest CSV file read (1 GiB; write more data as .npz)."""
 
 
 def _header(data: TrajectoryData) -> dict:
@@ -102,6 +105,23 @@ def check_header(header: Any, path: Path, format_: str, version: int, hint: str 
     meta = header.get("metadata", {})
     if not isinstance(meta, dict):
         raise DataFileError(f"{path}: 'metadata' in the header must be a JSON object")
+    # what later steps pass on (fit -> fitted.json -> train --model, evaluate) is typed here
+    env_id = meta.get("env_id")
+    if env_id is not None and (not isinstance(env_id, str) or env_id.count(":") > 1):
+        raise DataFileError(f"{path}: the metadata's env_id {env_id!r} is not an environment id")
+    kwargs, params = meta.get("env_kwargs"), meta.get("params")
+    if kwargs is not None and not scalar_arguments(kwargs):
+        raise DataFileError(
+            f"{path}: the metadata's env_kwargs {kwargs!r} must map names to numbers or text"
+        )
+    if params is not None and not (
+        isinstance(params, dict)
+        and all(
+            isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+            for v in params.values()
+        )
+    ):
+        raise DataFileError(f"{path}: the metadata's params {params!r} must be finite numbers")
     return meta
 
 
@@ -127,13 +147,14 @@ def csv_parts(path: Path, format_: str, version: int) -> tuple[Any, list[str], l
         DataFileError: not text, no JSON header line, or no column names (naming the line).
     """
     try:
-        lines = path.read_text(encoding="utf-8-sig").splitlines()  # -sig: a spreadsheet's BOM
+        text = read_limited(path, MAX_CSV_BYTES, "data file")  # not /dev/zero named .csv
+        lines = text.decode("utf-8-sig").splitlines()  # -sig: a spreadsheet's BOM
     except UnicodeDecodeError:
         raise DataFileError(f"{path} is not a text file; is it an .npz named .csv?") from None
     first = lines[0] if lines else ""
     try:
-        header = json.loads(first[1:]) if first.startswith("#") else None
-    except json.JSONDecodeError as e:
+        header = parse_json(first[1:]) if first.startswith("#") else None
+    except ValueError as e:
         raise DataFileError(f"{path}, line 1: the header is not valid JSON ({e})") from None
     if header is None:
         raise DataFileError(
@@ -224,8 +245,8 @@ def _read_npz(path: Path) -> TrajectoryData:
     except (OSError, ValueError, zipfile.BadZipFile, EOFError) as e:
         raise DataFileError(f"{path} is not a readable .npz ({e}); write it again") from None
     try:
-        header = json.loads(arrays.pop("header").tobytes().decode())
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        header = parse_json(arrays.pop("header").tobytes())
+    except ValueError as e:
         raise DataFileError(f"{path}: the header array is not JSON ({e}); write it again") from None
     meta = check_header(header, path, FORMAT, VERSION)
     columns = header.get("columns")

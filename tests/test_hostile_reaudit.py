@@ -1,0 +1,386 @@
+"""The re-audit of issue 12: new variants of each class of hostile input, in-process (the
+CLI's ``main``, the library), on the shared tiny runs. Each gets one line and exit status 2,
+imports nothing a file names, and changes nothing."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import sys
+
+import numpy as np
+import pytest
+
+import diffcontrol
+from diffcontrol.cli import main
+from diffcontrol.errors import ConfigError, DiffcontrolError
+
+EVIL = "evil_module_of_the_reaudit"
+
+
+def _one_line(capsys, argv, *needles):
+    try:
+        code = main([str(a) for a in argv])
+    except SystemExit as e:
+        code = e.code
+    err = capsys.readouterr().err
+    assert code == 2, err
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
+    for needle in needles:
+        assert needle in err, err
+    assert EVIL not in sys.modules
+
+
+def _copy(run, tmp_path, name="run"):
+    out = tmp_path / name
+    shutil.copytree(run, out)
+    return out
+
+
+def _edit(path, change):
+    doc = json.loads(path.read_text())
+    change(doc)
+    path.write_text(json.dumps(doc))
+
+
+# --- corrupt-text generators, shared by every file kind ---------------------------------------
+
+HOSTILE_TEXTS = {
+    "deep nesting": "[" * 100_000 + "]" * 100_000,
+    "huge integer": '{"version": ' + "9" * 5000 + "}",
+    "truncated": '{"format": "diffcontrol-',
+    "not UTF-8": "\udcff",
+}
+
+
+def _write_hostile(path, kind):
+    text = HOSTILE_TEXTS[kind]
+    if kind == "not UTF-8":
+        path.write_bytes(b'{"a": "\xff"}')
+    else:
+        path.write_text(text)
+
+
+@pytest.mark.parametrize("kind", list(HOSTILE_TEXTS))
+@pytest.mark.parametrize("file", ["model.json", "metrics.json", "run.json"])
+def test_hostile_text_in_every_run_file(capsys, pendulum_run, tmp_path, kind, file):
+    out = _copy(pendulum_run, tmp_path)
+    _write_hostile(out / file, kind)
+    _one_line(capsys, ["evaluate", out, "--episodes", "1"], file)
+
+
+@pytest.mark.parametrize("kind", list(HOSTILE_TEXTS))
+def test_hostile_text_in_a_fitted_file_and_a_data_header(capsys, tmp_path, kind):
+    fit = tmp_path / "fit"
+    fit.mkdir()
+    _write_hostile(fit / "fitted.json", kind)
+    out = tmp_path / "out"
+    _one_line(capsys, ["train", "pendulum", "--model", fit, "--out", out], "fitted.json")
+    assert not out.exists()
+    data = tmp_path / "data.csv"
+    text = "\n# x" if kind == "not UTF-8" else HOSTILE_TEXTS[kind]
+    data.write_text("# " + text + "\ntime,episode,obs.x [m],action.u [N]\n0,0,0,0\n")
+    if kind == "not UTF-8":
+        data.write_bytes(b"# {\xff}\n")
+    _one_line(capsys, ["fit", "pendulum", "--data", data, "--model", "params", "--out", out])
+    assert not out.exists()
+
+
+# --- ids and arguments from files -------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "real, needle",
+    [
+        ({"env_id": f"{EVIL}:X-v0"}, "not import"),
+        ({"env_id": "os:X:Y"}, "not an id"),
+        ({"env_id": "CartPole-v1", "env_kwargs": "oops"}, "finite"),
+        ({"env_id": "CartPole-v1", "env_kwargs": {"render_mode": 5}}, "does not take"),
+        ("oops", "not an object"),
+    ],
+)
+def test_a_real_system_named_by_metrics_json(capsys, cartpole_run, tmp_path, real, needle):
+    out = _copy(cartpole_run, tmp_path)
+    _edit(out / "metrics.json", lambda m: m.update(model={"real_system": real}))
+    _one_line(capsys, ["evaluate", out, "--episodes", "1"], needle)
+    _one_line(capsys, ["animate", out, "--out", tmp_path / "a.gif"], needle)
+    assert not (tmp_path / "a.gif").exists()
+
+
+@pytest.fixture(scope="module")
+def fitted_dir(tmp_path_factory):
+    """A grey-box fitted.json of the pendulum (a few steps; only its fields matter here)."""
+    d = tmp_path_factory.mktemp("fit")
+    data = d / "data.csv"
+    assert main(["record", "Pendulum-v1", "--episodes", "2", "--out", str(data), "--quiet"]) == 0
+    argv = ["fit", "pendulum", "--data", str(data), "--model", "params", "--steps", "3"]
+    assert main([*argv, "--lm-steps", "1", "--out", str(d / "fit"), "--quiet"]) == 0
+    return d / "fit", data
+
+
+@pytest.mark.parametrize(
+    "change, needle",
+    [
+        (lambda f: f["data"].update(env_id="os:X:Y"), "not an id"),
+        (lambda f: f["data"].update(env_kwargs=[1, 2]), "finite"),
+        (lambda f: f.update(data=[1]), "'data'"),
+        (lambda f: f["all_parameters"].update(max_speed=1e300), "float32"),
+        (lambda f: f["all_parameters"].update(friction=-0.5), ">= 0"),
+    ],
+)
+def test_a_damaged_fitted_file_trains_nothing(capsys, fitted_dir, tmp_path, change, needle):
+    fit = tmp_path / "fit"
+    shutil.copytree(fitted_dir[0], fit)
+    _edit(fit / "fitted.json", change)
+    out = tmp_path / "out"
+    _one_line(capsys, ["train", "pendulum", "--model", fit, "--out", out], needle)
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    "change, needle",
+    [
+        (lambda m: m.update(env_id=5), "env_id"),
+        (lambda m: m.update(env_id="a:b:c"), "env_id"),
+        (lambda m: m.update(env_kwargs="oops"), "env_kwargs"),
+        (lambda m: m.update(params={"g": "x"}), "params"),
+    ],
+)
+def test_bad_metadata_is_refused_by_the_first_reader(capsys, fitted_dir, tmp_path, change, needle):
+    lines = fitted_dir[1].read_text().splitlines()
+    header = json.loads(lines[0][2:])
+    change(header["metadata"])
+    data = tmp_path / "data.csv"
+    data.write_text("# " + json.dumps(header) + "\n" + "\n".join(lines[1:]) + "\n")
+    out = tmp_path / "out"
+    _one_line(
+        capsys, ["fit", "pendulum", "--data", data, "--model", "params", "--out", out], needle
+    )
+    assert not out.exists()
+
+
+# --- physical parameters, model files -----------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "task, param",
+    [
+        ("acrobot", "dt=0"),
+        ("acrobot", "link_mass_1=-1"),
+        ("pendulum", "max_speed=1e300"),
+        ("mountain-car-continuous", "max_speed=1e300"),
+        ("trebuchet", "projectile_mass=0"),
+        ("trebuchet", "drag_coefficient=-1"),
+    ],
+)
+def test_physical_parameters_of_other_tasks(capsys, tmp_path, task, param):
+    out = tmp_path / "x"
+    _one_line(capsys, ["train", task, "--out", out, "--param", param], param.split("=")[0])
+    assert not out.exists()
+
+
+def test_a_recorded_trebuchet_out_of_range(capsys, tmp_path):
+    out = tmp_path / "t.csv"
+    argv = ["record", "trebuchet", "--episodes", "2", "--env-arg", "sling_length=0"]
+    _one_line(capsys, [*argv, "--out", out], "sling_length")
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    "change, needle",
+    [
+        (lambda m: m["action"].update(size=True), "action size"),
+        (lambda m: m["observation"].update(state="abcd", features="abcd"), "lists of names"),
+        (
+            lambda m: m["network"]["layers"][0].update(
+                weight=[[1e300] * len(r) for r in m["network"]["layers"][0]["weight"]]
+            ),
+            "float32",
+        ),
+    ],
+)
+def test_model_file_fields_of_the_wrong_kind(cartpole_run, tmp_path, change, needle):
+    out = _copy(cartpole_run, tmp_path)
+    _edit(out / "model.json", change)
+    with pytest.raises(DiffcontrolError, match=needle):
+        diffcontrol.load(out)
+
+
+# --- the fit's output is what the next command accepts -----------------------------------------
+
+
+def test_a_fit_never_writes_a_parameter_out_of_its_range(fitted_dir):
+    from diffcontrol import identify, tasks
+    from diffcontrol.identify.data import read_trajectories
+
+    task = tasks.make("pendulum")
+    data = read_trajectories(fitted_dir[1])
+    # frictionless data: the fitted friction lands either side of 0; never below it
+    result = identify.fit(task, data, "params", steps=3, lm_steps=1)
+    assert result.values["friction"] >= 0
+    task.check_params(result.params)
+
+
+def test_library_inputs_of_the_wrong_kind(cartpole_run):
+    task = diffcontrol.make("cartpole")
+    for change in (dict(eval_every=True), dict(batch=2.5), dict(keep_best="no")):
+        with pytest.raises(ConfigError):
+            task.default_config().replace(**change)
+    policy = diffcontrol.load(cartpole_run)
+    for obs in (np.zeros((2, 5)), [[1.0, 2.0]], np.full(4, np.inf)):
+        with pytest.raises(ValueError):
+            policy(obs)
+
+
+# --- integers on every command, races for a new file ------------------------------------------
+
+HUGE = "1" + "0" * 13
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["evaluate", "DIR", "--episodes", HUGE],
+        ["evaluate", "DIR", "--seed", "1" + "0" * 30],
+        ["animate", "DIR", "--seed", "-1"],
+        ["record", "Pendulum-v1", "--episodes", HUGE, "--out", "x.csv"],
+        ["record", "Pendulum-v1", "--episodes", "1", "--seed", "-1", "--out", "x.csv"],
+        ["record", "Pendulum-v1", "--episodes", "1", "--max-steps", HUGE, "--out", "x.csv"],
+        ["loop", "pendulum", "--out", "x", "--rounds", HUGE],
+        ["loop", "pendulum", "--out", "x", "--seed", "1" + "0" * 30],
+        ["loop", "pendulum", "--out", "x", "--eval-episodes", HUGE],
+        ["fit", "pendulum", "--data", "x.csv", "--model", "params", "--out", "x", "--window", HUGE],
+        ["train", "pendulum", "--out", "x", "--final-eval", HUGE],
+        ["train", "cartpole-swingup", "--out", "x", "--population", HUGE],
+        ["compare", "cartpole", "--out", "x", "--final-episodes", HUGE],
+    ],
+)
+def test_huge_and_negative_integers_on_every_command(capsys, pendulum_run, tmp_path, argv):
+    argv = [str(pendulum_run) if a == "DIR" else a for a in argv]
+    argv = [str(tmp_path / a) if a in ("x", "x.csv") else a for a in argv]
+    _one_line(capsys, argv, "at most")
+    assert not (tmp_path / "x").exists() and not (tmp_path / "x.csv").exists()
+
+
+def test_of_two_writers_racing_for_a_new_file_one_wins(tmp_path):
+    import threading
+
+    from diffcontrol import io
+    from diffcontrol.errors import RunDirectoryError
+
+    for trial in range(20):
+        path = tmp_path / f"race{trial}.csv"
+        barrier = threading.Barrier(2)
+        outcomes = []
+
+        def write(text, path=path, barrier=barrier, outcomes=outcomes):
+            def writer(tmp):
+                tmp.write_text(text)
+                barrier.wait()  # both have checked and written: now both publish
+
+            try:
+                io.write_new(path, writer)
+                outcomes.append(text)
+            except RunDirectoryError:
+                outcomes.append("refused")
+
+        threads = [threading.Thread(target=write, args=(t,)) for t in ("a", "b")]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+        assert sorted(outcomes)[-1] == "refused" and path.read_text() in outcomes, outcomes
+        assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
+
+
+def test_a_run_that_diverges_after_a_checkpoint_names_a_fix_that_works(
+    capsys, tmp_path, monkeypatch
+):
+    from diffcontrol.errors import TrainingDiverged
+    from diffcontrol.training import _bptt
+
+    calls = []
+    check = _bptt.Trainer.check
+
+    def diverge_second_chunk(self, old, new, losses):
+        calls.append(1)
+        if len(calls) == 2:
+            raise TrainingDiverged("training diverged near update 3: lower --learning-rate")
+        return check(self, old, new, losses)
+
+    monkeypatch.setattr(_bptt.Trainer, "check", diverge_second_chunk)
+    out = tmp_path / "run"
+    argv = ["train", "cartpole", "--out", str(out), "--updates", "4", "--eval-every", "2"]
+    argv += ["--eval-episodes", "2", "--final-eval", "1", "--no-animation", "--quiet"]
+    _one_line(capsys, argv, "new --out", f"{out} keeps this run")
+    assert (out / "checkpoint.npz").exists()
+    monkeypatch.undo()
+    new = tmp_path / "again"
+    assert main([*argv[:3], str(new), *argv[4:], "--learning-rate", "0.001"]) == 0
+
+
+def test_a_users_real_system_is_imported_only_when_named_on_the_command_line(
+    capsys, fitted_dir, tmp_path, monkeypatch
+):
+    module = "reaudit_user_env"
+    (tmp_path / f"{module}.py").write_text(
+        "import gymnasium\ngymnasium.register('ReauditPendulum-v0', "
+        "entry_point='gymnasium.envs.classic_control.pendulum:PendulumEnv', "
+        "max_episode_steps=200)\n"
+    )
+    monkeypatch.syspath_prepend(str(tmp_path))
+    fit = tmp_path / "fit"
+    shutil.copytree(fitted_dir[0], fit)
+    env = f"{module}:ReauditPendulum-v0"
+    _edit(fit / "fitted.json", lambda f: f["data"].update(env_id=env, env_kwargs={}))
+    out = tmp_path / "run"
+    argv = ["train", "pendulum", "--model", str(fit), "--out", str(out), "--updates", "2"]
+    argv += ["--eval-every", "1", "--final-eval", "1", "--no-animation", "--quiet"]
+    try:
+        code = main(argv)
+        err = capsys.readouterr().err
+        assert code == 2 and module not in sys.modules and f"pass --env {env}" in err, err
+        assert not out.exists()
+        # the suggested flag works: the user names the module, so it may be imported
+        assert main([*argv, "--env", env]) == 0
+        metrics = json.loads((out / "metrics.json").read_text())
+        assert metrics["gym_eval"]["env_id"] == env
+        assert json.loads((out / "run.json").read_text())["invocation"]["env"] == env
+    finally:
+        sys.modules.pop(module, None)
+
+
+def test_a_model_of_another_size_than_its_task_is_refused_on_opening(
+    capsys, cartpole_run, tmp_path
+):
+    out = _copy(cartpole_run, tmp_path)
+
+    def three_inputs(m):
+        m["observation"].update(size=3, offset=[0] * 3, scale=[1] * 3)
+        m["network"]["layers"][0]["weight"] = [r[:3] for r in m["network"]["layers"][0]["weight"]]
+
+    _edit(out / "model.json", three_inputs)
+    _one_line(capsys, ["evaluate", out, "--episodes", "1"], "observation size 3")
+
+
+def test_an_environment_a_fitted_model_names_is_made_before_training(capsys, fitted_dir, tmp_path):
+    fit = tmp_path / "fit"
+    shutil.copytree(fitted_dir[0], fit)
+    _edit(fit / "fitted.json", lambda f: f["data"].update(env_kwargs={"nope": 1}))
+    out = tmp_path / "out"
+    _one_line(capsys, ["train", "pendulum", "--model", fit, "--out", out], "does not take")
+    assert not out.exists()
+
+
+def test_an_environment_of_another_size_or_a_missing_module_or_place(
+    capsys, pendulum_run, tmp_path
+):
+    _one_line(capsys, ["evaluate", pendulum_run, "--env", "CartPole-v1"], "size 3")
+    _one_line(
+        capsys,
+        ["record", "no_such_module_q:X-v0", "--episodes", "1", "--out", tmp_path / "q.csv"],
+        "no_such_module_q",
+    )
+    _one_line(
+        capsys, ["loop", "pendulum", "--out", "/proc/no/such", "--rounds", "1"], "/proc/no"
+    )

@@ -1,0 +1,133 @@
+"""One interrupt path: SIGTERM at each phase of a small ``diffcontrol train`` behaves as
+Ctrl-C does (one line, exit 130, a resume command that works and gives the uninterrupted
+result, no partial file), and a full disk ends with one line, exit 2 and a resume that works
+once there is room."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from diffcontrol.cli import main
+
+SMALL = ["--updates", "40", "--eval-every", "10", "--batch", "4", "--window", "20"]
+SMALL += ["--hidden", "8", "--eval-episodes", "2", "--no-animation"]
+SRC = str(Path(__file__).resolve().parents[1] / "src")
+
+
+def _weights(out: Path) -> list:
+    return json.loads((out / "model.json").read_text())["network"]["layers"]
+
+
+def _no_partial_files(out: Path) -> None:
+    if out.exists():
+        assert not [p.name for p in out.iterdir() if p.name.endswith(".tmp")]
+
+
+def _cli(*argv: str) -> subprocess.Popen:
+    env = {**os.environ, "PYTHONPATH": SRC + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    return subprocess.Popen(
+        [sys.executable, "-m", "diffcontrol.cli", *argv],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    """The uninterrupted run that every resumed one must reproduce."""
+    out = tmp_path_factory.mktemp("sigterm") / "reference"
+    assert (
+        main(["train", "pendulum", "--out", str(out), "--quiet", *SMALL, "--final-eval", "2"]) == 0
+    )
+    return _weights(out)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "phase, after_lines",
+    [("import", 0), ("compile", 1), ("train", 3), ("final evaluation", 6)],
+)
+def test_sigterm_at_each_phase_then_resume(tmp_path, reference, phase, after_lines):
+    out = tmp_path / "run"
+    final_eval = "300" if phase == "final evaluation" else "2"
+    proc = _cli("train", "pendulum", "--out", str(out), *SMALL, "--final-eval", final_eval)
+    for _ in range(after_lines):  # the progress lines before the phase
+        if not proc.stdout.readline():
+            break
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=300)
+    _no_partial_files(out)
+    assert "Traceback" not in err and "Segmentation" not in err, err
+    if proc.returncode == 0:  # it finished before the signal: nothing to check here
+        pytest.skip(f"the run ended before SIGTERM reached the {phase} phase")
+    if proc.returncode == -signal.SIGTERM:  # during the import, before diffcontrol's handler
+        assert phase == "import" and not (out / "run.json").exists()
+        resume = ["train", "pendulum", "--out", str(out), *SMALL, "--final-eval", final_eval]
+    else:
+        assert proc.returncode == 130, err
+        lines = [line for line in err.strip().splitlines() if line.strip()]
+        assert len(lines) == 1, err
+        if "nothing was kept" in lines[0]:
+            assert not (out / "run.json").exists()
+            resume = ["train", "pendulum", "--out", str(out), *SMALL, "--final-eval", final_eval]
+        else:
+            command = lines[0].split("Continue with: ")[-1].split("finish them with: ")[-1]
+            assert command.startswith("diffcontrol train") and command.endswith("--resume"), err
+            resume = command.split()[1:]
+    assert main([*resume, "--quiet"] if "--resume" in resume else [*resume, "--quiet"]) == 0
+    assert _weights(out) == reference
+    assert json.loads((out / "run.json").read_text())["complete"] is True
+
+
+def _tmpfs(path: Path, size: str) -> bool:
+    if os.geteuid() != 0 or shutil.which("mount") is None:
+        return False
+    path.mkdir()
+    done = subprocess.run(
+        ["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(path)], capture_output=True
+    )
+    return done.returncode == 0
+
+
+@pytest.mark.slow
+def test_a_full_disk_ends_with_one_line_and_resumes(tmp_path, reference, capsys):
+    disk = tmp_path / "disk"
+    if not _tmpfs(disk, "256k"):
+        pytest.skip("mounting a small tmpfs needs root and a kernel that allows it")
+    try:
+        filler = disk / "filler"
+        with open(filler, "wb") as f:  # leave a little room: run.json fits, more does not
+            try:
+                f.write(b"\0" * (256 * 1024 - 12 * 1024))
+            except OSError:
+                pass
+        out = disk / "run"
+        argv = ["train", "pendulum", "--out", str(out), "--quiet", *SMALL, "--final-eval", "2"]
+        code = main(argv)
+        err = capsys.readouterr().err
+        assert code == 2, err
+        lines = [line for line in err.strip().splitlines() if line.strip()]
+        assert len(lines) == 1 and "Traceback" not in err, err
+        assert "No space left" in lines[0] and "--resume" in lines[0]
+        _no_partial_files(out)
+        for p in out.iterdir() if out.exists() else ():
+            if p.suffix == ".json":
+                json.loads(p.read_text())  # whole, never half-written
+        filler.unlink()  # room again: the suggested command completes the run
+        again = ["train", "--out", str(out), "--resume", "--quiet"]
+        if not (out / "run.json").exists():  # nothing was kept: the command itself again
+            again = argv
+        assert main(again) == 0
+        assert _weights(out) == reference
+    finally:
+        subprocess.run(["umount", str(disk)], check=False)
