@@ -94,6 +94,7 @@ def test_each_member_stops_early_on_its_own():
         (lambda: grid(BASE, [0], {"nope": [1]}), "cannot sweep 'nope'"),
         (lambda: grid(BASE, [0], {"learning_rate": []}), "non-empty list"),
         (lambda: grid(BASE, [], {}), "at least one seed"),
+        (lambda: grid(BASE, range(70_000), {}), "more than 65,536"),
         (lambda: grid(BASE, [0], {"learning_rate": [-1.0]}), "learning_rate"),
     ],
 )

@@ -36,6 +36,9 @@ from ._bptt import Trainer, builtin_loss_name, make_optimizer
 from ._devices import check_devices, mesh_placements, placer
 from ._driver import TrainResult, _check_head, interrupts_deferred, task_params
 
+MAX_MEMBERS = 2**16
+"""The most members one sweep may have."""
+
 SWEPT_IN_PROGRAM = ("seed", "learning_rate")
 """Settings whose values may differ between the members of one compiled program."""
 
@@ -70,6 +73,12 @@ def grid(
     if not seeds:
         raise ConfigError("a sweep needs at least one seed")
     names = list(values)
+    count = len(seeds) * math.prod(len(v) for v in values.values())
+    if count > MAX_MEMBERS:
+        raise ConfigError(
+            f"a sweep of {count:,} members is more than {MAX_MEMBERS:,}; sweep fewer seeds or "
+            "values, or split the sweep"
+        )
     members = []
     for combo in itertools.product(*(values[n] for n in names)):
         changed = config.replace(**dict(zip(names, combo, strict=True)))
