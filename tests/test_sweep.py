@@ -41,6 +41,7 @@ def test_grid_orders_settings_outside_seeds():
     ]
 
 
+@pytest.mark.slow
 def test_each_member_is_the_run_train_would_make(swept):
     """Same keys, same updates, the member's own learning rate: the controller and curve of
     ``train(task, config)`` up to the order of floating-point sums."""
@@ -56,6 +57,7 @@ def test_each_member_is_the_run_train_would_make(swept):
         assert member.metrics["returned_update"] == alone.metrics["returned_update"]
 
 
+@pytest.mark.slow
 def test_members_differ_by_learning_rate(swept):
     configs, result = swept
     # the same seed with another learning rate: the same start, another controller
@@ -64,6 +66,7 @@ def test_members_differ_by_learning_rate(swept):
     assert first[0] == first[2] and first[1] == first[3]
 
 
+@pytest.mark.slow
 def test_a_shape_setting_makes_a_program_per_value():
     configs = grid(BASE.replace(updates=10), [0], {"hidden": [(8,), (4, 4)]})
     result = sweep(TASK, configs)
@@ -73,6 +76,7 @@ def test_a_shape_setting_makes_a_program_per_value():
     ]
 
 
+@pytest.mark.slow
 def test_each_member_stops_early_on_its_own():
     configs = grid(BASE.replace(target_return=20.0), [0, 1, 2, 3], {})
     result = sweep(TASK, configs)

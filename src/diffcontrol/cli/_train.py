@@ -115,20 +115,16 @@ def cmd_train(args: argparse.Namespace) -> int:
         outcome = train_run(
             args.out,
             args.task,
-            recipe=args.recipe,
             settings={name: getattr(args, name) for name in _SETTINGS},
             params=tuple(args.param or ()),
-            model=args.model,
             env_id=args.env,
-            resume=args.resume,
-            final_eval=args.final_eval,
             animation=not args.no_animation,
-            devices=args.devices,
             hosts=args.coordinator
             and (args.coordinator, args.processes, args.process_id, args.join_timeout),
             compile_cache=not args.no_compile_cache,
             progress=a.say(args),
             command=args.command_line,
+            **a.pick(args, "recipe model resume final_eval devices"),
         )
     print(outcome.summary)
     if outcome.files:
@@ -180,17 +176,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         values = s.parse_values(args.set or [], tasks.resolve(task).default_config())
     if not args.no_compile_cache:
         _jax_setup.enable_compile_cache()
-    _, files = s.sweep_dir(
-        args.out,
-        task,
-        seeds=seeds,
-        values=values,
-        recipe=args.recipe,
-        devices=args.devices,
-        settings={f: getattr(args, f) for f in _DISCRETE - {"seed", "params"}},
-        resume=args.resume,
-        final_eval=args.final_eval,
-        progress=a.say(args),
-    )
+    settings = {f: getattr(args, f) for f in _DISCRETE - {"seed", "params"}}
+    _, files = s.sweep_dir(args.out, task, seeds=seeds, values=values, settings=settings,
+                           progress=a.say(args), **a.pick(args, "recipe devices resume final_eval"))  # fmt: skip
     print(f"wrote {args.out}: sweep.txt, sweep.png and {len(files) - 3} run directories")
     return 0
