@@ -381,6 +381,22 @@ def test_an_environment_of_another_size_or_a_missing_module_or_place(
         ["record", "no_such_module_q:X-v0", "--episodes", "1", "--out", tmp_path / "q.csv"],
         "no_such_module_q",
     )
-    _one_line(
-        capsys, ["loop", "pendulum", "--out", "/proc/no/such", "--rounds", "1"], "/proc/no"
-    )
+    _one_line(capsys, ["loop", "pendulum", "--out", "/proc/no/such", "--rounds", "1"], "/proc/no")
+
+
+def test_env_of_a_task_whose_evaluation_is_its_own(capsys, swingup_run):
+    """--env runs Gymnasium episodes; a task that evaluates otherwise (a float64 reference
+    solve) refuses it instead of ignoring it."""
+    argv = ["evaluate", str(swingup_run), "--env", "Pendulum-v1"]
+    _one_line(capsys, argv, "--env does not apply", "cartpole-swingup")
+
+
+def test_a_horizon_beyond_float32_time_is_refused():
+    from diffcontrol.config import ODETrainConfig
+
+    with pytest.raises(ConfigError, match="up to 1e"):
+        ODETrainConfig(horizon_s=1e300)
+
+
+def test_an_unwritable_gif_names_the_file_asked_for(capsys, cartpole_run):
+    _one_line(capsys, ["animate", str(cartpole_run), "--out", "/proc/x.gif"], "(/proc/x.gif)")

@@ -23,6 +23,8 @@ def _opt(doc: str, **kwargs: Any) -> Any:
 
 MAX_COUNT = 2**31 - 1
 """The largest count (updates, steps, seed): the trainer counts in 32-bit integers."""
+MAX_HORIZON_S = 1e6
+"""The longest closed-loop solve (s): float32 times lose the solver's steps beyond it."""
 MAX_WIDTH = 2**20
 """The largest batch, population, layer width or number of episodes a run may ask for."""
 _WIDE = ("batch", "eval_episodes", "population", "starts")
@@ -351,9 +353,10 @@ class ODETrainConfig(_Config):
             raise ConfigError(
                 f"saves must be at least 2 (both ends of the horizon), got {self.saves}"
             )
-        if not (math.isfinite(self.horizon_s) and self.horizon_s > 0):
+        if not (math.isfinite(self.horizon_s) and 0 < self.horizon_s <= MAX_HORIZON_S):
             raise ConfigError(
-                f"horizon_s must be a positive number of seconds, got {self.horizon_s!r}"
+                f"horizon_s must be a positive number of seconds up to {MAX_HORIZON_S:g} (the "
+                f"solve's times are float32), got {self.horizon_s!r}"
             )
         for name in ("rtol", "atol"):
             value = getattr(self, name)

@@ -76,7 +76,8 @@ os.umask(_UMASK)
 @contextlib.contextmanager
 def _atomic(path: Path, mode: str) -> Iterator[Any]:
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    with named_errors(path):
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
         os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp makes 0600; give the file the usual mode
         with os.fdopen(fd, mode) as f:
@@ -136,6 +137,20 @@ def write_json_new(path: str | os.PathLike, obj: Any) -> None:
             os.unlink(tmp)
 
 
+@contextlib.contextmanager
+def named_errors(path: Path) -> Iterator[None]:
+    """A file-system error while writing ``path`` through a temporary file names ``path``
+    (the file the user asked for), not the temporary one."""
+    try:
+        yield
+    except FileExistsError:
+        raise
+    except OSError as e:
+        if e.filename in (None, str(path)) or e.errno is None:
+            raise
+        raise OSError(e.errno, e.strerror, str(path)) from None
+
+
 def write_new(path: str | os.PathLike, write: Any) -> Any:
     """Create the new file ``path`` with ``write(tmp_path)`` (any writer; ``tmp_path`` keeps the
     suffix) such that of two processes racing for it exactly one succeeds, and the other's
@@ -150,8 +165,9 @@ def write_new(path: str | os.PathLike, write: Any) -> Any:
     path = Path(path)
     tmp = path.with_name(f".{path.stem}.{uuid.uuid4().hex[:12]}.new{path.suffix}")
     try:
-        result = write(tmp)
-        os.link(tmp, path)
+        with named_errors(path):
+            result = write(tmp)
+            os.link(tmp, path)
     except FileExistsError:
         raise RunDirectoryError(
             f"{path} was created by another process meanwhile; choose a new file name"

@@ -48,6 +48,11 @@ def evaluate_dir(
         raise ConfigError(
             f"task {run.task.name!r} has no environment to evaluate in; name one with --env"
         )
+    if env_id and ev.key != "gym_eval":  # the task's own evaluation, not episodes of env_id
+        raise ConfigError(
+            f"--env does not apply to task {run.task.name!r}, whose evaluation is its own "
+            f"({ev.key}), not Gymnasium episodes; leave --env out"
+        )
     return run, ev
 
 
