@@ -193,6 +193,7 @@ def loop(
             },
             "real_return": judged.get("mean_return"),
             "real_return_std": judged.get("std_return"),
+            "real_returns": judged.get("returns"),
             "eval_episodes": eval_episodes,
             "eval_seed": eval_seed,
             "seconds": time.perf_counter() - t0,
