@@ -94,9 +94,12 @@ def run_real_comparison(
 
     task = resolve(task) if isinstance(task, str) else task
     thresholds = THRESHOLDS.get(task.name)
+    if type(task).state_from_observation is Task.state_from_observation:
+        thresholds = None  # no model of it can be fitted to recorded observations
     if not thresholds:
         raise ConfigError(
-            f"compare --real needs a task with a threshold; choose one of {list(THRESHOLDS)}"
+            f"compare --real needs a task with a threshold whose model can be fitted to "
+            f"recorded episodes, not {task.name!r}; choose pendulum or cartpole"
         )
     models = list(models or LABELS)
     bad = [m for m in models if m not in LABELS]
