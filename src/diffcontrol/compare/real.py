@@ -238,11 +238,15 @@ def _prepare(out: Path, settings: dict, resume: bool) -> None:
         old = io.read_json(path, "comparison settings")
         if not resume:
             raise RunDirectoryError(f"{out} holds a comparison; pass --resume or another --out")
-        if {k: v for k, v in old.items() if k != "created"} != settings:
+        same = ("created", "seeds")  # more (or fewer) seeds: the finished runs still hold
+        if {k: v for k, v in old.items() if k not in same} != {
+            k: v for k, v in settings.items() if k not in same
+        }:
             raise RunDirectoryError(
                 f"{out} holds a comparison with other settings; resume it with those, or choose "
                 "another --out"
             )
+        io.write_json(path, {**old, "seeds": settings["seeds"]})
         return
     if out.exists() and any(out.iterdir()):
         raise RunDirectoryError(f"--out {out} is not empty; choose a new or empty directory")

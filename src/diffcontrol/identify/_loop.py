@@ -310,4 +310,5 @@ def _plot(state: dict, path: Path) -> None:
     ax.set_ylabel("return on the real system")
     ax.set_title(f"{s['task']}: {s['model']} model, real system {s['env_id']}", fontsize=9)
     ax.grid(alpha=0.3)
+    fig.tight_layout()
     write_figure(fig, path)
