@@ -275,7 +275,11 @@ def _report(task, out, settings, results, rl, thresholds) -> dict:
     }
     io.write_json(out / "comparison.json", doc)
     (out / "comparison.md").write_text(text + "\n")
-    plot(task.name, results + rl, thresholds, out / "comparison.png")
+    title = f"{task.name}: diffcontrol's loop counted in real steps, against RL baselines"
+    low = min(thresholds) - 0.5 * (max(thresholds) - min(thresholds) or abs(min(thresholds)))
+    top = max(p["mean_return"] for r in results + rl for p in r["curve"])
+    top += 0.1 * (top - low)  # room above the best point
+    plot(task.name, results + rl, thresholds, out / "comparison.png", title=title, ylim=(low, top))
     doc["files"] = [str(out / f) for f in ("comparison.json", "comparison.md", "comparison.png")]
     return doc
 
