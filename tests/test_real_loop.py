@@ -112,7 +112,7 @@ def test_loop_counts_real_steps_starts_wrong_and_resumes(tmp_path, capsys):
     (out / "round_2" / "run" / "model.json").unlink()  # as if interrupted in round 2's training
     assert main([*argv, "--resume"]) == 0
     assert (out / "round_1" / "recorded.csv").read_bytes() == before  # nothing recorded twice
-    assert len(identify.read_trajectories(out / "data.csv").episodes()) == 2
+    assert identify.read_trajectories(out / "data.csv").num_episodes == 2
 
 
 def test_a_loop_becomes_a_compare_run_on_real_steps(tmp_path):

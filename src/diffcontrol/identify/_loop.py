@@ -162,6 +162,7 @@ def loop(
             for line in fitted.lines:
                 say(line)
         if not (here / "run" / "model.json").exists():
+            (here / "eval.json").unlink(missing_ok=True)  # it judged another controller
             trained, params, real, info = fitted_training(task, here / "fit", None)
             say(info.pop("note"))
             # A parameter that must be >= 0 (the Pendulum's friction) fitted a hair below 0
