@@ -69,7 +69,8 @@ def run_real_comparison(
     ``comparison.json`` holds (with ``"table"`` and ``"files"``).
 
     Args:
-        task: a discrete-time task with a Gymnasium twin (``pendulum``, ``cartpole``).
+        task: a discrete-time task with a threshold whose state can be reconstructed from
+            observations (``pendulum``; the cart-pole cannot yet).
         out_dir: a new or empty directory, or a previous one with ``resume``.
         seeds: loop seeds ``0 ... seeds-1`` (recording, the networks, training).
         models: a subset of ``params``, ``hybrid``, ``neural`` (default all).
@@ -99,7 +100,7 @@ def run_real_comparison(
     if not thresholds:
         raise ConfigError(
             f"compare --real needs a task with a threshold whose model can be fitted to "
-            f"recorded episodes, not {task.name!r}; choose pendulum or cartpole"
+            f"recorded episodes, not {task.name!r}; choose pendulum"
         )
     models = list(models or LABELS)
     bad = [m for m in models if m not in LABELS]

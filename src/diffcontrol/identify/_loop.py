@@ -89,7 +89,7 @@ def loop(
     if type(task).state_from_observation is Task.state_from_observation:
         raise ConfigError(
             f"loop cannot fit a model of {task.name!r} (it does not reconstruct its state from "
-            "observations: define its state_from_observation); e.g. pendulum or cartpole"
+            "observations: define its state_from_observation); e.g. pendulum"
         )
     env_id = env_id or task.gym_id or own_id(task)
     env_kwargs = dict(env_kwargs or {})
