@@ -73,6 +73,14 @@ def add_parsers(sub: Any) -> None:
         ("--updates", a.positive_int, None, "N", "per round"),
         ("--seed", a.seed, 0, "S", "seed of training and recording (0)"),
         ("--eval-episodes", a.episodes, 20, "N", "(20)"),
+        ("--eval-seed", a.seed, 0, "S",
+         "first reset seed of the evaluation episodes on the real system (0; compare: 1000)"),
+        ("--start", [a.param], [], "NAME=VALUE",
+         "a parameter the grey box or hybrid starts from instead of the nominal one "
+         "(repeatable), e.g. g=8, so that it is not handed the truth"),
+        ("--explore-noise", a.fraction, 0.0, "F",
+         "noise on the controller's actions while it records, a fraction of the action's "
+         "half range (0: none; 0.1 suits the Pendulum)"),
         ("--resume", FLAG, False, None, "continue an interrupted loop in DIR"),
         ("--quiet", FLAG, False, None, "print only each round's summary"),
     )
@@ -104,7 +112,10 @@ def cmd_loop(args: argparse.Namespace) -> int:
         env_id=args.env,
         env_kwargs=dict(args.env_arg),
         names=args.params,
+        start=dict(args.start),
         progress=a.say(args),
-        **a.pick(args, "model rounds episodes updates seed eval_episodes resume"),
+        **a.pick(
+            args, "model rounds episodes updates seed eval_episodes eval_seed explore_noise resume"
+        ),
     )
     return 0

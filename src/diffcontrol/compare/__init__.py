@@ -290,6 +290,8 @@ def machine() -> dict[str, Any]:
     return info
 
 
+from .real import run_real_comparison  # noqa: E402  (it reads machine() above)
+
 __all__ = [
     "BASELINES",
     "Baseline",
@@ -300,4 +302,5 @@ __all__ = [
     "machine",
     "methods_for",
     "run_comparison",
+    "run_real_comparison",
 ]

@@ -120,10 +120,18 @@ def _median_curve(curves: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarr
     return grid, np.nanmedian(vals, axis=0), np.nanmin(vals, axis=0), np.nanmax(vals, axis=0)
 
 
-def plot(task_name: str, results: list[dict], thresholds: tuple[float, ...], path: str | Path):
+def plot(
+    task_name: str,
+    results: list[dict],
+    thresholds: tuple[float, ...],
+    path: str | Path,
+    *,
+    title: str | None = None,
+    ylim: tuple[float, float] | None = None,
+):
     """Return against environment steps and against training seconds, all methods on one
     figure, log-scaled x, the median over seeds drawn and its min–max range shaded (over the
-    seeds evaluated by then).
+    seeds evaluated by then); ``ylim`` zooms in on the returns (e.g. near the thresholds).
 
     Points at zero steps or seconds are left out (log scale). Written atomically.
     """
@@ -159,7 +167,9 @@ def plot(task_name: str, results: list[dict], thresholds: tuple[float, ...], pat
                 continue
             grid, med, lo, hi = _median_curve(curves)
             n = len(curves)
-            axis.step(grid, med, where="post", color=f"C{i}", label=f"{method} ({n} seeds)")
+            few = len(grid) <= 4  # a loop's few rounds: mark them
+            axis.step(grid, med, where="post", color=f"C{i}", label=f"{method} ({n} seeds)",
+                      marker="o" if few else None, markersize=4)  # fmt: skip
             axis.fill_between(grid, lo, hi, step="post", color=f"C{i}", alpha=0.2)
         for t in thresholds:
             axis.axhline(t, color="k", ls="--", lw=0.8)
@@ -169,6 +179,8 @@ def plot(task_name: str, results: list[dict], thresholds: tuple[float, ...], pat
         axis.grid(True, which="both", alpha=0.3)
     axes[0].set_ylabel("evaluation return (median; shaded: min–max over seeds)")
     axes[0].legend(loc="lower right")
-    fig.suptitle(f"{task_name}: diffcontrol against RL baselines")
+    if ylim is not None:
+        axes[0].set_ylim(*ylim)
+    fig.suptitle(title or f"{task_name}: diffcontrol against RL baselines")
     fig.tight_layout()
     return write_figure(fig, path)

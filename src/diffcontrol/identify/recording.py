@@ -180,15 +180,17 @@ def record(
     every = max(1, episodes // 20)
     all_obs, all_act, returns, ends = [], [], [], []
     for i in range(episodes):
-        obs, _ = env.reset(seed=seed + i)
+        obs, _ = _call(env.reset, env_id, i, 0, seed=seed + i)
         observations, actions, total, done = [obs], [], 0.0, False
         while not done:
+            _check_finite(obs, env_id, i, len(actions))
             action = env.action_space.sample() if policy is None else policy(obs)
             actions.append(_action_row(action, env.action_space, env_id))
-            obs, reward, terminated, truncated, _ = env.step(action)
+            obs, reward, terminated, truncated, _ = _call(env.step, env_id, i, len(actions), action)
             observations.append(obs)
             total += float(reward)
             done = terminated or truncated or (limit is not None and len(actions) >= limit)
+        _check_finite(obs, env_id, i, len(actions))
         all_obs.append(np.asarray(observations, np.float64))
         all_act.append(np.stack(actions))
         returns.append(total)
@@ -216,6 +218,30 @@ def record(
     return TrajectoryData.from_episodes(
         all_obs, all_act, obs_columns, act_columns, dt_s=_time_step(env), metadata=metadata
     )
+
+
+def _call(method: Callable, env_id: str, episode: int, step: int, *args: Any, **kw: Any) -> Any:
+    """``env.reset``/``env.step``, with an exception of the environment turned into one line
+    (the environment is the user's: a bug there is not diffcontrol's traceback)."""
+    try:
+        return method(*args, **kw)
+    except (KeyboardInterrupt, SystemExit, ConfigError):
+        raise
+    except Exception as e:
+        raise ConfigError(
+            f"{env_id} raised {type(e).__name__}: {e} in episode {episode} at step {step} while "
+            "recording; nothing of this recording was written: fix the environment and record again"
+        ) from None
+
+
+def _check_finite(obs: Any, env_id: str, episode: int, step: int) -> None:
+    """Refuse a NaN or infinite observation: a model cannot be fitted to it."""
+    if not np.all(np.isfinite(np.asarray(obs, np.float64))):
+        raise ConfigError(
+            f"{env_id} returned the non-finite observation {np.asarray(obs).tolist()} in episode "
+            f"{episode} at step {step}; nothing of this recording was written: fix the "
+            "environment (or its parameters) and record again"
+        )
 
 
 def record_gym(

@@ -1,0 +1,291 @@
+"""``diffcontrol compare TASK --real``: diffcontrol counted in the real system's steps.
+
+``diffcontrol compare`` counts the simulated episodes diffcontrol trains on, which is right
+when the simulator is the system. Here diffcontrol may not use the task's simulator as the
+system: it learns a model by acting on the real Gymnasium environment (``identify.loop``:
+explore, fit, train through the fit, act) and every real environment step it takes is
+counted: the random exploration and every episode its controllers record (with exploration
+noise); the evaluation episodes are not, as for RL. Each round's controller is evaluated on
+the real environment over ``final_episodes`` episodes with reset seeds ``eval_seed ...``
+(those of ``diffcontrol compare``), and the loop stops at the first round whose controller
+reaches the task's threshold, or after ``max_rounds``.
+
+Methods: ``params`` (the grey box, whose physics starts from the stated wrong ``start``),
+``hybrid`` (the same wrong physics plus a network) and ``neural`` (a network alone). The RL
+rows are those already recorded by ``diffcontrol compare`` (e.g.
+``benchmarks/results/compare.json``, same evaluation seeds), read, not re-run.
+
+Writes to ``out``: ``loops/<model>-seed<S>/`` (each loop's directory; resumable),
+``runs/<method>-seed<S>.json`` (each finished run, as ``compare`` writes them),
+``comparison.json``, ``comparison.md`` and ``comparison.png`` (return against real steps and
+against wall-clock seconds, the RL curves beside).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .. import io
+from ..errors import ConfigError, RunDirectoryError
+from ..tasks import Task, resolve
+from .report import plot, summarize, table
+from .run import THRESHOLDS, first_reached
+
+LABELS = {"params": "grey box", "hybrid": "hybrid", "neural": "neural"}
+"""The rows' names: ``diffcontrol (grey box)`` and so on."""
+
+EPISODES = {"params": 1, "hybrid": 1, "neural": 5}
+"""Real episodes recorded per round: a network alone needs 1,000 transitions to be fitted at all
+(``identify.MIN_TRANSITIONS``), i.e. 5 Pendulum episodes."""
+
+START = {"pendulum": {"g": 8.0, "friction": 0.1}}
+"""The wrong physics the grey box and the hybrid start from (Pendulum-v1: g = 10, no
+friction)."""
+
+
+def run_real_comparison(
+    task: Task | str,
+    out_dir: str | Path,
+    *,
+    seeds: int = 5,
+    models: list[str] | None = None,
+    max_rounds: int = 3,
+    episodes: dict[str, int] | None = None,
+    start: dict[str, float] | None = None,
+    explore_noise: float = 0.1,
+    updates: int | None = None,
+    final_episodes: int = 100,
+    eval_seed: int = 1000,
+    rl_results: str | Path | None = None,
+    resume: bool = False,
+    progress: Callable[[str], None] | None = None,
+) -> dict[str, Any]:
+    """Run the loop of every model on every seed on the real environment; returns what
+    ``comparison.json`` holds (with ``"table"`` and ``"files"``).
+
+    Args:
+        task: a discrete-time task with a threshold whose state can be reconstructed from
+            observations (``pendulum``; the cart-pole cannot yet).
+        out_dir: a new or empty directory, or a previous one with ``resume``.
+        seeds: loop seeds ``0 ... seeds-1`` (recording, the networks, training).
+        models: a subset of ``params``, ``hybrid``, ``neural`` (default all).
+        max_rounds: the most rounds of a loop; it stops at the first controller that reaches
+            the task's threshold.
+        episodes: real episodes per round by model (default ``EPISODES``).
+        start: the wrong physics the grey box and hybrid start from (default ``START``).
+        explore_noise: action noise while a controller records (``identify.loop``).
+        updates: gradient updates of each round's training (default the task's, which stops
+            early at its target return).
+        final_episodes: evaluation episodes of each round's controller (not counted).
+        eval_seed: their first reset seed (``diffcontrol compare``'s: 1000).
+        rl_results: a ``diffcontrol compare`` result (its ``comparison.json``, or the
+            benchmark's ``compare.json`` holding several tasks) whose RL runs are shown beside.
+        resume: keep what ``out_dir`` already holds.
+
+    Raises:
+        ConfigError: a task without a threshold, an unknown model, an RL file of another
+            evaluation protocol; RunDirectoryError: ``out_dir`` holds other things.
+    """
+    from ..identify import loop
+
+    task = resolve(task) if isinstance(task, str) else task
+    thresholds = THRESHOLDS.get(task.name)
+    if type(task).state_from_observation is Task.state_from_observation:
+        thresholds = None  # no model of it can be fitted to recorded observations
+    if not thresholds:
+        raise ConfigError(
+            f"compare --real needs a task with a threshold whose model can be fitted to "
+            f"recorded episodes, not {task.name!r}; choose pendulum"
+        )
+    models = list(models or LABELS)
+    bad = [m for m in models if m not in LABELS]
+    if bad:
+        raise ConfigError(f"unknown model(s) {bad} for --real; choose among {list(LABELS)}")
+    episodes = {**EPISODES, **(episodes or {})}
+    start = dict(START.get(task.name, {}) if start is None else start)
+    target = max(thresholds)  # returns: the highest is the hardest
+    rl = _rl_runs(rl_results, task.name, eval_seed) if rl_results else []
+    out = Path(out_dir)
+    settings = {
+        "format": "diffcontrol-compare-real",
+        "task": task.name,
+        "env_id": task.gym_id,
+        "models": models,
+        "seeds": list(range(seeds)),
+        "max_rounds": max_rounds,
+        "episodes_per_round": {m: episodes[m] for m in models},
+        "start": start,
+        "explore_noise": explore_noise,
+        "updates": updates,
+        "final_episodes": final_episodes,
+        "eval_seed": eval_seed,
+        "threshold": target,
+        "rl_results": str(rl_results) if rl_results else None,
+    }
+    _prepare(out, settings, resume)
+    say = progress or (lambda line: None)
+    results = []
+    said: set[str] = set()  # a resumed loop reports its earlier rounds again: said once
+
+    def tell(line: str) -> None:
+        if line not in said:
+            said.add(line)
+            say(line)
+
+    for seed in range(seeds):  # every model on seed 0 first: a cut-short run covers them all
+        for model in models:
+            path = out / "runs" / f"{model}-seed{seed}.json"
+            if path.exists():
+                results.append(io.read_json(path, "run"))
+                continue
+            where = out / "loops" / f"{model}-seed{seed}"
+            t0 = time.perf_counter()
+            for rounds in range(1, max_rounds + 1):
+                state = loop(
+                    task,
+                    where,
+                    model=model,
+                    rounds=rounds,
+                    episodes=episodes[model],
+                    seed=seed,
+                    eval_episodes=final_episodes,
+                    eval_seed=eval_seed,
+                    start=start if model != "neural" else None,
+                    explore_noise=explore_noise,
+                    updates=updates,
+                    resume=True,
+                    progress=None,
+                    report=lambda line, m=model, s=seed: tell(f"{LABELS[m]} seed {s}: {line}"),
+                )
+                last = max(state["rounds"], key=lambda r: r["round"])
+                if last["real_return"] is not None and last["real_return"] >= target:
+                    break
+            run = _as_run(model, seed, state, time.perf_counter() - t0)
+            path.parent.mkdir(parents=True, exist_ok=True)
+            io.write_json(path, run)
+            results.append(run)
+    return _report(task, out, settings, results, rl, thresholds)
+
+
+def _as_run(model: str, seed: int, state: dict, wall: float, point_episodes: int = 20) -> dict:
+    """A loop as a run of ``diffcontrol compare`` (``runs/<method>-seed<S>.json``): one curve
+    point per round at the real steps used so far and the loop's seconds so far (recording,
+    fitting and training; the evaluations left out, as in ``compare``). A point's return is
+    the mean over the first ``point_episodes`` evaluation episodes (``compare``'s evaluation
+    points: 20, reset seeds 1000-1019); ``final`` and ``return_all`` are over all of them."""
+    curve, seconds = [], 0.0
+    for r in sorted(state["rounds"], key=lambda r: r["round"]):
+        seconds += sum(v for v in (r.get("work_seconds") or {}).values() if v)
+        returns = np.asarray(r.get("real_returns") or [r["real_return"]], float)
+        curve.append(
+            {
+                "env_steps": r["real_steps"],
+                "episodes": float(r["episodes"]),
+                "episodes_finished": r["episodes"],
+                "train_seconds": seconds,
+                "mean_return": float(np.mean(returns[:point_episodes])),
+                "std_return": float(np.std(returns[:point_episodes])),
+                "return_all": r["real_return"],
+                "std_all": r["real_return_std"],
+                "round": r["round"],
+                "model_error_on_new_data": r.get("model_error_on_new_data"),
+            }
+        )
+    last = curve[-1]
+    return {
+        "method": f"diffcontrol ({LABELS[model]})",
+        "algo": "real-system loop",
+        "source": "identify.loop on the real environment",
+        "seed": seed,
+        "config": {**state["settings"], "start": state.get("start")},
+        "env_steps": last["env_steps"],
+        "episodes": last["episodes"],
+        "train_seconds": last["train_seconds"],
+        "wall_seconds_with_evaluation": wall,
+        "curve": curve,
+        "final": {
+            "episodes": state["rounds"][-1]["eval_episodes"],
+            "mean_return": last["return_all"],
+            "std_return": last["std_all"],
+        },
+    }
+
+
+def _rl_runs(path: str | Path, task_name: str, eval_seed: int) -> list[dict]:
+    """The RL runs of a recorded ``diffcontrol compare`` (its diffcontrol rows left out: they
+    count simulated steps)."""
+    doc = io.read_json(Path(path), "comparison")
+    doc = doc.get("tasks", {}).get(task_name, doc)
+    if doc.get("task") != task_name or "runs" not in doc:
+        raise ConfigError(f"{path} holds no comparison of {task_name!r}; pass --rl-results FILE")
+    if doc.get("eval_seed") != eval_seed:
+        raise ConfigError(
+            f"{path} evaluated from reset seed {doc.get('eval_seed')}, not {eval_seed}; pass "
+            f"--eval-seed {doc.get('eval_seed')}"
+        )
+    return [r for r in doc["runs"] if r["method"] != "diffcontrol"]
+
+
+def _prepare(out: Path, settings: dict, resume: bool) -> None:
+    path = out / "compare-real.json"
+    if out.exists() and not out.is_dir():
+        raise RunDirectoryError(f"--out {out} is a file; give a directory")
+    if path.exists():
+        old = io.read_json(path, "comparison settings")
+        if not resume:
+            raise RunDirectoryError(f"{out} holds a comparison; pass --resume or another --out")
+        same = ("created", "seeds")  # more (or fewer) seeds: the finished runs still hold
+        if {k: v for k, v in old.items() if k not in same} != {
+            k: v for k, v in settings.items() if k not in same
+        }:
+            raise RunDirectoryError(
+                f"{out} holds a comparison with other settings; resume it with those, or choose "
+                "another --out"
+            )
+        io.write_json(path, {**old, "seeds": settings["seeds"]})
+        return
+    if out.exists() and any(out.iterdir()):
+        raise RunDirectoryError(f"--out {out} is not empty; choose a new or empty directory")
+    out.mkdir(parents=True, exist_ok=True)
+    io.write_json(path, {**settings, "created": io.now_iso()})
+
+
+def _report(task, out, settings, results, rl, thresholds) -> dict:
+    summary = summarize(results + rl, thresholds)
+    text = table(f"{task.name} (diffcontrol: real steps of the loop; RL: its own steps)", summary)
+    per_seed, per_seed_all = {}, {}
+    for r in results:
+        hit = first_reached(r["curve"], settings["threshold"])
+        per_seed.setdefault(r["method"], {})[r["seed"]] = hit["env_steps"] if hit else None
+        hit = next((p for p in r["curve"] if p["return_all"] >= settings["threshold"]), None)
+        per_seed_all.setdefault(r["method"], {})[r["seed"]] = hit["env_steps"] if hit else None
+    doc = {
+        **settings,
+        "created": io.now_iso(),
+        "machine": _machine(),
+        "real_steps_to_threshold": per_seed,
+        "real_steps_to_threshold_over_all_episodes": per_seed_all,
+        "summary": summary,
+        "runs": results,
+        "table": text,
+    }
+    io.write_json(out / "comparison.json", doc)
+    (out / "comparison.md").write_text(text + "\n")
+    title = f"{task.name}: diffcontrol's loop counted in real steps, against RL baselines"
+    low = min(thresholds) - 0.5 * (max(thresholds) - min(thresholds) or abs(min(thresholds)))
+    top = max(p["mean_return"] for r in results + rl for p in r["curve"])
+    top += 0.1 * (top - low)  # room above the best point
+    plot(task.name, results + rl, thresholds, out / "comparison.png", title=title, ylim=(low, top))
+    doc["files"] = [str(out / f) for f in ("comparison.json", "comparison.md", "comparison.png")]
+    return doc
+
+
+def _machine() -> dict:
+    from . import machine
+
+    return machine()

@@ -1,0 +1,135 @@
+"""The loop counted in real steps (issue 14): its bookkeeping, a grey box that starts wrong,
+exploration with noise, bad input, and ``compare --real``'s runs."""
+
+from __future__ import annotations
+
+import json
+
+import gymnasium
+import numpy as np
+import pytest
+from gymnasium import spaces
+
+import diffcontrol
+from diffcontrol import identify
+from diffcontrol.cli import main
+from diffcontrol.compare.real import _as_run, _rl_runs
+from diffcontrol.errors import ConfigError
+from diffcontrol.identify._rounds import NoisyPolicy, model_error, predictor_of
+
+
+class _BrokenPendulum(gymnasium.Env):
+    """Pendulum-shaped spaces; NaN observations after 3 steps, or raises at step 3."""
+
+    observation_space = spaces.Box(-np.inf, np.inf, (3,), np.float32)
+    action_space = spaces.Box(-2.0, 2.0, (1,), np.float32)
+
+    def __init__(self, how: str = "nan"):
+        self.how, self.t = how, 0
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.t = 0
+        return np.array([1.0, 0.0, 0.0], np.float32), {}
+
+    def step(self, action):
+        self.t += 1
+        if self.t == 3 and self.how == "raise":
+            raise RuntimeError("motor driver fault")
+        obs = np.array([1.0, 0.0, np.nan if self.t >= 3 else 0.0], np.float32)
+        return obs, 0.0, False, self.t >= 10, {}
+
+
+gymnasium.register("test/BrokenPendulum-v0", entry_point=_BrokenPendulum, max_episode_steps=10)
+
+
+@pytest.mark.parametrize("how, match", [("nan", "non-finite observation"), ("raise", "raised")])
+def test_record_refuses_nan_observations_and_an_environment_that_raises(how, match):
+    task = diffcontrol.make("pendulum")
+    with pytest.raises(ConfigError, match=match) as e:
+        identify.record("test/BrokenPendulum-v0", 1, env_kwargs={"how": how}, task=task)
+    assert "\n" not in str(e.value) and "episode 0 at step 3" in str(e.value)
+
+
+def test_loop_refuses_other_spaces_and_unknown_start_before_writing(tmp_path, capsys):
+    out = tmp_path / "loop"
+    assert main(["loop", "pendulum", "--env", "CartPole-v1", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "CartPole-v1 has the spaces" in err
+    assert main(["loop", "pendulum", "--start", "gravity=8", "--out", str(out)]) == 2
+    assert "no parameter 'gravity'" in capsys.readouterr().err
+    assert main(["loop", "trebuchet", "--out", str(out)]) == 2
+    assert "cannot fit a model of 'trebuchet'" in capsys.readouterr().err
+    assert main(["compare", "trebuchet", "--real", "--out", str(out)]) == 2
+    assert "choose pendulum" in capsys.readouterr().err
+    assert main(["compare", "pendulum", "--real", "--models", "pid", "--out", str(out)]) == 2
+    assert "unknown model(s) ['pid']" in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_noisy_policy_stays_in_the_action_space_and_explores():
+    box = spaces.Box(-2.0, 2.0, (1,), np.float32)
+    policy = NoisyPolicy(lambda obs: np.array([1.9], np.float32), box, 0.5, seed=0)
+    actions = np.array([policy(np.zeros(3)) for _ in range(500)])
+    assert np.all((actions >= -2.0) & (actions <= 2.0))
+    assert 0.5 < actions.std() < 1.2 and np.any(actions < 1.9)  # noise of 0.5 * 2 N m, clipped
+    assert np.array_equal(NoisyPolicy(lambda o: [0.5], box, 0.0, 0)(np.zeros(3)), [0.5])
+    discrete = NoisyPolicy(lambda obs: 1, spaces.Discrete(2), 0.3, seed=0)
+    picks = np.array([discrete(np.zeros(4)) for _ in range(2000)])
+    assert abs(np.mean(picks == 0) - 0.15) < 0.03  # random with p 0.3, half of those are 0
+
+
+def test_model_error_before_the_fit_is_that_of_the_start_physics():
+    task = diffcontrol.make("pendulum")
+    data = identify.record("Pendulum-v1", 1, seed=0, task=task)
+    truth = model_error(predictor_of(task, None, "params", {}), data)
+    wrong = model_error(predictor_of(task, None, "hybrid", {"g": 8.0}), data)
+    assert truth["rmse_1"] < 1e-5 < 1e-3 < wrong["rmse_1"] < wrong["rmse_10"]
+    assert predictor_of(task, None, "neural", {}) is None
+
+
+@pytest.mark.slow
+def test_loop_counts_real_steps_starts_wrong_and_resumes(tmp_path, capsys):
+    out = tmp_path / "loop"
+    argv = ["loop", "pendulum", "--rounds", "2", "--episodes", "1", "--updates", "2"]
+    argv += ["--eval-episodes", "2", "--eval-seed", "1000", "--start", "g=8"]
+    argv += ["--explore-noise", "0.1", "--out", str(out), "--quiet"]
+    assert main(argv) == 0
+    doc = json.loads((out / "loop.json").read_text())
+    assert doc["settings"]["start"] == {"g": 8.0} and "g = 8 (nominal 10)" in doc["start"]["note"]
+    rounds = doc["rounds"]
+    assert [r["real_steps"] for r in rounds] == [200, 400]  # evaluation episodes not counted
+    first, second = (r["model_error_on_new_data"] for r in rounds)
+    assert first["rmse_1"] > 1e-3 > second["rmse_1"]  # g = 8 was wrong; the fit of round 1 not
+    assert all(abs(r["fitted_parameters"]["g"] - 10.0) < 0.01 for r in rounds)
+    evaluated = json.loads((out / "round_1" / "eval.json").read_text())
+    assert (
+        evaluated["seeds"] == [1000, 1001] and rounds[0]["real_return"] == evaluated["mean_return"]
+    )
+    sources = json.loads((out / "data.csv").read_text().splitlines()[0][2:])["metadata"]["sources"]
+    assert sources == ["random actions", "round 1 controller with action noise 0.1"]
+    before = (out / "round_1" / "recorded.csv").read_bytes()
+    (out / "round_2" / "run" / "model.json").unlink()  # as if interrupted in round 2's training
+    assert main([*argv, "--resume"]) == 0
+    assert (out / "round_1" / "recorded.csv").read_bytes() == before  # nothing recorded twice
+    assert identify.read_trajectories(out / "data.csv").num_episodes == 2
+
+
+def test_a_loop_becomes_a_compare_run_on_real_steps(tmp_path):
+    rounds = [
+        {"round": 1, "episodes": 1, "real_steps": 200, "real_return": -400.0,
+         "real_return_std": 50.0, "eval_episodes": 100, "model_error_on_new_data": None,
+         "work_seconds": {"record": 0.1, "fit": 2.0, "train": 3.0}},
+        {"round": 2, "episodes": 2, "real_steps": 400, "real_return": -140.0,
+         "real_return_std": 80.0, "eval_episodes": 100, "model_error_on_new_data": {"rmse_1": 0.1},
+         "work_seconds": {"record": 0.1, "fit": 1.0, "train": None}},
+    ]  # fmt: skip
+    run = _as_run("params", 3, {"settings": {}, "rounds": rounds, "start": {}}, 9.0)
+    assert run["method"] == "diffcontrol (grey box)" and run["seed"] == 3
+    assert [p["env_steps"] for p in run["curve"]] == [200, 400]
+    assert run["curve"][-1]["train_seconds"] == pytest.approx(6.2)
+    assert run["final"]["mean_return"] == -140.0 and run["env_steps"] == 400
+    other = tmp_path / "c.json"
+    other.write_text(json.dumps({"task": "pendulum", "eval_seed": 0, "runs": []}))
+    with pytest.raises(ConfigError, match="--eval-seed 0"):
+        _rl_runs(other, "pendulum", 1000)
