@@ -58,8 +58,10 @@ def test_loop_refuses_other_spaces_and_unknown_start_before_writing(tmp_path, ca
     assert len(err.strip().splitlines()) == 1 and "CartPole-v1 has the spaces" in err
     assert main(["loop", "pendulum", "--start", "gravity=8", "--out", str(out)]) == 2
     assert "no parameter 'gravity'" in capsys.readouterr().err
-    assert main(["loop", "trebuchet", "--out", str(out)]) == 2
-    assert "cannot fit a model of 'trebuchet'" in capsys.readouterr().err
+    assert main(["loop", "cartpole", "--out", str(out)]) == 2
+    assert "cannot fit a model of 'cartpole'" in capsys.readouterr().err
+    assert main(["loop", "trebuchet", "--explore-noise", "0.1", "--out", str(out)]) == 2
+    assert "applies to Gymnasium episodes" in capsys.readouterr().err
     assert main(["compare", "trebuchet", "--real", "--out", str(out)]) == 2
     assert "choose pendulum" in capsys.readouterr().err
     assert main(["compare", "pendulum", "--real", "--models", "pid", "--out", str(out)]) == 2
