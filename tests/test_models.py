@@ -214,7 +214,7 @@ def test_loop_records_fits_trains_and_resumes(tmp_path, capsys):
         assert np.isfinite(r["real_return"])
     sources = json.loads((out / "data.csv").read_text().splitlines()[0][2:])["metadata"]
     assert sources["sources"][0] == "random actions"  # round 1 records with its controller:
-    assert sources["sources"][1] == f"controller {out / 'round_1' / 'run'} (task 'pendulum')"
+    assert sources["sources"][1] == "round 1 controller"
     assert (out / "round_2" / "run" / "model.json").exists() and (out / "loop.png").exists()
     capsys.readouterr()
     assert main(argv) == 2 and "pass --resume" in capsys.readouterr().err

@@ -158,7 +158,6 @@ def train_run(
     cache_dir = None
     if compile_cache and not os.environ.get("DIFFCONTROL_NO_COMPILE_CACHE"):
         cache_dir = _jax_setup.enable_compile_cache()
-    say(describe(the_task, config, out))
     if getattr(config, "gradient", None) == "backsolve":
         note(
             "note: --gradient backsolve is the continuous adjoint: its gradient is "
@@ -175,6 +174,7 @@ def train_run(
     resume_command = f"diffcontrol train{named} --out {out} --resume" + (
         f" --env {env_id}" if env_id and ":" in env_id else ""
     )
+    say(describe(the_task, config, out))  # the first line; an interrupt after it is caught
     try:
         result = train(
             the_task,

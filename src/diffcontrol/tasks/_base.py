@@ -96,8 +96,9 @@ class _TaskBase(abc.ABC):
         for path, leaf in jax.tree_util.tree_leaves_with_path(params):
             if np.any(np.isnan(np.asarray(leaf, float))):
                 raise ConfigError(f"the parameters of task {self.name!r} hold NaN")
-            with np.errstate(over="ignore"):  # the simulator runs in float32
-                if not np.all(np.isfinite(np.asarray(leaf, np.float32))):
+            with np.errstate(over="ignore"):  # the simulator runs in float32; inf is a value
+                wide = np.asarray(leaf, float)  # there (an unlimited torque), 1e300 is not
+                if not np.all(np.isinf(wide) | np.isfinite(np.asarray(leaf, np.float32))):
                     name = jax.tree_util.keystr(path).lstrip(".")
                     raise ConfigError(
                         f"parameter {name}={np.asarray(leaf)} of task {self.name!r} is beyond "
