@@ -43,6 +43,7 @@ from ..identify.data._files import (
     csv_parts,
     csv_table,
     npz_arrays,
+    read_npz,
     readable_suffix,
 )
 from ..io import parse_json
@@ -259,33 +260,19 @@ def _read_old(path: Path, suffix: str) -> TrajectoryData:
         check_ranges(throws, str(path), [columns[j] for j in order], lambda i: f"line {lines[i]}")
         return throws_table(throws, meta)
     names = (*FIELDS, "header")
-    try:
-        with np.load(path, allow_pickle=False) as npz:
-            missing = [n for n in names if n not in npz.files]
-            if missing:
-                cols = [c for c, f in zip(OLD_COLUMNS, FIELDS) if f in missing]
-                raise DataFileError(
-                    f"{path}: missing array(s) {missing}"
-                    + (f" (the column(s) {cols})" if cols else "")
-                    + f"; a {OLD_FORMAT} .npz holds {list(names)}"
-                )
-            arrays = npz_arrays(npz, names, path)
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as e:
-        raise DataFileError(f"{path} is not a readable .npz ({e}); write it again") from None
-    try:
-        header = parse_json(arrays.pop("header").tobytes())
-    except ValueError as e:
-        raise DataFileError(f"{path}: the header array is not JSON ({e}); write it again") from None
+
+    def missing(absent: list[str]) -> str:
+        cols = [c for c, f in zip(OLD_COLUMNS, FIELDS) if f in absent]
+        return (
+            f" (the column(s) {cols})" if cols else ""
+        ) + f"; a {OLD_FORMAT} .npz holds {list(names)}"
+
+    arrays, header = read_npz(path, names, missing)
     meta = check_header(header, path, OLD_FORMAT, OLD_VERSION)
     columns = header.get("columns", list(OLD_COLUMNS))
     if not isinstance(columns, list) or not all(isinstance(c, str) for c in columns):
         raise DataFileError(f"{path}: 'columns' in the header must be a list of column names")
     _column_order(columns, OLD_COLUMNS, path, f"a {OLD_FORMAT} file")  # the declared units
-    for name, arr in arrays.items():
-        if not np.issubdtype(arr.dtype, np.integer) and not np.issubdtype(arr.dtype, np.floating):
-            raise DataFileError(
-                f"{path}: array {name!r} has dtype {arr.dtype}; it must hold real numbers"
-            )
     if any(arrays[f].shape != arrays["wind"].shape or arrays[f].ndim != 1 for f in FIELDS):
         shapes = {f: arrays[f].shape for f in FIELDS}
         raise DataFileError(f"{path}: the four columns must be 1-D of one length, got {shapes}")

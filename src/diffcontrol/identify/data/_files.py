@@ -8,6 +8,7 @@ import json
 import math
 import os
 import zipfile
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -232,30 +233,42 @@ def npz_arrays(npz: Any, names: tuple[str, ...], path: Path) -> dict[str, np.nda
     return {name: npz[name] for name in names}
 
 
-def _read_npz(path: Path) -> TrajectoryData:
+def read_npz(path: Path, names: Sequence[str], missing: Callable[[list[str]], str]) -> tuple:
+    """The arrays ``names`` (one of them ``header``, a JSON text) of the .npz at ``path``,
+    bounded in size and checked to hold real numbers: ``(arrays without the header, header)``.
+
+    Raises:
+        DataFileError: an unreadable file, a missing array (``missing(names)`` says what the
+            file should hold), a header that is not JSON, an array that is not numbers.
+    """
     try:
         with np.load(path, allow_pickle=False) as npz:
-            missing = [name for name in _NPZ_ARRAYS if name not in npz.files]
-            if missing:
-                raise DataFileError(
-                    f"{path}: missing array(s) {missing}; a trajectory .npz holds "
-                    f"{list(_NPZ_ARRAYS)} (write it with diffcontrol.data.write_npz)"
-                )
-            arrays = npz_arrays(npz, _NPZ_ARRAYS, path)
+            absent = [name for name in names if name not in npz.files]
+            if absent:
+                raise DataFileError(f"{path}: missing array(s) {absent}{missing(absent)}")
+            arrays = npz_arrays(npz, names, path)
     except (OSError, ValueError, zipfile.BadZipFile, EOFError) as e:
         raise DataFileError(f"{path} is not a readable .npz ({e}); write it again") from None
     try:
         header = parse_json(arrays.pop("header").tobytes())
     except ValueError as e:
         raise DataFileError(f"{path}: the header array is not JSON ({e}); write it again") from None
-    meta = check_header(header, path, FORMAT, VERSION)
-    columns = header.get("columns")
-    if not isinstance(columns, list) or not all(isinstance(c, str) for c in columns):
-        raise DataFileError(f"{path}: the header has no list of column names under 'columns'")
     for name, arr in arrays.items():
         if not np.issubdtype(arr.dtype, np.integer) and not np.issubdtype(arr.dtype, np.floating):
             raise DataFileError(
                 f"{path}: array {name!r} has dtype {arr.dtype}; it must hold real numbers"
             )
+    return arrays, header
+
+
+def _read_npz(path: Path) -> TrajectoryData:
+    hint = (
+        f"; a trajectory .npz holds {list(_NPZ_ARRAYS)} (write it with diffcontrol.data.write_npz)"
+    )
+    arrays, header = read_npz(path, _NPZ_ARRAYS, lambda absent: hint)
+    meta = check_header(header, path, FORMAT, VERSION)
+    columns = header.get("columns")
+    if not isinstance(columns, list) or not all(isinstance(c, str) for c in columns):
+        raise DataFileError(f"{path}: the header has no list of column names under 'columns'")
     validate(*arrays.values(), columns, meta, where=str(path))
     return TrajectoryData(**arrays, columns=tuple(columns), metadata=meta)
