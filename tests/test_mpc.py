@@ -205,3 +205,25 @@ def test_gradients_through_the_unrolled_solver_match_finite_differences(solver):
         fd = [(f(x0.at[i].add(eps)) - f(x0.at[i].add(-eps))) / (2 * eps) for i in range(2)]
         np.testing.assert_allclose(grad, np.asarray(fd), rtol=1e-5, atol=1e-7)
         assert np.all(np.abs(grad) > 1e-3)  # the plan does depend on the state
+
+
+def test_evaluate_resets_a_stateful_policy_before_every_episode():
+    """A planner's warm start belongs to one episode: evaluate() resets it each time."""
+    import diffcontrol
+
+    class Counting:
+        def __init__(self):
+            self.resets, self.steps_since_reset = 0, []
+
+        def reset(self):
+            self.resets += 1
+            self.steps_since_reset.append(0)
+
+        def __call__(self, obs):
+            if self.steps_since_reset:
+                self.steps_since_reset[-1] += 1
+            return np.zeros(1)
+
+    policy = Counting()
+    diffcontrol.evaluate(policy, diffcontrol.make("pendulum"), episodes=3)
+    assert policy.resets == 3 and policy.steps_since_reset == [200, 200, 200]

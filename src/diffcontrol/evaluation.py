@@ -83,7 +83,8 @@ def evaluate(
 
     Episode ``i`` is reset with ``seed + i``; each runs until Gymnasium terminates or
     truncates it. This is the standard protocol, so the mean return compares with any
-    other method evaluated on the same seeds.
+    other method evaluated on the same seeds. A policy with a ``reset()`` method (a planner,
+    whose warm start is the last plan) is reset before every episode.
 
     Args:
         real: ``(env_id, env_kwargs)`` of another environment to run instead, e.g. the "real"
@@ -96,7 +97,10 @@ def evaluate(
     returns, lengths = [], []
     try:
         _check_fits(policy, env, label)
+        reset = getattr(policy, "reset", None)
         for i in range(episodes):
+            if callable(reset):
+                reset()
             obs, _ = env.reset(seed=seed + i)
             total, n, done = 0.0, 0, False
             while not done:
