@@ -85,7 +85,7 @@ def test_round_trip_of_states_discrete_actions_and_step_time(tmp_path, suffix):
     data.write_trajectories(path, d)
     back = read_trajectories(path)
     _same(back, d)
-    assert back.kind == "state" and back.columns[0] == "time [step]"
+    assert back.holds == "state" and back.columns[0] == "time [step]"
     assert back.units["state.speed"] == "?" and back.units["action.0"] == "index"
 
 

@@ -381,7 +381,7 @@ def record_data(
 
 def describe(data: TrajectoryData) -> str:
     """One line on recorded data: episodes, steps and columns."""
-    kind = "observation" if data.kind == "obs" else "state"
+    kind = "observation" if data.holds == "obs" else "state"
     return (
         f"{data.num_episodes} episode(s), {data.num_steps} steps, "
         f"{len(data.observation_columns)} {kind} and {len(data.action_columns)} action "

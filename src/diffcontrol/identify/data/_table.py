@@ -113,8 +113,9 @@ class TrajectoryData:
         return self.columns[2 + self.observations.shape[1] :]
 
     @property
-    def kind(self) -> str:
-        """``"obs"`` (observations) or ``"state"`` (physical states)."""
+    def holds(self) -> str:
+        """What the table's rows hold: ``"obs"`` (observations) or ``"state"`` (physical
+        states)."""
         return parse_column(self.columns[2])[0]
 
     @property
