@@ -146,11 +146,4 @@ class ILQR(eqx.Module):
         init = (actions, states, cost, jnp.asarray(self.mu, cost.dtype))
         (us, _, final, _), gains = jax.lax.scan(iteration, init, None, length=self.iterations)
         last = gains[-1]
-        info = SolveInfo(
-            initial_cost=cost,
-            cost=final,
-            last_improvement=last,
-            converged=last <= self.tol * jnp.abs(final),
-            finite=jnp.all(jnp.isfinite(us)) & jnp.isfinite(final),
-        )
-        return us, info
+        return us, SolveInfo.of(us, cost, final, last, self.tol)

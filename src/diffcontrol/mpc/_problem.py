@@ -76,6 +76,18 @@ class SolveInfo(eqx.Module):
     converged: Bool[Array, ""]
     finite: Bool[Array, ""]
 
+    @classmethod
+    def of(cls, plan: Array, initial_cost: Array, cost: Array, last: Array, tol: float):
+        """The report of a solve that returned ``plan`` at ``cost``, its last iteration having
+        improved the cost by ``last`` (converged: ``last <= tol |cost|``)."""
+        return cls(
+            initial_cost=initial_cost,
+            cost=cost,
+            last_improvement=last,
+            converged=last <= tol * jnp.abs(cost),
+            finite=jnp.all(jnp.isfinite(plan)) & jnp.isfinite(cost),
+        )
+
 
 def squash(z: Array, low: Array, high: Array) -> Array:
     """``low + (high - low) (tanh z + 1) / 2``: any real ``z`` to an action within the bounds."""

@@ -62,11 +62,4 @@ class Shooting(eqx.Module):
         best = jnp.minimum(best, jnp.where(jnp.isfinite(last_value), last_value, jnp.inf))
         plan = squash(best_z, problem.low, problem.high)
         last = jnp.abs(changes[-1])
-        info = SolveInfo(
-            initial_cost=first,
-            cost=best,
-            last_improvement=last,
-            converged=last <= self.tol * jnp.abs(best),
-            finite=jnp.all(jnp.isfinite(plan)) & jnp.isfinite(best),
-        )
-        return plan, info
+        return plan, SolveInfo.of(plan, first, best, last, self.tol)
