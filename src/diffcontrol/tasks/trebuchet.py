@@ -320,7 +320,11 @@ def _longest_throw(wind, p):
     return angle, jnp.maximum(longest, jnp.max(coarse, axis=-1)), coarse
 
 
-@jax.jit
+RANGE_CHUNK = 256
+"""Winds per compiled call of ``reachable_range``: every batch size (one wind included) is
+padded to whole chunks, so one program serves every caller (compiling it takes seconds)."""
+
+
 def reachable_range(wind_mps, params: tb.TrebuchetParams | None = None):
     """The shortest and longest distances (m) the bounded heads can reach in this wind.
 
@@ -330,9 +334,24 @@ def reachable_range(wind_mps, params: tb.TrebuchetParams | None = None):
     lightest and heaviest weights over the coarse angle grid: approximate (to a few metres),
     and below 20 m unless the tail wind exceeds about 17 m/s, so it rarely decides whether
     a target of the task is reachable.
-    Elementwise over a batch of winds.
+    Elementwise over a batch of winds (NumPy arrays of the winds' shape).
     """
-    p = params or tb.TrebuchetParams()
+    wind = np.asarray(wind_mps, np.float64)
+    flat = wind.reshape(-1)
+    padded = np.zeros(-(-max(flat.size, 1) // RANGE_CHUNK) * RANGE_CHUNK)
+    padded[: flat.size] = flat
+    params = params or tb.TrebuchetParams()  # one pytree structure, one program
+    parts = [
+        _reachable_range(padded[i : i + RANGE_CHUNK], params)
+        for i in range(0, padded.size, RANGE_CHUNK)
+    ]
+    shortest, longest = (np.concatenate([np.asarray(r[j]) for r in parts]) for j in (0, 1))
+    return shortest[: flat.size].reshape(wind.shape), longest[: flat.size].reshape(wind.shape)
+
+
+@jax.jit
+def _reachable_range(wind_mps, p: tb.TrebuchetParams):
+    """``reachable_range`` of one chunk of winds, compiled."""
     wind = jnp.asarray(wind_mps, jnp.result_type(float))
     w_lo, w_hi = WEIGHT_RANGE_LB
     _, longest, coarse = _longest_throw(wind, p)
