@@ -14,12 +14,13 @@ Three measurements, each printed as a table and written to benchmarks/results/sw
 2. **Population scaling on one device**: simulated steps per second (forward and backward,
    compilation and evaluation excluded) of the Pendulum trainer's chunk vmapped over 1, 8, 64
    and 512 members (batch 64, window 20 each).
-3. **Devices**: the same throughput for 64 members split over 1 and over 2 devices
-   (`--xla_force_host_platform_device_count=2`, in a subprocess; meaningful with two free
-   cores: run it as `taskset -c 0,1`).
+3. **Devices**: the same throughput for 64 members on 1 device pinned to one core, on 1
+   device with both cores (XLA's intra-op threads), and split over 2 devices
+   (`--xla_force_host_platform_device_count=2`) with one thread each, one per core: each in
+   its own process under `taskset` (meaningful on an otherwise idle 2-core machine).
 
     taskset -c 0 python benchmarks/sweep.py            # 1 and 2 on one pinned core
-    taskset -c 0,1 python benchmarks/sweep.py --only devices
+    python benchmarks/sweep.py --only devices         # pins its own processes
 """
 
 from __future__ import annotations
@@ -163,20 +164,44 @@ def main() -> None:
             per = r["steps_per_second"] / rows[0]["steps_per_second"]
             print(f"{r['members']:>7}  {r['steps_per_second']:>14,.0f}  {per:8.2f}x")
     if args.only == "devices":
-        code = (
-            f"import json, sys; sys.path.insert(0, {str(HERE)!r}); from sweep import population_scaling; "
-            "print(json.dumps([population_scaling((64,), 1)[0], population_scaling((64,), 2)[0]]))"
-        )
-        env = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=2"}
-        out = subprocess.run([sys.executable, "-c", code], env=env, check=True,
-                             capture_output=True, text=True).stdout  # fmt: skip
-        rows = json.loads(out.strip().splitlines()[-1])
+        rows = device_rows()
         result["devices"] = rows
-        ratio = rows[1]["steps_per_second"] / rows[0]["steps_per_second"]
-        print(f"64 members, pendulum trainer: 1 device {rows[0]['steps_per_second']:,.0f} steps/s, "
-              f"2 devices {rows[1]['steps_per_second']:,.0f} steps/s: {ratio:.2f}x (target >= 1.8x)")  # fmt: skip
+        base = rows[0]["steps_per_second"]
+        print("64 members, pendulum trainer       cores  steps/s       vs 1 device on 1 core")
+        for r in rows:
+            print(f"{r['setting']:<34} {r['cores']:>5}  {r['steps_per_second']:>12,.0f}  "
+                  f"{r['steps_per_second'] / base:6.2f}x")  # fmt: skip
+        print(f"target: 2 devices (one per core) >= 1.8x one device; "
+              f"{rows[-1]['steps_per_second'] / base:.2f}x")  # fmt: skip
     _write(path, result)
     print(f"wrote {path}")
+
+
+DEVICE_SETTINGS = (
+    # (label, cores for taskset, devices, XLA flags)
+    ("1 device, 1 core", "0", 1, "--xla_cpu_multi_thread_eigen=false"),
+    ("1 device, 2 cores (intra-op threads)", "0,1", 1, ""),
+    ("2 devices, one thread each", "0,1", 2, "--xla_cpu_multi_thread_eigen=false"),
+)
+
+
+def device_rows() -> list[dict]:
+    """The 64-member throughput of each ``DEVICE_SETTINGS`` row, each in a fresh process
+    pinned with ``taskset`` (the device count and XLA's threading are fixed at start-up)."""
+    rows = []
+    for label, cores, devices, flags in DEVICE_SETTINGS:
+        code = (
+            f"import json, sys; sys.path.insert(0, {str(HERE)!r}); "
+            "from sweep import population_scaling; "
+            f"print(json.dumps(population_scaling((64,), {devices})[0]))"
+        )
+        xla = f"--xla_force_host_platform_device_count={devices} {flags}".strip()
+        env = {**os.environ, "XLA_FLAGS": xla}
+        out = subprocess.run(["taskset", "-c", cores, sys.executable, "-c", code], env=env,
+                             check=True, capture_output=True, text=True).stdout  # fmt: skip
+        row = json.loads(out.strip().splitlines()[-1])
+        rows.append({"setting": label, "cores": len(cores.split(",")), "xla_flags": xla, **row})
+    return rows
 
 
 def _write(path: Path, result: dict) -> None:
