@@ -64,22 +64,18 @@ def _number(cast: Callable, expected: str, ok: Callable, must: str) -> Callable[
     return parse
 
 
+def _integer(low: int, high: int) -> Callable[[str], int]:
+    """Integers in ``low ... high`` (``low`` is 0 or 1), with messages that say the range."""
+    must = "a positive integer" if low else ">= 0"
+    expected = "a positive integer" if low else "an integer >= 0"
+    return _number(int, expected, lambda v: low <= v <= high, f"{must} (at most {high:,})")
+
+
 # Every integer has an upper bound, so that no flag can ask for more than a run can hold
 # (MAX_COUNT: counts and seeds, 32-bit in the trainers; MAX_WIDTH: episodes, batches).
-_COUNT, _WIDTH = MAX_COUNT, MAX_WIDTH
-positive_int = _number(
-    int, "a positive integer", lambda v: 0 < v <= _COUNT, f"a positive integer (at most {_COUNT:,})"
-)
-nonneg_int = _number(
-    int, "an integer >= 0", lambda v: 0 <= v <= _COUNT, f">= 0 (at most {_COUNT:,})"
-)
+positive_int, nonneg_int = _integer(1, MAX_COUNT), _integer(0, MAX_COUNT)
+episodes, episodes_or_0 = _integer(1, MAX_WIDTH), _integer(0, MAX_WIDTH)
 seed = nonneg_int
-episodes = _number(
-    int, "a positive integer", lambda v: 0 < v <= _WIDTH, f"a positive integer (at most {_WIDTH:,})"
-)
-episodes_or_0 = _number(
-    int, "an integer >= 0", lambda v: 0 <= v <= _WIDTH, f">= 0 (at most {_WIDTH:,})"
-)
 finite_float = _number(float, "a number", math.isfinite, "a finite number")
 positive_float = _number(float, "a number", lambda v: 0 < v < math.inf, "a finite positive number")
 nonneg_float = _number(float, "a number", lambda v: 0 <= v < math.inf, "a finite number >= 0")

@@ -74,32 +74,29 @@ def add_parsers(sub: Any) -> None:
 def cmd_compare(args: argparse.Namespace) -> int:
     from ..compare import run_comparison, run_real_comparison
 
+    shared = a.pick(args, "seeds updates final_episodes eval_seed resume")
     if args.real:
         doc = run_real_comparison(
             args.task,
             args.out or f"runs/compare-real-{args.task}",
             models=args.models,
             start=dict(args.start) or None,
-            **a.pick(
-                args,
-                "seeds max_rounds explore_noise updates final_episodes eval_seed rl_results resume",
-            ),
             progress=a.say(args),
+            **shared,
+            **a.pick(args, "max_rounds explore_noise rl_results"),
         )
-        print(doc["table"])
-        print(f"real steps to {doc['threshold']:g} per seed: {doc['real_steps_to_threshold']}")
-        print(f"wrote {', '.join(doc['files'])}")
-        return 0
-
-    names = "seeds methods rl_steps updates eval_every eval_episodes final_episodes eval_seed"
-    doc = run_comparison(
-        args.task,
-        args.out,
-        **a.pick(args, names + " torch_threads resume"),
-        progress=a.say(args),
-        compile_cache=not args.no_compile_cache,
-        command=args.command_line,
-    )
+    else:
+        doc = run_comparison(
+            args.task,
+            args.out,
+            progress=a.say(args),
+            compile_cache=not args.no_compile_cache,
+            command=args.command_line,
+            **shared,
+            **a.pick(args, "methods rl_steps eval_every eval_episodes torch_threads"),
+        )
     print(doc["table"])
+    if args.real:
+        print(f"real steps to {doc['threshold']:g} per seed: {doc['real_steps_to_threshold']}")
     print(f"wrote {', '.join(doc['files'])}")
     return 0

@@ -103,6 +103,7 @@ def add_parsers(sub: Any) -> None:
     add(group, ("--param", [a.param], None, "NAME=VALUE", "override a physical parameter of "
                 "the simulator (repeatable), e.g. --param g=9.81"))
     # fmt: on
+    _add_sweep_parser(sub)
 
 
 def cmd_train(args: argparse.Namespace) -> int:
@@ -134,7 +135,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     return 0
 
 
-def add_sweep_parser(sub: Any) -> None:
+def _add_sweep_parser(sub: Any) -> None:
     p = sub.add_parser(
         "sweep",
         help="train a grid of runs (seeds x settings) as one vmapped program",
@@ -164,20 +165,18 @@ def add_sweep_parser(sub: Any) -> None:
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
-    from .. import _jax_setup, tasks
-    from ..errors import ConfigError
-    from ..runs import _sweep as s
+    from ..runs import sweep_dir
 
-    task = args.task or (s.stored_sweep(args.out)["task"] if args.resume else None)
-    if task is None:
-        raise ConfigError("name the TASK to sweep (or --resume the sweep in --out)")
-    seeds, values = s.parse_seeds(args.seeds), {}
-    if not args.resume:
-        values = s.parse_values(args.set or [], tasks.resolve(task).default_config())
-    if not args.no_compile_cache:
-        _jax_setup.enable_compile_cache()
     settings = {f: getattr(args, f) for f in _DISCRETE - {"seed", "params"}}
-    _, files = s.sweep_dir(args.out, task, seeds=seeds, values=values, settings=settings,
-                           progress=a.say(args), **a.pick(args, "recipe devices resume final_eval"))  # fmt: skip
+    _, files = sweep_dir(
+        args.out,
+        args.task,
+        seeds=args.seeds,
+        values=args.set or [],
+        settings=settings,
+        compile_cache=not args.no_compile_cache,
+        progress=a.say(args),
+        **a.pick(args, "recipe devices resume final_eval"),
+    )
     print(f"wrote {args.out}: sweep.txt, sweep.png and {len(files) - 3} run directories")
     return 0

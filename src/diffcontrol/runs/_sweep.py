@@ -14,6 +14,7 @@ their results are the same to noise).
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -38,24 +39,27 @@ def member_name(index: int, config: Any, swept: Sequence[str]) -> str:
 
 def sweep_dir(
     out_dir: str | Path,
-    task: str,
+    task: str | None = None,
     *,
-    seeds: Sequence[int] = (0,),
-    values: dict[str, Sequence[Any]] | None = None,
+    seeds: Sequence[int] | str = (0,),
+    values: dict[str, Sequence[Any]] | Sequence[str] | None = None,
     settings: dict[str, Any] | None = None,
     recipe: str | None = None,
     devices: int | None = None,
     resume: bool = False,
     final_eval: int | None = None,
+    compile_cache: bool = True,
     progress: Callable[[str], None] | None = None,
 ) -> tuple[Any, list[str]]:
     """Train a grid of runs of ``task`` as one program and write them into ``out_dir``.
 
     Args:
         out_dir: the sweep directory (new or empty; with ``resume``, the sweep to continue).
-        task: a registered task name or an import path ``module:Class``.
-        seeds: the training seeds.
-        values: setting name -> values to try (e.g. ``{"learning_rate": [1e-3, 3e-3]}``).
+        task: a registered task name or an import path ``module:Class`` (``None`` with
+            ``resume``: the sweep's own).
+        seeds: the training seeds, or their text (``"0-63"``, ``"0,3,7"``: ``parse_seeds``).
+        values: setting name -> values to try (e.g. ``{"learning_rate": [1e-3, 3e-3]}``),
+            or ``NAME=V1,V2`` items as the command line writes them (``parse_values``).
         settings: overrides of the base settings (``None`` values skipped).
         recipe: a named set of settings of the task to start from.
         devices: local devices to shard the members over (default: all that divide them).
@@ -63,6 +67,8 @@ def sweep_dir(
             ``values``, ``settings`` and ``recipe`` are then not used): only the members not
             yet written are trained.
         final_eval: the best member's final evaluation size (``None``: the task's default).
+        compile_cache: use JAX's persistent compilation cache (unless
+            ``DIFFCONTROL_NO_COMPILE_CACHE`` is set).
         progress: called with each progress line.
 
     Returns:
@@ -77,7 +83,17 @@ def sweep_dir(
 
     say = progress or (lambda line: None)
     out = Path(out_dir)
+    task = task or (stored_sweep(out)["task"] if resume else None)
+    if task is None:
+        raise ConfigError("name the TASK to sweep (or --resume the sweep in --out)")
+    seeds = parse_seeds(seeds) if isinstance(seeds, str) else seeds
     the_task = resolve(task)
+    if not resume and values is not None and not isinstance(values, dict):
+        values = parse_values(values, the_task.default_config())
+    if compile_cache and not os.environ.get("DIFFCONTROL_NO_COMPILE_CACHE"):
+        from .. import _jax_setup
+
+        _jax_setup.enable_compile_cache()
     if resume:  # the sweep's own settings, from its directory alone
         stored = stored_sweep(out)
         base = type(the_task.default_config()).from_json(stored["config"])
