@@ -11,6 +11,7 @@ list their specs as tables, with ruff's formatter off, so that an option is a li
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import sys
 from collections.abc import Callable
@@ -45,6 +46,48 @@ def add(parser: Any, *specs: tuple) -> None:
         elif flag.startswith("-"):
             kw["required"] = True
         parser.add_argument(flag, help=help, **kw)
+
+
+def config_specs(cls: type, skip: Any = (), defaults: bool = True) -> list[tuple]:
+    """One ``--name`` spec per field of the config dataclass ``cls`` (``config``,
+    ``settings``): its type from the field's declared type and bounds (``config._opt``), its
+    help the field's, with its default if ``defaults``. An option not given is ``None``: the
+    field's default (``config_of``), or the task's for a training setting."""
+    specs = []
+    for f in (f for f in dataclasses.fields(cls) if f.name not in skip):
+        meta, declared = f.metadata, str(f.type).removesuffix(" | None")
+        forms = {
+            "int": (_integer(meta.get("low", 1), meta.get("high", MAX_COUNT)), "N"),
+            "float": (_FLOATS.get(meta.get("form"), finite_float), "X"),
+            "str": (meta.get("choices", str), "NAME"),
+            "bool": (yes_no, "yes|no"),
+            "tuple[int, ...]": (widths, "W,W"),
+            "tuple[str, ...]": (names, "NAMES"),
+            "dict[str, float]": ([param], "NAME=VALUE"),
+        }
+        form, metavar = forms[declared]
+        default = f"{f.default:g}" if isinstance(f.default, float) else f.default
+        default = ",".join(map(str, default)) if isinstance(default, tuple) else default
+        shown = (
+            ""
+            if not defaults or default in (None, dataclasses.MISSING)
+            else f" (default {default})"
+        )
+        flag = "--" + meta.get("flag", f.name).replace("_", "-")
+        help = (meta["help"] + shown).replace("%", "%%")
+        metavar = meta.get("metavar") or (None if "choices" in meta else metavar)
+        specs.append((flag, form, None, metavar, help))
+    return specs
+
+
+def config_of(cls: type, args: argparse.Namespace) -> Any:
+    """The settings ``cls`` of the options ``config_specs(cls)`` made: the fields given."""
+    given = {}
+    for f in dataclasses.fields(cls):
+        value = getattr(args, f.metadata.get("flag", f.name))
+        if value is not None:  # NAME=VALUE pairs make a dict
+            given[f.name] = dict(value) if str(f.type).startswith("dict") else value
+    return cls(**given)
 
 
 def _number(cast: Callable, expected: str, ok: Callable, must: str) -> Callable[[str], Any]:
@@ -82,6 +125,9 @@ nonneg_float = _number(float, "a number", lambda v: 0 <= v < math.inf, "a finite
 fraction = _number(float, "a number", lambda v: 0 <= v < 1, "a fraction in [0, 1)")
 
 
+_FLOATS = {"fraction": fraction, "positive": positive_float, "any": float}
+
+
 def widths(text: str) -> tuple[int, ...]:
     try:
         widths = tuple(int(w) for w in text.split(","))
@@ -115,8 +161,9 @@ def names(text: str) -> list[str]:
     return names
 
 
-def pick(args: argparse.Namespace, names: str) -> dict[str, Any]:
-    """The options ``names`` (space-separated) as keyword arguments of the library call."""
+def pick(args: Any, names: str) -> dict[str, Any]:
+    """The options (or settings) ``names`` (space-separated) as keyword arguments of the
+    library call."""
     return {name: getattr(args, name) for name in names.split()}
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from ..settings import CompareConfig
 from . import _args as a
 from ._args import FLAG, REQUIRED, add
 
@@ -29,23 +30,7 @@ def add_parsers(sub: Any) -> None:
     add(p,
         ("task", str, REQUIRED, "TASK", "cartpole, pendulum or trebuchet"),
         ("--out", str, None, "DIR", "output directory (default runs/compare-TASK)"),
-        ("--seeds", a.episodes, 3, "N", "training seeds (default 3)"),
-        ("--methods", a.names, None, "M,M",
-         "a subset of the methods, e.g. diffcontrol,ppo (default: all for the task)"),
-        ("--rl-steps", a.positive_int, None, "N",
-         "RL budget in environment steps (default: each baseline's zoo budget)"),
-        ("--updates", a.positive_int, None, "N",
-         "diffcontrol's gradient updates (default: the task's default config)"),
-        ("--eval-every", a.positive_int, None, "STEPS", "RL evaluation interval in environment "
-         "steps (default: cartpole 2000, pendulum 1000, trebuchet 1000); diffcontrol is "
-         "evaluated at its own evaluation points"),
-        ("--eval-episodes", a.episodes, 20, "N", "episodes per evaluation point (default 20)"),
-        ("--final-episodes", a.episodes, 100, "N",
-         "episodes for each method's returned controller (default 100)"),
-        ("--eval-seed", a.nonneg_int, 1000, "S",
-         "first reset seed of the evaluation episodes (default 1000)"),
-        ("--torch-threads", a.positive_int, 1, "N",
-         "PyTorch threads for the RL baselines (default 1)"),
+        *a.config_specs(CompareConfig),
         ("--resume", FLAG, False, None, "continue the comparison in DIR, keeping its runs"),
         ("--real", FLAG, False, None,
          "count the REAL system's steps: diffcontrol learns a model by acting on the real "
@@ -74,7 +59,7 @@ def add_parsers(sub: Any) -> None:
 def cmd_compare(args: argparse.Namespace) -> int:
     from ..compare import run_comparison, run_real_comparison
 
-    shared = a.pick(args, "seeds updates final_episodes eval_seed resume")
+    config = a.config_of(CompareConfig, args)
     if args.real:
         doc = run_real_comparison(
             args.task,
@@ -82,18 +67,18 @@ def cmd_compare(args: argparse.Namespace) -> int:
             models=args.models,
             start=dict(args.start) or None,
             progress=a.say(args),
-            **shared,
-            **a.pick(args, "max_rounds explore_noise rl_results"),
+            **a.pick(config, "seeds updates final_episodes eval_seed"),
+            **a.pick(args, "max_rounds explore_noise rl_results resume"),
         )
     else:
         doc = run_comparison(
             args.task,
             args.out,
+            config,
+            resume=args.resume,
             progress=a.say(args),
             compile_cache=not args.no_compile_cache,
             command=args.command_line,
-            **shared,
-            **a.pick(args, "methods rl_steps eval_every eval_episodes torch_threads"),
         )
     print(doc["table"])
     if args.real:

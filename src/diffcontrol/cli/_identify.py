@@ -8,10 +8,9 @@ import argparse
 import time
 from typing import Any
 
+from ..settings import MODELS, FitConfig, LoopConfig
 from . import _args as a
 from ._args import FLAG, REQUIRED, add
-
-MODELS = ("params", "hybrid", "neural")
 
 
 def add_parsers(sub: Any) -> None:
@@ -68,16 +67,7 @@ def add_parsers(sub: Any) -> None:
         ("--data", str, REQUIRED, "FILE", "recorded trajectories/throws"),
         ("--model", MODELS, REQUIRED, None, "grey box, hybrid or neural"),
         ("--out", str, REQUIRED, "DIR", "output directory"),
-        ("--params", a.names, None, "NAMES",
-         "--model params: the parameters to fit (default: the task's, e.g. g,friction)"),
-        ("--hidden", a.widths, (32, 32), "W,W", "(32,32)"),
-        ("--seed", a.nonneg_int, 0, "S", "the network's initial weights (0)"),
-        ("--window", a.positive_int, 10, "N", "steps (10)"),
-        ("--steps", a.nonneg_int, None, "N", "Adam steps"),
-        ("--lm-steps", a.nonneg_int, 20, "N", "Levenberg-Marquardt (20)"),
-        ("--learning-rate", a.positive_float, None, "LR", "Adam learning rate"),
-        ("--holdout", a.fraction, 0.2, "F",
-         "fraction of the episodes (throws) held out, the last ones (0.2; 0 for none)"),
+        *a.config_specs(FitConfig),
         ("--force", FLAG, False, None, "replace DIR/fitted.json if it exists"),
         a.QUIET,
     )
@@ -98,21 +88,7 @@ def add_parsers(sub: Any) -> None:
         ("--out", str, REQUIRED, "DIR", "output directory"),
         ("--env", str, None, "ENV_ID", "the real system (task's own)"),
         a.env_arg("a numeric argument of the real environment (repeatable), e.g. g=12"),
-        ("--model", MODELS, "params", None, "what to fit (params)"),
-        ("--params", a.names, None, "NAMES", "to fit"),
-        ("--rounds", a.episodes, 3, "R", "rounds (3)"),
-        ("--episodes", a.episodes, 2, "N", "per round (2)"),
-        ("--updates", a.positive_int, None, "N", "per round"),
-        ("--seed", a.seed, 0, "S", "seed of training and recording (0)"),
-        ("--eval-episodes", a.episodes, 20, "N", "(20)"),
-        ("--eval-seed", a.seed, 0, "S",
-         "first reset seed of the evaluation episodes on the real system (0; compare: 1000)"),
-        ("--start", [a.param], [], "NAME=VALUE",
-         "a parameter the grey box or hybrid starts from instead of the nominal one "
-         "(repeatable), e.g. g=8, so that it is not handed the truth"),
-        ("--explore-noise", a.fraction, 0.0, "F",
-         "noise on the controller's actions while it records, a fraction of the action's "
-         "half range (0: none; 0.1 suits the Pendulum)"),
+        *a.config_specs(LoopConfig),
         ("--resume", FLAG, False, None, "continue an interrupted loop in DIR"),
         ("--quiet", FLAG, False, None, "print only each round's summary"),
     )
@@ -127,9 +103,9 @@ def cmd_fit(args: argparse.Namespace) -> int:
         args.data,
         args.model,
         args.out,
-        names=args.params,
+        a.config_of(FitConfig, args),
+        force=args.force,
         progress=a.say(args),
-        **a.pick(args, "holdout force window steps learning_rate lm_steps hidden seed"),
     )
     print("\n".join(done.lines))
     return 0
@@ -141,14 +117,11 @@ def cmd_loop(args: argparse.Namespace) -> int:
     identify.loop(
         tasks.resolve(args.task),
         args.out,
+        a.config_of(LoopConfig, args),
         env_id=args.env,
         env_kwargs=dict(args.env_arg),
-        names=args.params,
-        start=dict(args.start),
+        resume=args.resume,
         progress=a.say(args),
-        **a.pick(
-            args, "model rounds episodes updates seed eval_episodes eval_seed explore_noise resume"
-        ),
     )
     return 0
 
