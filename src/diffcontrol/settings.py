@@ -129,7 +129,8 @@ class LoopConfig(_Settings):
 @dataclass(frozen=True)
 class CompareConfig(_Settings):
     """Settings of ``compare.run_comparison``: diffcontrol and the RL baselines on one task,
-    trained on seeds ``0 ... seeds-1`` and evaluated alike."""
+    trained on seeds ``0 ... seeds-1`` and evaluated alike; the ``--real`` fields are those of
+    the comparison in the real system's steps (``run_comparison(real=True)``)."""
 
     seeds: int = _opt("training seeds", 3, "N", high=MAX_WIDTH)
     methods: tuple[str, ...] | None = _opt(
@@ -153,5 +154,32 @@ class CompareConfig(_Settings):
     )
     eval_seed: int = _opt("first reset seed of the evaluation episodes", 1000, "S", low=0)
     torch_threads: int | None = _opt(
-        "PyTorch threads for the RL baselines; None leaves it to PyTorch", 1, "N"
+        "PyTorch threads for the RL baselines (None: PyTorch's own number)", 1, "N"
+    )
+    models: tuple[str, ...] | None = _opt(
+        "--real: a subset of params,hybrid,neural (default all)", None, "M,M"
+    )
+    max_rounds: int = _opt(
+        "--real: the most rounds of a loop; it stops at the first controller that reaches the "
+        "task's threshold",
+        3,
+        "R",
+    )
+    start: dict[str, float] = _opt(
+        "--real: the wrong physics the grey box and hybrid start from (repeatable; default "
+        "for pendulum g=8, friction=0.1)",
+        {},
+        "NAME=VALUE",
+    )
+    explore_noise: float = _opt(
+        "--real: action noise while a controller records, a fraction of the half range",
+        0.1,
+        "F",
+        form="fraction",
+    )
+    rl_results: str | None = _opt(
+        "--real: a comparison (comparison.json, or benchmarks/results/compare.json) whose RL "
+        "runs are drawn beside",
+        None,
+        "FILE",
     )

@@ -30,26 +30,13 @@ def add_parsers(sub: Any) -> None:
     add(p,
         ("task", str, REQUIRED, "TASK", "cartpole, pendulum or trebuchet"),
         ("--out", str, None, "DIR", "output directory (default runs/compare-TASK)"),
-        *a.config_specs(CompareConfig),
         ("--resume", FLAG, False, None, "continue the comparison in DIR, keeping its runs"),
         ("--real", FLAG, False, None,
          "count the REAL system's steps: diffcontrol learns a model by acting on the real "
          "environment (the loop: explore, fit, train, act) instead of using the task's "
          "simulator; rows diffcontrol (grey box), (hybrid), (neural) beside the RL runs of "
          "--rl-results; writes DIR/loops/ and DIR/runs/ as it goes (--resume)"),
-        ("--models", a.names, None, "M,M",
-         "--real: a subset of params,hybrid,neural (default all)"),
-        ("--max-rounds", a.positive_int, 3, "R",
-         "--real: the most rounds of a loop; it stops at the first controller that reaches "
-         "the task's threshold (3)"),
-        ("--start", [a.param], [], "NAME=VALUE",
-         "--real: the wrong physics the grey box and hybrid start from (repeatable; default "
-         "for pendulum g=8, friction=0.1)"),
-        ("--explore-noise", a.fraction, 0.1, "F",
-         "--real: action noise while a controller records (0.1 of the half range)"),
-        ("--rl-results", str, None, "FILE",
-         "--real: a comparison (comparison.json, or benchmarks/results/compare.json) whose RL "
-         "runs are drawn beside"),
+        *a.config_specs(CompareConfig),
         a.NO_COMPILE_CACHE,
         a.QUIET,
     )
@@ -57,29 +44,18 @@ def add_parsers(sub: Any) -> None:
 
 
 def cmd_compare(args: argparse.Namespace) -> int:
-    from ..compare import run_comparison, run_real_comparison
+    from ..compare import run_comparison
 
-    config = a.config_of(CompareConfig, args)
-    if args.real:
-        doc = run_real_comparison(
-            args.task,
-            args.out or f"runs/compare-real-{args.task}",
-            models=args.models,
-            start=dict(args.start) or None,
-            progress=a.say(args),
-            **a.pick(config, "seeds updates final_episodes eval_seed"),
-            **a.pick(args, "max_rounds explore_noise rl_results resume"),
-        )
-    else:
-        doc = run_comparison(
-            args.task,
-            args.out,
-            config,
-            resume=args.resume,
-            progress=a.say(args),
-            compile_cache=not args.no_compile_cache,
-            command=args.command_line,
-        )
+    doc = run_comparison(
+        args.task,
+        args.out,
+        a.config_of(CompareConfig, args),
+        real=args.real,
+        resume=args.resume,
+        progress=a.say(args),
+        compile_cache=not args.no_compile_cache,
+        command=args.command_line,
+    )
     print(doc["table"])
     if args.real:
         print(f"real steps to {doc['threshold']:g} per seed: {doc['real_steps_to_threshold']}")

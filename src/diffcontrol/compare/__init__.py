@@ -35,6 +35,10 @@ from .run import (
 )
 
 SETTINGS_FILE = "compare.json"
+# The fields of a CompareConfig that the comparison in real steps takes as they are.
+_REAL_SETTINGS = (
+    "seeds max_rounds explore_noise updates final_episodes eval_seed rl_results".split()
+)
 
 
 def run_comparison(
@@ -42,6 +46,7 @@ def run_comparison(
     out_dir: str | Path | None = None,
     config: CompareConfig | None = None,
     *,
+    real: bool = False,
     resume: bool = False,
     progress: Callable[[str], None] | None = None,
     compile_cache: bool = True,
@@ -61,7 +66,11 @@ def run_comparison(
             default); the RL evaluation interval ``eval_every`` in environment steps; the
             episodes per evaluation point ``eval_episodes`` and for each returned controller
             ``final_episodes``, on reset seeds ``eval_seed ...``; ``torch_threads`` for the RL
-            baselines (``None``: PyTorch's default).
+            baselines (``None``: PyTorch's default); and those of ``real``.
+        real: count the real system's steps instead (``run_real_comparison`` with the
+            config's ``seeds``, ``models``, ``max_rounds``, ``start`` (empty: the task's),
+            ``explore_noise``, ``updates``, ``final_episodes``, ``eval_seed`` and
+            ``rl_results``; default ``out_dir`` ``runs/compare-real-TASK``).
         resume: keep the finished runs already in ``out_dir`` and run only the others.
         progress: called with one line per evaluation point and per finished run.
         compile_cache: use JAX's persistent compilation cache (unless
@@ -79,13 +88,24 @@ def run_comparison(
         Interrupted: Ctrl-C; the message says where the finished runs are and how to continue.
     """
     task = resolve(task) if isinstance(task, str) else task
+    config = config or CompareConfig()
+    if real:
+        return run_real_comparison(
+            task,
+            out_dir or f"runs/compare-real-{task.name}",
+            models=config.models,
+            start=config.start or None,
+            resume=resume,
+            progress=progress,
+            **{n: getattr(config, n) for n in _REAL_SETTINGS},
+        )
     out = Path(out_dir or f"runs/compare-{task.name}")
     if compile_cache and not os.environ.get("DIFFCONTROL_NO_COMPILE_CACHE"):
         from .. import _jax_setup
 
         _jax_setup.enable_compile_cache()
     try:
-        return _compare(task, out, config or CompareConfig(), resume, progress)
+        return _compare(task, out, config, resume, progress)
     except KeyboardInterrupt:
         again = command or f"diffcontrol compare {task.name}"
         raise Interrupted(
