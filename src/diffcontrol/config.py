@@ -61,14 +61,7 @@ class _Config:
                     what = "text" if declared == "str" else "true or false"
                     raise ConfigError(f"{f.name} must be {what}, got {value!r}")
             elif declared == "tuple[int, ...]":
-                if not isinstance(value, tuple | list) or not all(
-                    isinstance(w, int) and not isinstance(w, bool) and 0 < w <= MAX_WIDTH
-                    for w in value
-                ):
-                    raise ConfigError(
-                        f"{f.name} must be positive layer widths such as (64, 64), got {value!r}"
-                    )
-                object.__setattr__(self, f.name, tuple(value))
+                object.__setattr__(self, f.name, layer_widths(f.name, value))
             elif f.name == "params":
                 object.__setattr__(self, f.name, _pairs(value))
 
@@ -139,6 +132,19 @@ class _Config:
             if value is None and isinstance(fields[name].default, float):
                 data[name] = math.nan
         return cls(**data)
+
+
+def layer_widths(name: str, value: Any) -> tuple[int, ...]:
+    """``value`` as layer widths (positive, at most ``MAX_WIDTH``).
+
+    Raises:
+        ConfigError: anything else, naming the setting ``name``.
+    """
+    if not isinstance(value, tuple | list) or not all(
+        isinstance(w, int) and not isinstance(w, bool) and 0 < w <= MAX_WIDTH for w in value
+    ):
+        raise ConfigError(f"{name} must be positive layer widths such as (64, 64), got {value!r}")
+    return tuple(value)
 
 
 def _pairs(value: Any) -> tuple[tuple[str, float], ...]:
@@ -407,28 +413,3 @@ class ODETrainConfig(_Config):
     def target_return(self) -> float:
         """No early stop for continuous-time runs (the driver asks every config)."""
         return math.nan
-
-
-def parse_field_value(config: Any, name: str, text: str) -> Any:
-    """The value of field ``name`` of ``config`` written as ``text`` (command-line form:
-    ``3e-3``, ``64x64`` for layer widths, ``yes``/``no``), of the field's declared type.
-
-    Raises:
-        ConfigError: ``text`` is not a value of that type.
-    """
-    declared = next(str(f.type) for f in dataclasses.fields(config) if f.name == name)
-    try:
-        if declared == "int":
-            return int(text)
-        if declared == "float":
-            return float(text)
-        if declared == "bool":
-            return {"yes": True, "true": True, "no": False, "false": False}[text.lower()]
-        if declared == "tuple[int, ...]":
-            return tuple(int(w) for w in text.split("x"))
-        return text
-    except (ValueError, KeyError):
-        form = {"int": "an integer", "float": "a number", "bool": "yes or no"}
-        raise ConfigError(
-            f"{name} takes {form.get(declared, 'layer widths such as 64x64')}, got {text!r}"
-        ) from None

@@ -14,7 +14,7 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from .config import MAX_COUNT, MAX_WIDTH, _opt
+from .config import MAX_COUNT, MAX_WIDTH, _opt, layer_widths
 from .errors import ConfigError
 
 MODELS = ("params", "hybrid", "neural")
@@ -41,14 +41,7 @@ class _Settings:
                 if not isinstance(value, int | float) or not (low <= value <= high):
                     raise ConfigError(f"{f.name} must be in [{low:g}, {high:g}], got {value!r}")
             elif declared == "tuple[int, ...]":
-                if not isinstance(value, tuple | list) or not all(
-                    isinstance(w, int) and not isinstance(w, bool) and 0 < w <= MAX_WIDTH
-                    for w in value
-                ):
-                    raise ConfigError(
-                        f"{f.name} must be layer widths such as (32, 32), got {value!r}"
-                    )
-                object.__setattr__(self, f.name, tuple(value))
+                object.__setattr__(self, f.name, layer_widths(f.name, value))
             elif declared.startswith("tuple[str"):
                 if not isinstance(value, tuple | list) or not all(
                     isinstance(v, str) for v in value

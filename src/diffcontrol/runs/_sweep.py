@@ -13,6 +13,7 @@ their results are the same to noise).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 from collections.abc import Callable, Sequence
@@ -316,10 +317,6 @@ def parse_values(items: Sequence[str], config: Any) -> dict[str, list[Any]]:
     Raises:
         ConfigError: an unknown setting, a value of the wrong type, or a setting given twice.
     """
-    import dataclasses
-
-    from ..config import parse_field_value
-
     fields = {f.name: f for f in dataclasses.fields(config)}
     values: dict[str, list[Any]] = {}
     for item in items:
@@ -338,3 +335,28 @@ def parse_values(items: Sequence[str], config: Any) -> dict[str, list[Any]]:
             config.replace(**{name: v})  # the config's own checks, with their messages
         values[name] = options
     return values
+
+
+def parse_field_value(config: Any, name: str, text: str) -> Any:
+    """The value of field ``name`` of ``config`` written as ``text`` (command-line form:
+    ``3e-3``, ``64x64`` for layer widths, ``yes``/``no``), of the field's declared type.
+
+    Raises:
+        ConfigError: ``text`` is not a value of that type.
+    """
+    declared = next(str(f.type) for f in dataclasses.fields(config) if f.name == name)
+    try:
+        if declared == "int":
+            return int(text)
+        if declared == "float":
+            return float(text)
+        if declared == "bool":
+            return {"yes": True, "true": True, "no": False, "false": False}[text.lower()]
+        if declared == "tuple[int, ...]":
+            return tuple(int(w) for w in text.split("x"))
+        return text
+    except (ValueError, KeyError):
+        form = {"int": "an integer", "float": "a number", "bool": "yes or no"}
+        raise ConfigError(
+            f"{name} takes {form.get(declared, 'layer widths such as 64x64')}, got {text!r}"
+        ) from None
