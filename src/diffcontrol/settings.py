@@ -1,7 +1,8 @@
-"""Settings of the work around training: a model fit (``identify.fit_dir``), a loop on a
-real system (``identify.loop``) and a comparison with RL (``compare.run_comparison``).
+"""Settings of the work around training: a recording (``identify.record_data``), a model fit
+(``identify.fit_dir``), a loop on a real system (``identify.loop``) and a comparison with RL
+(``compare.run_comparison``).
 Frozen, typed dataclasses, as ``config`` holds the training ones: they validate on
-construction, and their fields are the command line's flags (``diffcontrol fit/loop/compare``:
+construction, and their fields are the command line's flags (``diffcontrol record/fit/loop/compare``:
 the name, the default, the bounds and the help).
 
 Importing this module imports no JAX.
@@ -55,6 +56,34 @@ class _Settings:
     def replace(self, **changes: Any) -> Any:
         """A copy with some fields changed (validated again)."""
         return dataclasses.replace(self, **changes)
+
+
+@dataclass(frozen=True)
+class RecordConfig(_Settings):
+    """Settings of ``identify.record_data``: episodes of a real system (or a task's own
+    data), as a task's ``record_data`` hook takes them."""
+
+    episodes: int = _opt("episodes (throws)", dataclasses.MISSING, "N", high=MAX_WIDTH)
+    controller: str | None = _opt(
+        "a run directory (or model.json) of `diffcontrol train`; random actions if omitted",
+        None,
+        "DIR",
+    )
+    seed: int = _opt("first reset seed", 0, "S", low=0)
+    env_kwargs: dict[str, float] = _opt(
+        "a numeric keyword argument of gymnasium.make (e.g. g=9.0), or a parameter of a task's "
+        "own system (e.g. drag_coefficient=1.5); repeatable",
+        {},
+        "NAME=VALUE",
+        flag="env_arg",
+    )
+    noise_m: float | None = _opt(
+        "trebuchet only: Gaussian noise (m) on the recorded distances (0)",
+        None,
+        "SD",
+        form="nonneg",
+    )
+    max_steps: int | None = _opt("cut episodes at N", None, "N")
 
 
 @dataclass(frozen=True)

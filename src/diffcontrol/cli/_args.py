@@ -74,9 +74,10 @@ def config_specs(cls: type, skip: Any = (), defaults: bool = True) -> list[tuple
             else f" (default {default})"
         )
         flag = "--" + meta.get("flag", f.name).replace("_", "-")
+        required = f.default is f.default_factory is dataclasses.MISSING
         help = (meta["help"] + shown).replace("%", "%%")
         metavar = meta.get("metavar") or (None if "choices" in meta else metavar)
-        specs.append((flag, form, None, metavar, help))
+        specs.append((flag, form, REQUIRED if required else None, metavar, help))
     return specs
 
 
@@ -125,7 +126,7 @@ nonneg_float = _number(float, "a number", lambda v: 0 <= v < math.inf, "a finite
 fraction = _number(float, "a number", lambda v: 0 <= v < 1, "a fraction in [0, 1)")
 
 
-_FLOATS = {"fraction": fraction, "positive": positive_float, "any": float}
+_FLOATS = {"fraction": fraction, "positive": positive_float, "nonneg": nonneg_float, "any": float}
 
 
 def widths(text: str) -> tuple[int, ...]:

@@ -8,7 +8,7 @@ import argparse
 import time
 from typing import Any
 
-from ..settings import MODELS, FitConfig, LoopConfig
+from ..settings import MODELS, FitConfig, LoopConfig, RecordConfig
 from . import _args as a
 from ._args import FLAG, REQUIRED, add
 
@@ -34,15 +34,7 @@ def add_parsers(sub: Any) -> None:
     add(p,
         ("env_id", str, REQUIRED, "ENV_ID", "a Gymnasium environment id or a task name"),
         ("--task", str, None, "TASK", "the task whose real system ENV_ID is"),
-        ("--episodes", a.episodes, REQUIRED, "N", "episodes (throws)"),
-        ("--controller", str, None, "DIR",
-         "a run directory (or model.json) of `diffcontrol train`; random actions if omitted"),
-        ("--seed", a.seed, 0, "S", "first reset seed (0)"),
-        a.env_arg("a numeric keyword argument of gymnasium.make (e.g. g=9.0), or a parameter of "
-                  "a task's own system (e.g. drag_coefficient=1.5); repeatable"),
-        ("--noise-m", a.nonneg_float, None, "SD",
-         "trebuchet only: Gaussian noise (m) on the recorded distances (0)"),
-        ("--max-steps", a.positive_int, None, "N", "cut episodes at N"),
+        *a.config_specs(RecordConfig),
         ("--out", str, None, "FILE", "a .csv or .npz file"),
         ("--force", FLAG, False, None, "overwrite FILE if it exists"),
         a.QUIET,
@@ -132,12 +124,11 @@ def cmd_record(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     data, out = identify.record_data(
         args.env_id,
-        args.episodes,
+        a.config_of(RecordConfig, args),
         args.out,
         task=tasks.resolve(args.task) if args.task else None,
-        env_kwargs=dict(args.env_arg),
+        force=args.force,
         progress=a.say(args),
-        **a.pick(args, "force controller seed max_steps noise_m"),
     )
     print(f"wrote {out}: {identify.describe(data)} ({time.perf_counter() - t0:.1f} s)")
     return 0
