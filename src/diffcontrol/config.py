@@ -17,8 +17,15 @@ from .errors import ConfigError
 SCHEDULES = ("constant", "cosine", "warmup_cosine")
 
 
-def _opt(doc: str, **kwargs: Any) -> Any:
-    return field(metadata={"help": doc}, **kwargs)
+def _opt(doc: str, default: Any, metavar: str | None = None, **cli: Any) -> Any:
+    """A config field: its help ``doc``, its ``default``, and how the command line reads it:
+    the flag's ``metavar``, a number's bounds ``low`` (default 1) and ``high`` (default
+    ``MAX_COUNT``), a float's ``form`` (``"fraction"``, ``"positive"``; ``"any"`` takes nan),
+    text's ``choices``, or a ``flag`` named otherwise than the field."""
+    meta = {"help": doc, "metavar": metavar, **cli}
+    if isinstance(default, dict):
+        return field(default_factory=dict, metadata=meta)
+    return field(default=default, metadata=meta)
 
 
 MAX_COUNT = 2**31 - 1
@@ -54,14 +61,7 @@ class _Config:
                     what = "text" if declared == "str" else "true or false"
                     raise ConfigError(f"{f.name} must be {what}, got {value!r}")
             elif declared == "tuple[int, ...]":
-                if not isinstance(value, tuple | list) or not all(
-                    isinstance(w, int) and not isinstance(w, bool) and 0 < w <= MAX_WIDTH
-                    for w in value
-                ):
-                    raise ConfigError(
-                        f"{f.name} must be positive layer widths such as (64, 64), got {value!r}"
-                    )
-                object.__setattr__(self, f.name, tuple(value))
+                object.__setattr__(self, f.name, layer_widths(f.name, value))
             elif f.name == "params":
                 object.__setattr__(self, f.name, _pairs(value))
 
@@ -134,6 +134,19 @@ class _Config:
         return cls(**data)
 
 
+def layer_widths(name: str, value: Any) -> tuple[int, ...]:
+    """``value`` as layer widths (positive, at most ``MAX_WIDTH``).
+
+    Raises:
+        ConfigError: anything else, naming the setting ``name``.
+    """
+    if not isinstance(value, tuple | list) or not all(
+        isinstance(w, int) and not isinstance(w, bool) and 0 < w <= MAX_WIDTH for w in value
+    ):
+        raise ConfigError(f"{name} must be positive layer widths such as (64, 64), got {value!r}")
+    return tuple(value)
+
+
 def _pairs(value: Any) -> tuple[tuple[str, float], ...]:
     """``params`` as ``((name, value), ...)``: names are text, values finite numbers."""
     ok = isinstance(value, tuple | list) and all(
@@ -175,23 +188,31 @@ class TrainConfig(_Config):
     full BPTT over whole episodes.
     """
 
-    seed: int = _opt("PRNG seed: a run is a function of this seed.", default=0)
+    seed: int = _opt("PRNG seed: a run is a function of this seed.", default=0, low=0)
     updates: int = _opt("Number of gradient updates (one per window).", default=500)
     batch: int = _opt("Simulations run side by side (initial states under vmap).", default=32)
-    window: int = _opt("Simulated steps per update (the truncated-BPTT window).", default=200)
+    window: int = _opt(
+        "Simulated steps per update (the truncated-BPTT window).", default=200, metavar="STEPS"
+    )
     horizon: int = _opt(
         "Training episode length in steps before a restart; 0 means the task's standard "
         "episode length.",
         default=0,
+        metavar="STEPS",
+        low=0,
     )
-    learning_rate: float = _opt("Adam learning rate (peak value for schedules).", default=3e-3)
+    learning_rate: float = _opt(
+        "Adam learning rate (peak value for schedules).", default=3e-3, metavar="LR"
+    )
     lr_schedule: str = _opt(
         "Learning-rate schedule: constant, cosine (decay to lr_final_fraction), or "
         "warmup_cosine (5% linear warm-up, then cosine).",
         default="cosine",
     )
     lr_final_fraction: float = _opt("Final learning rate as a fraction of the peak.", default=0.05)
-    grad_clip: float = _opt("Clip the gradient's global norm to this; 0 disables.", default=1.0)
+    grad_clip: float = _opt(
+        "Clip the gradient's global norm to this; 0 disables.", default=1.0, metavar="NORM"
+    )
     hidden: tuple[int, ...] = _opt("Hidden layer widths of the MLP controller.", default=(64, 64))
     activation: str = _opt("Hidden activation: tanh, relu, sigmoid or elu.", default="tanh")
     head: str = _opt(
@@ -208,6 +229,8 @@ class TrainConfig(_Config):
     target_return: float = _opt(
         "Stop early once the in-simulator evaluation return reaches this; nan disables.",
         default=math.nan,
+        metavar="R",
+        form="any",
     )
     keep_best: bool = _opt(
         "Return the controller of the evaluation point with the best in-simulator return "
@@ -270,9 +293,11 @@ class ODETrainConfig(_Config):
     from different initial weights train side by side under ``vmap``; the best is returned.
     """
 
-    seed: int = _opt("PRNG seed: a run is a function of this seed.", default=0)
+    seed: int = _opt("PRNG seed: a run is a function of this seed.", default=0, low=0)
     updates: int = _opt("Number of gradient updates (one closed-loop solve each).", default=1000)
-    horizon_s: float = _opt("Length of the closed-loop solve (s).", default=1.0)
+    horizon_s: float = _opt(
+        "Length of the closed-loop solve (s).", default=1.0, metavar="S", form="positive"
+    )
     saves: int = _opt(
         "Equally spaced saved points on [0, horizon_s] that the loss sees (both ends included).",
         default=50,
@@ -282,8 +307,12 @@ class ODETrainConfig(_Config):
         "loops).",
         default="tsit5",
     )
-    rtol: float = _opt("Relative tolerance of the adaptive step-size controller.", default=1e-3)
-    atol: float = _opt("Absolute tolerance of the adaptive step-size controller.", default=1e-6)
+    rtol: float = _opt(
+        "Relative tolerance of the adaptive step-size controller.", 1e-3, "TOL", form="positive"
+    )
+    atol: float = _opt(
+        "Absolute tolerance of the adaptive step-size controller.", 1e-6, "TOL", form="positive"
+    )
     max_steps: int = _opt(
         "Step budget of one solve; a solve that needs more fails (and is reported).",
         default=4096,
@@ -294,6 +323,7 @@ class ODETrainConfig(_Config):
         "continuous adjoint: O(1) memory but an APPROXIMATE gradient) or forward (forward "
         "mode, one tangent per weight; cheapest for a few dozen weights).",
         default="checkpoint",
+        metavar="METHOD",
     )
     starts: int = _opt(
         "Initial states per update, drawn from the task's reset distribution "
@@ -315,14 +345,18 @@ class ODETrainConfig(_Config):
         "Share of the updates over which the curriculum's horizon grows to horizon_s.",
         default=0.5,
     )
-    learning_rate: float = _opt("Adam learning rate (peak value for schedules).", default=0.05)
+    learning_rate: float = _opt(
+        "Adam learning rate (peak value for schedules).", default=0.05, metavar="LR"
+    )
     lr_schedule: str = _opt(
         "Learning-rate schedule: constant, cosine (decay to lr_final_fraction), or "
         "warmup_cosine (5% linear warm-up, then cosine).",
         default="constant",
     )
     lr_final_fraction: float = _opt("Final learning rate as a fraction of the peak.", default=0.05)
-    grad_clip: float = _opt("Clip the gradient's global norm to this; 0 disables.", default=0.0)
+    grad_clip: float = _opt(
+        "Clip the gradient's global norm to this; 0 disables.", default=0.0, metavar="NORM"
+    )
     hidden: tuple[int, ...] = _opt("Hidden layer widths of the MLP controller.", default=(8,))
     activation: str = _opt("Hidden activation: tanh, relu, sigmoid or elu.", default="tanh")
     head: str = _opt(
@@ -379,36 +413,3 @@ class ODETrainConfig(_Config):
     def target_return(self) -> float:
         """No early stop for continuous-time runs (the driver asks every config)."""
         return math.nan
-
-
-def help_of(name: str, cls: type = TrainConfig) -> str:
-    """The help text of a field of ``cls`` (``TrainConfig`` or ``ODETrainConfig``)."""
-    for f in dataclasses.fields(cls):
-        if f.name == name:
-            return f.metadata["help"]
-    raise KeyError(name)
-
-
-def parse_field_value(config: Any, name: str, text: str) -> Any:
-    """The value of field ``name`` of ``config`` written as ``text`` (command-line form:
-    ``3e-3``, ``64x64`` for layer widths, ``yes``/``no``), of the field's declared type.
-
-    Raises:
-        ConfigError: ``text`` is not a value of that type.
-    """
-    declared = next(str(f.type) for f in dataclasses.fields(config) if f.name == name)
-    try:
-        if declared == "int":
-            return int(text)
-        if declared == "float":
-            return float(text)
-        if declared == "bool":
-            return {"yes": True, "true": True, "no": False, "false": False}[text.lower()]
-        if declared == "tuple[int, ...]":
-            return tuple(int(w) for w in text.split("x"))
-        return text
-    except (ValueError, KeyError):
-        form = {"int": "an integer", "float": "a number", "bool": "yes or no"}
-        raise ConfigError(
-            f"{name} takes {form.get(declared, 'layer widths such as 64x64')}, got {text!r}"
-        ) from None

@@ -2,7 +2,7 @@
 
 Each command parses its options, makes one library call and prints what it returns. One module
 a group of commands: ``_train`` (train), ``_runs`` (list, evaluate, animate, aim), ``_compare``
-(compare), ``_data`` (record), ``_fit`` (fit, loop); ``_args`` holds the option specs, the
+(compare), ``_identify`` (record, fit, loop); ``_args`` holds the option specs, the
 argument types and the one-line-error parser.
 """
 
@@ -16,10 +16,9 @@ import signal
 import sys
 import threading
 from collections.abc import Iterator
-from typing import Any
 
 from ..errors import DiffcontrolError, Interrupted
-from . import _compare, _data, _fit, _runs, _train
+from . import _compare, _identify, _runs, _train
 from ._args import EXIT_USAGE, Parser
 
 
@@ -33,24 +32,14 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
     sub.required = True
-    for module in (_runs, _train, _compare, _data, _fit):
+    for module in _MODULES:
         module.add_parsers(sub)
-    _train.add_sweep_parser(sub)
     return parser
 
 
-COMMANDS = {
-    "list": _runs.cmd_list,
-    "train": _train.cmd_train,
-    "sweep": _train.cmd_sweep,
-    "evaluate": _runs.cmd_evaluate,
-    "animate": _runs.cmd_animate,
-    "aim": _runs.cmd_aim,
-    "compare": _compare.cmd_compare,
-    "record": _data.cmd_record,
-    "fit": _fit.cmd_fit,
-    "loop": _fit.cmd_loop,
-}
+# Each command is the function ``cmd_<command>`` of its module.
+_MODULES = (_runs, _train, _compare, _identify)
+COMMANDS = {n[4:]: f for m in _MODULES for n, f in vars(m).items() if n.startswith("cmd_")}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -92,11 +81,7 @@ def _terminate_as_interrupt() -> Iterator[None]:
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-
-    def interrupt(signum: int, frame: Any) -> None:
-        raise KeyboardInterrupt
-
-    previous = signal.signal(signal.SIGTERM, interrupt)
+    previous = signal.signal(signal.SIGTERM, signal.default_int_handler)
     try:
         yield
     finally:

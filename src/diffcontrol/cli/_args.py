@@ -11,6 +11,7 @@ list their specs as tables, with ruff's formatter off, so that an option is a li
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import sys
 from collections.abc import Callable
@@ -47,6 +48,49 @@ def add(parser: Any, *specs: tuple) -> None:
         parser.add_argument(flag, help=help, **kw)
 
 
+def config_specs(cls: type, skip: Any = (), defaults: bool = True) -> list[tuple]:
+    """One ``--name`` spec per field of the config dataclass ``cls`` (``config``,
+    ``settings``): its type from the field's declared type and bounds (``config._opt``), its
+    help the field's, with its default if ``defaults``. An option not given is ``None``: the
+    field's default (``config_of``), or the task's for a training setting."""
+    specs = []
+    for f in (f for f in dataclasses.fields(cls) if f.name not in skip):
+        meta, declared = f.metadata, str(f.type).removesuffix(" | None")
+        forms = {
+            "int": (_integer(meta.get("low", 1), meta.get("high", MAX_COUNT)), "N"),
+            "float": (_FLOATS.get(meta.get("form"), finite_float), "X"),
+            "str": (meta.get("choices", str), "NAME"),
+            "bool": (yes_no, "yes|no"),
+            "tuple[int, ...]": (widths, "W,W"),
+            "tuple[str, ...]": (names, "NAMES"),
+            "dict[str, float]": ([param], "NAME=VALUE"),
+        }
+        form, metavar = forms[declared]
+        default = f"{f.default:g}" if isinstance(f.default, float) else f.default
+        default = ",".join(map(str, default)) if isinstance(default, tuple) else default
+        shown = (
+            ""
+            if not defaults or default in (None, dataclasses.MISSING)
+            else f" (default {default})"
+        )
+        flag = "--" + meta.get("flag", f.name).replace("_", "-")
+        required = f.default is f.default_factory is dataclasses.MISSING
+        help = (meta["help"] + shown).replace("%", "%%")
+        metavar = meta.get("metavar") or (None if "choices" in meta else metavar)
+        specs.append((flag, form, REQUIRED if required else None, metavar, help))
+    return specs
+
+
+def config_of(cls: type, args: argparse.Namespace) -> Any:
+    """The settings ``cls`` of the options ``config_specs(cls)`` made: the fields given."""
+    given = {}
+    for f in dataclasses.fields(cls):
+        value = getattr(args, f.metadata.get("flag", f.name))
+        if value is not None:  # NAME=VALUE pairs make a dict
+            given[f.name] = dict(value) if str(f.type).startswith("dict") else value
+    return cls(**given)
+
+
 def _number(cast: Callable, expected: str, ok: Callable, must: str) -> Callable[[str], Any]:
     """A type function: ``cast`` the text, refuse what is not ``ok``, with messages that say
     what was expected."""
@@ -64,26 +108,25 @@ def _number(cast: Callable, expected: str, ok: Callable, must: str) -> Callable[
     return parse
 
 
+def _integer(low: int, high: int) -> Callable[[str], int]:
+    """Integers in ``low ... high`` (``low`` is 0 or 1), with messages that say the range."""
+    must = "a positive integer" if low else ">= 0"
+    expected = "a positive integer" if low else "an integer >= 0"
+    return _number(int, expected, lambda v: low <= v <= high, f"{must} (at most {high:,})")
+
+
 # Every integer has an upper bound, so that no flag can ask for more than a run can hold
 # (MAX_COUNT: counts and seeds, 32-bit in the trainers; MAX_WIDTH: episodes, batches).
-_COUNT, _WIDTH = MAX_COUNT, MAX_WIDTH
-positive_int = _number(
-    int, "a positive integer", lambda v: 0 < v <= _COUNT, f"a positive integer (at most {_COUNT:,})"
-)
-nonneg_int = _number(
-    int, "an integer >= 0", lambda v: 0 <= v <= _COUNT, f">= 0 (at most {_COUNT:,})"
-)
+positive_int, nonneg_int = _integer(1, MAX_COUNT), _integer(0, MAX_COUNT)
+episodes, episodes_or_0 = _integer(1, MAX_WIDTH), _integer(0, MAX_WIDTH)
 seed = nonneg_int
-episodes = _number(
-    int, "a positive integer", lambda v: 0 < v <= _WIDTH, f"a positive integer (at most {_WIDTH:,})"
-)
-episodes_or_0 = _number(
-    int, "an integer >= 0", lambda v: 0 <= v <= _WIDTH, f">= 0 (at most {_WIDTH:,})"
-)
 finite_float = _number(float, "a number", math.isfinite, "a finite number")
 positive_float = _number(float, "a number", lambda v: 0 < v < math.inf, "a finite positive number")
 nonneg_float = _number(float, "a number", lambda v: 0 <= v < math.inf, "a finite number >= 0")
 fraction = _number(float, "a number", lambda v: 0 <= v < 1, "a fraction in [0, 1)")
+
+
+_FLOATS = {"fraction": fraction, "positive": positive_float, "nonneg": nonneg_float, "any": float}
 
 
 def widths(text: str) -> tuple[int, ...]:
@@ -119,8 +162,9 @@ def names(text: str) -> list[str]:
     return names
 
 
-def pick(args: argparse.Namespace, names: str) -> dict[str, Any]:
-    """The options ``names`` (space-separated) as keyword arguments of the library call."""
+def pick(args: Any, names: str) -> dict[str, Any]:
+    """The options (or settings) ``names`` (space-separated) as keyword arguments of the
+    library call."""
     return {name: getattr(args, name) for name in names.split()}
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from ..settings import CompareConfig
 from . import _args as a
 from ._args import FLAG, REQUIRED, add
 
@@ -29,42 +30,13 @@ def add_parsers(sub: Any) -> None:
     add(p,
         ("task", str, REQUIRED, "TASK", "cartpole, pendulum or trebuchet"),
         ("--out", str, None, "DIR", "output directory (default runs/compare-TASK)"),
-        ("--seeds", a.episodes, 3, "N", "training seeds (default 3)"),
-        ("--methods", a.names, None, "M,M",
-         "a subset of the methods, e.g. diffcontrol,ppo (default: all for the task)"),
-        ("--rl-steps", a.positive_int, None, "N",
-         "RL budget in environment steps (default: each baseline's zoo budget)"),
-        ("--updates", a.positive_int, None, "N",
-         "diffcontrol's gradient updates (default: the task's default config)"),
-        ("--eval-every", a.positive_int, None, "STEPS", "RL evaluation interval in environment "
-         "steps (default: cartpole 2000, pendulum 1000, trebuchet 1000); diffcontrol is "
-         "evaluated at its own evaluation points"),
-        ("--eval-episodes", a.episodes, 20, "N", "episodes per evaluation point (default 20)"),
-        ("--final-episodes", a.episodes, 100, "N",
-         "episodes for each method's returned controller (default 100)"),
-        ("--eval-seed", a.nonneg_int, 1000, "S",
-         "first reset seed of the evaluation episodes (default 1000)"),
-        ("--torch-threads", a.positive_int, 1, "N",
-         "PyTorch threads for the RL baselines (default 1)"),
         ("--resume", FLAG, False, None, "continue the comparison in DIR, keeping its runs"),
         ("--real", FLAG, False, None,
          "count the REAL system's steps: diffcontrol learns a model by acting on the real "
          "environment (the loop: explore, fit, train, act) instead of using the task's "
          "simulator; rows diffcontrol (grey box), (hybrid), (neural) beside the RL runs of "
          "--rl-results; writes DIR/loops/ and DIR/runs/ as it goes (--resume)"),
-        ("--models", a.names, None, "M,M",
-         "--real: a subset of params,hybrid,neural (default all)"),
-        ("--max-rounds", a.positive_int, 3, "R",
-         "--real: the most rounds of a loop; it stops at the first controller that reaches "
-         "the task's threshold (3)"),
-        ("--start", [a.param], [], "NAME=VALUE",
-         "--real: the wrong physics the grey box and hybrid start from (repeatable; default "
-         "for pendulum g=8, friction=0.1)"),
-        ("--explore-noise", a.fraction, 0.1, "F",
-         "--real: action noise while a controller records (0.1 of the half range)"),
-        ("--rl-results", str, None, "FILE",
-         "--real: a comparison (comparison.json, or benchmarks/results/compare.json) whose RL "
-         "runs are drawn beside"),
+        *a.config_specs(CompareConfig),
         a.NO_COMPILE_CACHE,
         a.QUIET,
     )
@@ -72,34 +44,20 @@ def add_parsers(sub: Any) -> None:
 
 
 def cmd_compare(args: argparse.Namespace) -> int:
-    from ..compare import run_comparison, run_real_comparison
+    from ..compare import run_comparison
 
-    if args.real:
-        doc = run_real_comparison(
-            args.task,
-            args.out or f"runs/compare-real-{args.task}",
-            models=args.models,
-            start=dict(args.start) or None,
-            **a.pick(
-                args,
-                "seeds max_rounds explore_noise updates final_episodes eval_seed rl_results resume",
-            ),
-            progress=a.say(args),
-        )
-        print(doc["table"])
-        print(f"real steps to {doc['threshold']:g} per seed: {doc['real_steps_to_threshold']}")
-        print(f"wrote {', '.join(doc['files'])}")
-        return 0
-
-    names = "seeds methods rl_steps updates eval_every eval_episodes final_episodes eval_seed"
     doc = run_comparison(
         args.task,
         args.out,
-        **a.pick(args, names + " torch_threads resume"),
+        a.config_of(CompareConfig, args),
+        real=args.real,
+        resume=args.resume,
         progress=a.say(args),
         compile_cache=not args.no_compile_cache,
         command=args.command_line,
     )
     print(doc["table"])
+    if args.real:
+        print(f"real steps to {doc['threshold']:g} per seed: {doc['real_steps_to_threshold']}")
     print(f"wrote {', '.join(doc['files'])}")
     return 0

@@ -8,43 +8,9 @@ import warnings
 from pathlib import Path
 from typing import Any
 
-from ..config import ODETrainConfig, TrainConfig, help_of
+from ..config import ODETrainConfig, TrainConfig
 from . import _args as a
 from ._args import FLAG, REQUIRED, add
-
-# How the command line reads a config field, by its type; the exceptions by name. The fields
-# themselves (and their help) come from the config dataclasses, so a new field is a new flag.
-_BY_TYPE: dict[str, tuple[Any, str]] = {
-    "int": (a.positive_int, "N"),
-    "float": (a.finite_float, "X"),
-    "str": (str, "NAME"),
-    "bool": (a.yes_no, "yes|no"),
-    "tuple[int, ...]": (a.widths, "W,W"),
-}
-_BY_NAME: dict[str, tuple[Any, str]] = {
-    "seed": (int, "N"),
-    "horizon": (a.nonneg_int, "STEPS"),
-    "window": (a.positive_int, "STEPS"),
-    "learning_rate": (a.finite_float, "LR"),
-    "grad_clip": (a.finite_float, "NORM"),
-    "target_return": (float, "R"),
-    "horizon_s": (a.positive_float, "S"),
-    "rtol": (a.positive_float, "TOL"),
-    "atol": (a.positive_float, "TOL"),
-    "gradient": (str, "METHOD"),
-}
-
-
-def _field_specs(config_cls: type, skip: set[str] = frozenset()) -> list[tuple]:
-    """One ``--name`` spec per config field (``params`` is ``--param``), its help the field's."""
-    specs = []
-    for f in dataclasses.fields(config_cls):
-        if f.name not in {*skip, "params"}:
-            typ, metavar = _BY_NAME.get(f.name) or _BY_TYPE[str(f.type)]
-            help = help_of(f.name, config_cls).replace("%", "%%")
-            specs.append(("--" + f.name.replace("_", "-"), typ, None, metavar, help))
-    return specs
-
 
 _DISCRETE = {f.name for f in dataclasses.fields(TrainConfig)}
 _SETTINGS = (_DISCRETE | {f.name for f in dataclasses.fields(ODETrainConfig)}) - {"params"}
@@ -96,13 +62,14 @@ def add_parsers(sub: Any) -> None:
     )
     group = p.add_argument_group(
         "training settings (defaults depend on the task; see `diffcontrol list`)")
-    add(group, *_field_specs(TrainConfig))
+    add(group, *a.config_specs(TrainConfig, skip={"params"}, defaults=False))
     ode = p.add_argument_group(
         "continuous-time tasks only (cartpole-swingup*): the ODE solve and its gradient")
-    add(ode, *_field_specs(ODETrainConfig, skip=_DISCRETE))
+    add(ode, *a.config_specs(ODETrainConfig, skip=_DISCRETE, defaults=False))
     add(group, ("--param", [a.param], None, "NAME=VALUE", "override a physical parameter of "
                 "the simulator (repeatable), e.g. --param g=9.81"))
     # fmt: on
+    _add_sweep_parser(sub)
 
 
 def cmd_train(args: argparse.Namespace) -> int:
@@ -134,7 +101,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     return 0
 
 
-def add_sweep_parser(sub: Any) -> None:
+def _add_sweep_parser(sub: Any) -> None:
     p = sub.add_parser(
         "sweep",
         help="train a grid of runs (seeds x settings) as one vmapped program",
@@ -159,25 +126,23 @@ def add_sweep_parser(sub: Any) -> None:
         ("--final-eval", a.nonneg_int, None, "N", "the best member's final evaluation size"),
         a.NO_COMPILE_CACHE, a.QUIET)
     add(p.add_argument_group("settings of every member (see `diffcontrol train --help`)"),
-        *_field_specs(TrainConfig, skip={"seed"}))
+        *a.config_specs(TrainConfig, skip={"seed", "params"}, defaults=False))
     # fmt: on
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
-    from .. import _jax_setup, tasks
-    from ..errors import ConfigError
-    from ..runs import _sweep as s
+    from ..runs import sweep_dir
 
-    task = args.task or (s.stored_sweep(args.out)["task"] if args.resume else None)
-    if task is None:
-        raise ConfigError("name the TASK to sweep (or --resume the sweep in --out)")
-    seeds, values = s.parse_seeds(args.seeds), {}
-    if not args.resume:
-        values = s.parse_values(args.set or [], tasks.resolve(task).default_config())
-    if not args.no_compile_cache:
-        _jax_setup.enable_compile_cache()
     settings = {f: getattr(args, f) for f in _DISCRETE - {"seed", "params"}}
-    _, files = s.sweep_dir(args.out, task, seeds=seeds, values=values, settings=settings,
-                           progress=a.say(args), **a.pick(args, "recipe devices resume final_eval"))  # fmt: skip
+    _, files = sweep_dir(
+        args.out,
+        args.task,
+        seeds=args.seeds,
+        values=args.set or [],
+        settings=settings,
+        compile_cache=not args.no_compile_cache,
+        progress=a.say(args),
+        **a.pick(args, "recipe devices resume final_eval"),
+    )
     print(f"wrote {args.out}: sweep.txt, sweep.png and {len(files) - 3} run directories")
     return 0

@@ -21,6 +21,7 @@ from typing import Any
 
 from .. import envs, io
 from ..errors import ConfigError, Interrupted, RunDirectoryError
+from ..settings import CompareConfig
 from ..tasks import Task, resolve
 from .baselines import BASELINES, INSTALL_HINT, Baseline, require_rl
 from .report import plot, summarize, table
@@ -34,21 +35,18 @@ from .run import (
 )
 
 SETTINGS_FILE = "compare.json"
+# The fields of a CompareConfig that the comparison in real steps takes as they are.
+_REAL_SETTINGS = (
+    "seeds max_rounds explore_noise updates final_episodes eval_seed rl_results".split()
+)
 
 
 def run_comparison(
     task: Task | str,
     out_dir: str | Path | None = None,
+    config: CompareConfig | None = None,
     *,
-    seeds: int = 3,
-    methods: list[str] | None = None,
-    rl_steps: int | None = None,
-    updates: int | None = None,
-    eval_every: int | None = None,
-    eval_episodes: int = 20,
-    final_episodes: int = 100,
-    eval_seed: int = 1000,
-    torch_threads: int | None = 1,
+    real: bool = False,
     resume: bool = False,
     progress: Callable[[str], None] | None = None,
     compile_cache: bool = True,
@@ -61,15 +59,18 @@ def run_comparison(
             name.
         out_dir: output directory (new or empty, or a previous comparison with ``resume``);
             default ``runs/compare-TASK``.
-        seeds: training seeds ``0 ... seeds-1`` for every method.
-        methods: a subset of ``methods_for(task)``; all of them when omitted.
-        rl_steps: RL budget in environment steps; each baseline's zoo budget when omitted.
-        updates: diffcontrol's gradient updates; the task's default when omitted.
-        eval_every: RL evaluation interval in environment steps (task default when omitted).
-        eval_episodes: episodes per evaluation point (reset seeds ``eval_seed ...``).
-        final_episodes: episodes for each returned controller (reset seeds ``eval_seed ...``).
-        eval_seed: the first reset seed of the evaluation episodes.
-        torch_threads: PyTorch threads for the RL baselines (``None``: PyTorch's default).
+        config: the comparison's settings (``CompareConfig``; default ``CompareConfig()``):
+            training seeds ``0 ... seeds-1`` for every method; ``methods``, a subset of
+            ``methods_for(task)`` (all when omitted); the RL budget ``rl_steps`` (each
+            baseline's zoo budget when omitted) and diffcontrol's ``updates`` (the task's
+            default); the RL evaluation interval ``eval_every`` in environment steps; the
+            episodes per evaluation point ``eval_episodes`` and for each returned controller
+            ``final_episodes``, on reset seeds ``eval_seed ...``; ``torch_threads`` for the RL
+            baselines (``None``: PyTorch's default); and those of ``real``.
+        real: count the real system's steps instead (``run_real_comparison`` with the
+            config's ``seeds``, ``models``, ``max_rounds``, ``start`` (empty: the task's),
+            ``explore_noise``, ``updates``, ``final_episodes``, ``eval_seed`` and
+            ``rl_results``; default ``out_dir`` ``runs/compare-real-TASK``).
         resume: keep the finished runs already in ``out_dir`` and run only the others.
         progress: called with one line per evaluation point and per finished run.
         compile_cache: use JAX's persistent compilation cache (unless
@@ -87,27 +88,24 @@ def run_comparison(
         Interrupted: Ctrl-C; the message says where the finished runs are and how to continue.
     """
     task = resolve(task) if isinstance(task, str) else task
+    config = config or CompareConfig()
+    if real:
+        return run_real_comparison(
+            task,
+            out_dir or f"runs/compare-real-{task.name}",
+            models=config.models,
+            start=config.start or None,
+            resume=resume,
+            progress=progress,
+            **{n: getattr(config, n) for n in _REAL_SETTINGS},
+        )
     out = Path(out_dir or f"runs/compare-{task.name}")
     if compile_cache and not os.environ.get("DIFFCONTROL_NO_COMPILE_CACHE"):
         from .. import _jax_setup
 
         _jax_setup.enable_compile_cache()
     try:
-        return _compare(
-            task,
-            out,
-            seeds=seeds,
-            methods=methods,
-            rl_steps=rl_steps,
-            updates=updates,
-            eval_every=eval_every,
-            eval_episodes=eval_episodes,
-            final_episodes=final_episodes,
-            eval_seed=eval_seed,
-            torch_threads=torch_threads,
-            resume=resume,
-            progress=progress,
-        )
+        return _compare(task, out, config, resume, progress)
     except KeyboardInterrupt:
         again = command or f"diffcontrol compare {task.name}"
         raise Interrupted(
@@ -119,58 +117,39 @@ def run_comparison(
 def _compare(
     task: Task,
     out_dir: Path,
-    *,
-    seeds: int,
-    methods: list[str] | None,
-    rl_steps: int | None,
-    updates: int | None,
-    eval_every: int | None,
-    eval_episodes: int,
-    final_episodes: int,
-    eval_seed: int,
-    torch_threads: int | None,
+    config: CompareConfig,
     resume: bool,
     progress: Callable[[str], None] | None,
 ) -> dict[str, Any]:
     say = progress or (lambda line: None)
     known = methods_for(task)
-    methods = list(methods or known)
+    methods = list(config.methods or known)
     for m in methods:
         if m not in known:
             raise ConfigError(
                 f"unknown method {m!r} for task {task.name!r}; choose from {', '.join(known)}"
             )
-    for name, value in (
-        ("seeds", seeds),
-        ("eval_episodes", eval_episodes),
-        ("final_episodes", final_episodes),
-    ):
-        if not isinstance(value, int) or value <= 0:
-            raise ConfigError(f"{name} must be a positive integer, got {value!r}")
-    for name, value in (("rl_steps", rl_steps), ("updates", updates), ("eval_every", eval_every)):
-        if value is not None and (not isinstance(value, int) or value <= 0):
-            raise ConfigError(f"{name} must be a positive integer, got {value!r}")
     if any(m != "diffcontrol" for m in methods):
         require_rl()
-    every = eval_every or DEFAULT_EVAL_EVERY[task.name]
+    every = config.eval_every or DEFAULT_EVAL_EVERY[task.name]
     settings = {
         "format": "diffcontrol-compare",
         "task": task.name,
         "methods": methods,
-        "seeds": list(range(seeds)),
-        "rl_steps": rl_steps,
-        "updates": updates,
+        "seeds": list(range(config.seeds)),
+        "rl_steps": config.rl_steps,
+        "updates": config.updates,
         "eval_every": every,
-        "eval_episodes": eval_episodes,
-        "final_episodes": final_episodes,
-        "eval_seed": eval_seed,
+        "eval_episodes": config.eval_episodes,
+        "final_episodes": config.final_episodes,
+        "eval_seed": config.eval_seed,
         "eval_env": task.gym_label if task.gym_id else envs.env_id(task),
     }
     out = _prepare(out_dir, settings, resume)
     runs_dir = out / "runs"
     results = []
     for method in methods:
-        for seed in range(seeds):
+        for seed in range(config.seeds):
             path = runs_dir / f"{method}-seed{seed}.json"
             if resume and path.exists():
                 result = io.read_json(path, "comparison run")
@@ -178,21 +157,21 @@ def _compare(
             else:
                 say(f"{method} seed {seed}: training")
                 common = dict(
-                    eval_episodes=eval_episodes,
-                    final_episodes=final_episodes,
-                    eval_seed=eval_seed,
+                    eval_episodes=config.eval_episodes,
+                    final_episodes=config.final_episodes,
+                    eval_seed=config.eval_seed,
                     say=say,
                 )
                 if method == "diffcontrol":
-                    result = run_diffcontrol(task, seed, updates=updates, **common)
+                    result = run_diffcontrol(task, seed, updates=config.updates, **common)
                 else:
                     result = run_rl(
                         task,
                         method,
                         seed,
-                        steps=rl_steps,
+                        steps=config.rl_steps,
                         eval_every=every,
-                        torch_threads=torch_threads,
+                        torch_threads=config.torch_threads,
                         **common,
                     )
                 io.write_json(path, result)

@@ -92,6 +92,7 @@ def run_real_comparison(
             evaluation protocol; RunDirectoryError: ``out_dir`` holds other things.
     """
     from ..identify import loop
+    from ..settings import LoopConfig
 
     task = resolve(task) if isinstance(task, str) else task
     thresholds = THRESHOLDS.get(task.name)
@@ -146,18 +147,21 @@ def run_real_comparison(
             where = out / "loops" / f"{model}-seed{seed}"
             t0 = time.perf_counter()
             for rounds in range(1, max_rounds + 1):
-                state = loop(
-                    task,
-                    where,
+                config = LoopConfig(
                     model=model,
                     rounds=rounds,
                     episodes=episodes[model],
                     seed=seed,
                     eval_episodes=final_episodes,
                     eval_seed=eval_seed,
-                    start=start if model != "neural" else None,
+                    start=start if model != "neural" else {},
                     explore_noise=explore_noise,
                     updates=updates,
+                )
+                state = loop(
+                    task,
+                    where,
+                    config,
                     resume=True,
                     progress=None,
                     report=lambda line, m=model, s=seed: tell(f"{LABELS[m]} seed {s}: {line}"),

@@ -16,7 +16,8 @@
   ``prediction.png``); ``read_fitted`` and ``fitted_model`` read it back, and
   ``real_system`` names the system its data came from (an environment id read from a file is
   used only where it needs no import).
-- **The loop**: ``loop(task, out, ...)``: record -> fit -> train, a few rounds.
+- **The loop**: ``loop(task, out, LoopConfig(...))``: record -> fit -> train, a few rounds
+  (``FitConfig`` and ``LoopConfig`` are in ``diffcontrol.settings``).
 """
 
 from . import data

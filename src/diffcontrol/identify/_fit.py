@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import ConfigError, RunDirectoryError
+from ..settings import FitConfig
 from ._shooting import MODEL_TYPES, FitResult
 from .fitted import FITTED_FILE, FITTED_FORMAT
 
@@ -126,14 +127,17 @@ def fit_dir(
     data_file: str | Path,
     model: str,
     out: str | Path,
+    config: FitConfig | None = None,
     *,
-    holdout: float = 0.2,
     force: bool = False,
     progress: Callable[[str], None] | None = None,
-    **settings: Any,
+    **start: Any,
 ) -> FitDir:
-    """``diffcontrol fit``: read ``data_file``, hold out its last ``holdout`` fraction, fit
-    ``model`` (``fit``) and write ``out/fitted.json`` and ``out/prediction.png``.
+    """``diffcontrol fit``: read ``data_file``, hold out its last ``config.holdout`` fraction,
+    fit ``model`` (``fit``, with the settings ``config``: a ``FitConfig``, by default
+    ``FitConfig()``) and write ``out/fitted.json`` and ``out/prediction.png``. ``start`` is
+    what the fit starts from, as ``fit`` takes it: ``init`` (a grey box's initial values) or
+    ``params`` (a hybrid's physics).
 
     Raises:
         RunDirectoryError: ``out`` cannot take the files (or holds a fit, without ``force``);
@@ -143,9 +147,9 @@ def fit_dir(
     if hasattr(route, "check_model"):  # before anything is read or created
         route.check_model(task, model)
     steps, lr = route.defaults.get(model, route.defaults["params"])
-    given = {k: v for k, v in settings.items() if v is not None}
-    settings = {"steps": steps, "learning_rate": lr, "window": 10, "hidden": (32, 32)}
-    settings = {**settings, "seed": 0, "lm_steps": 20, **given, "holdout": holdout}
+    given = {k: v for k, v in dataclasses.asdict(config or FitConfig()).items() if v is not None}
+    settings = {"steps": steps, "learning_rate": lr, **given, **start}
+    holdout = settings["holdout"]
     data = route.read(data_file)
     meta = getattr(data, "metadata", None) or {}
     if isinstance(meta.get("params"), dict) and not meta.get("env_id"):

@@ -24,6 +24,7 @@ from typing import Any
 
 from ..errors import ConfigError, RunDirectoryError
 from ..io import NumpyPolicy, now_iso, read_json, read_model, write_figure, write_json
+from ..settings import FitConfig, LoopConfig
 from ._fit import fit_dir
 from ._rounds import NoisyPolicy, model_error, parse_start, predictor_of, start_params
 from .data import concat, read_trajectories, write_trajectories
@@ -35,19 +36,10 @@ LOOP_FILE = "loop.json"
 def loop(
     task: Any,
     out: str | Path,
+    config: LoopConfig | None = None,
     *,
     env_id: str | None = None,
     env_kwargs: dict | None = None,
-    model: str = "params",
-    names: list[str] | None = None,
-    rounds: int = 3,
-    episodes: int = 2,
-    updates: int | None = None,
-    seed: int = 0,
-    eval_episodes: int = 20,
-    eval_seed: int = 0,
-    start: dict[str, float] | None = None,
-    explore_noise: float = 0.0,
     resume: bool = False,
     progress: Callable[[str], None] | None = None,
     report: Callable[[str], None] = print,
@@ -62,18 +54,18 @@ def loop(
     ``report`` gets each round's line and the last one. Returns the loop's state.
 
     Args:
-        eval_seed: the first reset seed of the ``eval_episodes`` evaluation episodes on the
-            real system (1000 in ``diffcontrol compare``); they are not counted as real steps.
-        start: the physics a grey box (``params``) or a hybrid starts from, by name (e.g.
-            ``{"g": 8.0}``), instead of the task's nominal values: a loop that must not be
-            handed the truth states a wrong start. Ignored by ``neural``.
-        explore_noise: exploration noise on the controller's actions while it records
-            (``NoisyPolicy``: a fraction of the action's half range; the chance of a random
-            action for a discrete space); 0 records the controller as it is.
+        config: the loop's settings (``LoopConfig``; default ``LoopConfig()``). Its
+            ``eval_seed`` is the first reset seed of the evaluation episodes on the real system
+            (not counted as real steps); ``start`` is the physics a grey box (``params``) or a
+            hybrid starts from, by name (e.g. ``{"g": 8.0}``), instead of the task's nominal
+            values: a loop that must not be handed the truth states a wrong start (ignored by
+            ``neural``); ``explore_noise`` is the noise on the controller's actions while it
+            records (``NoisyPolicy``: a fraction of the action's half range; the chance of a
+            random action for a discrete space).
 
     Raises:
         ConfigError: a task that records no Gymnasium episodes, an environment whose spaces
-            are not the task's, an unknown ``start`` parameter, a noise outside [0, 1].
+            are not the task's, an unknown ``start`` parameter.
         RunDirectoryError: ``out`` holds another loop (or, without ``resume``, any loop), or
             other files.
     """
@@ -94,10 +86,12 @@ def loop(
             f"loop cannot fit a model of {task.name!r} (it does not reconstruct its state from "
             "observations: define its state_from_observation); e.g. pendulum"
         )
+    c = config or LoopConfig()
+    model, rounds, episodes, updates, seed = c.model, c.rounds, c.episodes, c.updates, c.seed
+    eval_episodes, eval_seed, explore_noise = c.eval_episodes, c.eval_seed, c.explore_noise
+    names = None if c.names is None else list(c.names)
     env_kwargs = dict(env_kwargs or {})
-    start = parse_start(task, start)
-    if not 0.0 <= explore_noise <= 1.0:
-        raise ConfigError(f"--explore-noise {explore_noise} must be in [0, 1]; e.g. 0.1")
+    start = parse_start(task, c.start)
     if explore_noise and not episodes_of_env:
         raise ConfigError(
             f"--explore-noise applies to Gymnasium episodes, not to {task.name!r}'s own "
@@ -181,7 +175,7 @@ def loop(
         )
         if not (here / "fit" / "fitted.json").exists():
             fitted = fit_dir(
-                task, out / "data.csv", model, here / "fit", holdout=0.0, names=names,
+                task, out / "data.csv", model, here / "fit", FitConfig(names=names, holdout=0.0),
                 progress=progress, **_start_settings(task, model, start),
             )  # fmt: skip
             for line in fitted.lines:

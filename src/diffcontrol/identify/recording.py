@@ -11,6 +11,7 @@ written to a CSV or NPZ file.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -23,6 +24,7 @@ from .. import io
 from ..envs import make_env
 from ..errors import ConfigError
 from ..io import now_iso
+from ..settings import RecordConfig
 from .data import DISCRETE_UNIT, TrajectoryData, known_columns, write_trajectories
 
 
@@ -323,26 +325,28 @@ def check_data_file(out: Path, force: bool) -> None:
 
 def record_data(
     source: str,
-    episodes: int,
+    config: RecordConfig,
     out: str | Path | None = None,
     *,
     task: Any = None,
     force: bool = False,
-    **options: Any,
+    progress: Callable[[str], None] | None = None,
 ) -> tuple[Any, Path]:
-    """``diffcontrol record``: record ``episodes`` episodes and write them to ``out``.
+    """``diffcontrol record``: record ``config.episodes`` episodes and write them to ``out``.
 
     Args:
         source: a registered task's name (its ``record_data``: Gymnasium episodes, or the
             task's own recording) or a Gymnasium id (``module:Env-v0`` too; imported because
             the caller named it).
-        episodes: how many episodes.
+        config: what to record (``RecordConfig``): how many episodes, with which
+            controller (a run directory; random actions without), the first reset seed, the
+            environment's (or system's) keyword arguments, a cut ``max_steps`` and a noise
+            ``noise_m``, as the task's hook takes them.
         out: a ``.csv`` or ``.npz`` file (default: the task's ``data_file_name``, or the id
             with ``/`` as ``-``).
         task: the task whose real system the Gymnasium id ``source`` is (its columns).
         force: overwrite ``out``.
-        options: ``env_kwargs``, ``controller`` (a run directory), ``seed``, ``max_steps``,
-            ``noise_m`` and ``progress`` (called with lines), as the task's hook takes them.
+        progress: called with lines.
 
     Returns:
         The recorded data and the file written.
@@ -355,18 +359,12 @@ def record_data(
         task, env_id = tasks.make(source), None
     path = Path(out or (task.data_file_name(env_id) if task else source.replace("/", "-") + ".csv"))
     check_data_file(path, force)
+    options = {f.name: getattr(config, f.name) for f in dataclasses.fields(config)}
+    episodes = options.pop("episodes")
     if task is not None:
-        data = task.record_data(episodes, env_id=env_id, **options)
+        data = task.record_data(episodes, env_id=env_id, progress=progress, **options)
     else:
-        o = {k: options.get(k) for k in ("env_kwargs", "controller", "max_steps", "noise_m")}
-        data = _record_env(
-            source,
-            episodes,
-            None,
-            seed=options.get("seed", 0),
-            progress=options.get("progress"),
-            **o,
-        )
+        data = _record_env(source, episodes, None, progress=progress, **options)
     try:
         if force:
             write_trajectories(path, data)

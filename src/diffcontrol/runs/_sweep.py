@@ -13,7 +13,9 @@ their results are the same to noise).
 
 from __future__ import annotations
 
+import dataclasses
 import math
+import os
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -38,24 +40,27 @@ def member_name(index: int, config: Any, swept: Sequence[str]) -> str:
 
 def sweep_dir(
     out_dir: str | Path,
-    task: str,
+    task: str | None = None,
     *,
-    seeds: Sequence[int] = (0,),
-    values: dict[str, Sequence[Any]] | None = None,
+    seeds: Sequence[int] | str = (0,),
+    values: dict[str, Sequence[Any]] | Sequence[str] | None = None,
     settings: dict[str, Any] | None = None,
     recipe: str | None = None,
     devices: int | None = None,
     resume: bool = False,
     final_eval: int | None = None,
+    compile_cache: bool = True,
     progress: Callable[[str], None] | None = None,
 ) -> tuple[Any, list[str]]:
     """Train a grid of runs of ``task`` as one program and write them into ``out_dir``.
 
     Args:
         out_dir: the sweep directory (new or empty; with ``resume``, the sweep to continue).
-        task: a registered task name or an import path ``module:Class``.
-        seeds: the training seeds.
-        values: setting name -> values to try (e.g. ``{"learning_rate": [1e-3, 3e-3]}``).
+        task: a registered task name or an import path ``module:Class`` (``None`` with
+            ``resume``: the sweep's own).
+        seeds: the training seeds, or their text (``"0-63"``, ``"0,3,7"``: ``parse_seeds``).
+        values: setting name -> values to try (e.g. ``{"learning_rate": [1e-3, 3e-3]}``),
+            or ``NAME=V1,V2`` items as the command line writes them (``parse_values``).
         settings: overrides of the base settings (``None`` values skipped).
         recipe: a named set of settings of the task to start from.
         devices: local devices to shard the members over (default: all that divide them).
@@ -63,6 +68,8 @@ def sweep_dir(
             ``values``, ``settings`` and ``recipe`` are then not used): only the members not
             yet written are trained.
         final_eval: the best member's final evaluation size (``None``: the task's default).
+        compile_cache: use JAX's persistent compilation cache (unless
+            ``DIFFCONTROL_NO_COMPILE_CACHE`` is set).
         progress: called with each progress line.
 
     Returns:
@@ -77,7 +84,17 @@ def sweep_dir(
 
     say = progress or (lambda line: None)
     out = Path(out_dir)
+    task = task or (stored_sweep(out)["task"] if resume else None)
+    if task is None:
+        raise ConfigError("name the TASK to sweep (or --resume the sweep in --out)")
+    seeds = parse_seeds(seeds) if isinstance(seeds, str) else seeds
     the_task = resolve(task)
+    if not resume and values is not None and not isinstance(values, dict):
+        values = parse_values(values, the_task.default_config())
+    if compile_cache and not os.environ.get("DIFFCONTROL_NO_COMPILE_CACHE"):
+        from .. import _jax_setup
+
+        _jax_setup.enable_compile_cache()
     if resume:  # the sweep's own settings, from its directory alone
         stored = stored_sweep(out)
         base = type(the_task.default_config()).from_json(stored["config"])
@@ -300,10 +317,6 @@ def parse_values(items: Sequence[str], config: Any) -> dict[str, list[Any]]:
     Raises:
         ConfigError: an unknown setting, a value of the wrong type, or a setting given twice.
     """
-    import dataclasses
-
-    from ..config import parse_field_value
-
     fields = {f.name: f for f in dataclasses.fields(config)}
     values: dict[str, list[Any]] = {}
     for item in items:
@@ -322,3 +335,28 @@ def parse_values(items: Sequence[str], config: Any) -> dict[str, list[Any]]:
             config.replace(**{name: v})  # the config's own checks, with their messages
         values[name] = options
     return values
+
+
+def parse_field_value(config: Any, name: str, text: str) -> Any:
+    """The value of field ``name`` of ``config`` written as ``text`` (command-line form:
+    ``3e-3``, ``64x64`` for layer widths, ``yes``/``no``), of the field's declared type.
+
+    Raises:
+        ConfigError: ``text`` is not a value of that type.
+    """
+    declared = next(str(f.type) for f in dataclasses.fields(config) if f.name == name)
+    try:
+        if declared == "int":
+            return int(text)
+        if declared == "float":
+            return float(text)
+        if declared == "bool":
+            return {"yes": True, "true": True, "no": False, "false": False}[text.lower()]
+        if declared == "tuple[int, ...]":
+            return tuple(int(w) for w in text.split("x"))
+        return text
+    except (ValueError, KeyError):
+        form = {"int": "an integer", "float": "a number", "bool": "yes or no"}
+        raise ConfigError(
+            f"{name} takes {form.get(declared, 'layer widths such as 64x64')}, got {text!r}"
+        ) from None

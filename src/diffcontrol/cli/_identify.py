@@ -1,18 +1,44 @@
-"""``diffcontrol fit`` and ``diffcontrol loop``: a model of a task's system learnt from data
-(``identify.fit_dir``), and record -> fit -> train on a real system (``identify.loop``)."""
+"""``diffcontrol record``, ``fit`` and ``loop``: trajectories recorded to CSV or NPZ
+(``identify.record_data``), a model of a task's system learnt from them (``identify.fit_dir``),
+and record -> fit -> train on a real system (``identify.loop``)."""
 
 from __future__ import annotations
 
 import argparse
+import time
 from typing import Any
 
+from ..settings import MODELS, FitConfig, LoopConfig, RecordConfig
 from . import _args as a
 from ._args import FLAG, REQUIRED, add
 
-MODELS = ("params", "hybrid", "neural")
-
 
 def add_parsers(sub: Any) -> None:
+    p = sub.add_parser(
+        "record",
+        help="record trajectories from a Gymnasium environment (CSV or NPZ)",
+        description=(
+            "Record N episodes of ENV_ID with the controller saved in DIR, or with random "
+            "actions, and write them as a diffcontrol-trajectories file (CSV or NPZ by the "
+            "extension of FILE; episode i is reset with seed S+i; the last row of an episode "
+            "holds the final observation and no action). ENV_ID is a Gymnasium id (e.g. "
+            "Pendulum-v1, my_module:MyEnv-v0) or a task's name, which records the task's own "
+            "data: the trebuchet's throws (random inputs, or --controller aiming; --env-arg "
+            "sets the real trebuchet's parameters, --noise-m the distance noise; a throw is "
+            "a one-step episode), a swing-up's full state under random forces (--env-arg "
+            "sets its parameters). With --task, ENV_ID is the real system of TASK: its spaces "
+            "must match the task's and the columns are named by the task."
+        ),
+    )
+    # fmt: off
+    add(p,
+        ("env_id", str, REQUIRED, "ENV_ID", "a Gymnasium environment id or a task name"),
+        ("--task", str, None, "TASK", "the task whose real system ENV_ID is"),
+        *a.config_specs(RecordConfig),
+        ("--out", str, None, "FILE", "a .csv or .npz file"),
+        ("--force", FLAG, False, None, "overwrite FILE if it exists"),
+        a.QUIET,
+    )
     p = sub.add_parser(
         "fit",
         help="fit a model of the task's system to recorded trajectories (or throws)",
@@ -28,26 +54,15 @@ def add_parsers(sub: Any) -> None:
             "holds recorded throws and the distances are fitted."
         ),
     )
-    # fmt: off
     add(p,
         a.TASK,
         ("--data", str, REQUIRED, "FILE", "recorded trajectories/throws"),
         ("--model", MODELS, REQUIRED, None, "grey box, hybrid or neural"),
         ("--out", str, REQUIRED, "DIR", "output directory"),
-        ("--params", a.names, None, "NAMES",
-         "--model params: the parameters to fit (default: the task's, e.g. g,friction)"),
-        ("--hidden", a.widths, (32, 32), "W,W", "(32,32)"),
-        ("--seed", a.nonneg_int, 0, "S", "the network's initial weights (0)"),
-        ("--window", a.positive_int, 10, "N", "steps (10)"),
-        ("--steps", a.nonneg_int, None, "N", "Adam steps"),
-        ("--lm-steps", a.nonneg_int, 20, "N", "Levenberg-Marquardt (20)"),
-        ("--learning-rate", a.positive_float, None, "LR", "Adam learning rate"),
-        ("--holdout", a.fraction, 0.2, "F",
-         "fraction of the episodes (throws) held out, the last ones (0.2; 0 for none)"),
+        *a.config_specs(FitConfig),
         ("--force", FLAG, False, None, "replace DIR/fitted.json if it exists"),
         a.QUIET,
     )
-    # fmt: on
     p = sub.add_parser(
         "loop",
         help="alternate record -> fit -> train on a real system for a few rounds",
@@ -60,27 +75,12 @@ def add_parsers(sub: Any) -> None:
             "controller is DIR/round_R/run/model.json."
         ),
     )
-    # fmt: off
     add(p,
         a.TASK,
         ("--out", str, REQUIRED, "DIR", "output directory"),
         ("--env", str, None, "ENV_ID", "the real system (task's own)"),
         a.env_arg("a numeric argument of the real environment (repeatable), e.g. g=12"),
-        ("--model", MODELS, "params", None, "what to fit (params)"),
-        ("--params", a.names, None, "NAMES", "to fit"),
-        ("--rounds", a.episodes, 3, "R", "rounds (3)"),
-        ("--episodes", a.episodes, 2, "N", "per round (2)"),
-        ("--updates", a.positive_int, None, "N", "per round"),
-        ("--seed", a.seed, 0, "S", "seed of training and recording (0)"),
-        ("--eval-episodes", a.episodes, 20, "N", "(20)"),
-        ("--eval-seed", a.seed, 0, "S",
-         "first reset seed of the evaluation episodes on the real system (0; compare: 1000)"),
-        ("--start", [a.param], [], "NAME=VALUE",
-         "a parameter the grey box or hybrid starts from instead of the nominal one "
-         "(repeatable), e.g. g=8, so that it is not handed the truth"),
-        ("--explore-noise", a.fraction, 0.0, "F",
-         "noise on the controller's actions while it records, a fraction of the action's "
-         "half range (0: none; 0.1 suits the Pendulum)"),
+        *a.config_specs(LoopConfig),
         ("--resume", FLAG, False, None, "continue an interrupted loop in DIR"),
         ("--quiet", FLAG, False, None, "print only each round's summary"),
     )
@@ -95,9 +95,9 @@ def cmd_fit(args: argparse.Namespace) -> int:
         args.data,
         args.model,
         args.out,
-        names=args.params,
+        a.config_of(FitConfig, args),
+        force=args.force,
         progress=a.say(args),
-        **a.pick(args, "holdout force window steps learning_rate lm_steps hidden seed"),
     )
     print("\n".join(done.lines))
     return 0
@@ -109,13 +109,26 @@ def cmd_loop(args: argparse.Namespace) -> int:
     identify.loop(
         tasks.resolve(args.task),
         args.out,
+        a.config_of(LoopConfig, args),
         env_id=args.env,
         env_kwargs=dict(args.env_arg),
-        names=args.params,
-        start=dict(args.start),
+        resume=args.resume,
         progress=a.say(args),
-        **a.pick(
-            args, "model rounds episodes updates seed eval_episodes eval_seed explore_noise resume"
-        ),
     )
+    return 0
+
+
+def cmd_record(args: argparse.Namespace) -> int:
+    from .. import identify, tasks
+
+    t0 = time.perf_counter()
+    data, out = identify.record_data(
+        args.env_id,
+        a.config_of(RecordConfig, args),
+        args.out,
+        task=tasks.resolve(args.task) if args.task else None,
+        force=args.force,
+        progress=a.say(args),
+    )
+    print(f"wrote {out}: {identify.describe(data)} ({time.perf_counter() - t0:.1f} s)")
     return 0

@@ -1,0 +1,207 @@
+"""Settings of the work around training: a recording (``identify.record_data``), a model fit
+(``identify.fit_dir``), a loop on a real system (``identify.loop``) and a comparison with RL
+(``compare.run_comparison``).
+Frozen, typed dataclasses, as ``config`` holds the training ones: they validate on
+construction, and their fields are the command line's flags (``diffcontrol record/fit/loop/compare``:
+the name, the default, the bounds and the help).
+
+Importing this module imports no JAX.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from typing import Any
+
+from .config import MAX_COUNT, MAX_WIDTH, _opt, layer_widths
+from .errors import ConfigError
+
+MODELS = ("params", "hybrid", "neural")
+"""The models ``identify.fit`` learns: grey box, hybrid (physics plus a network), neural."""
+
+
+class _Settings:
+    """What the settings share: every field is checked against its declared type and bounds."""
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            value, meta, declared = getattr(self, f.name), f.metadata, str(f.type)
+            if value is None and declared.endswith("| None"):
+                continue
+            if declared.startswith("int"):
+                low, high = meta.get("low", 1), meta.get("high", MAX_COUNT)
+                if not isinstance(value, int) or isinstance(value, bool) or low > value:
+                    what = "a positive integer" if low else "an integer >= 0"
+                    raise ConfigError(f"{f.name} must be {what}, got {value!r}")
+                if value > high:
+                    raise ConfigError(f"{f.name} must be at most {high:,}, got {value!r}")
+            elif declared.startswith("float"):
+                low, high = 0.0, 1.0 if meta.get("form") == "fraction" else math.inf
+                if not isinstance(value, int | float) or not (low <= value <= high):
+                    raise ConfigError(f"{f.name} must be in [{low:g}, {high:g}], got {value!r}")
+            elif declared == "tuple[int, ...]":
+                object.__setattr__(self, f.name, layer_widths(f.name, value))
+            elif declared.startswith("tuple[str"):
+                if not isinstance(value, tuple | list) or not all(
+                    isinstance(v, str) for v in value
+                ):
+                    raise ConfigError(f"{f.name} must be names such as ('g',), got {value!r}")
+                object.__setattr__(self, f.name, tuple(value))
+            elif value not in meta.get("choices", (value,)):
+                choose = ", ".join(meta["choices"])
+                raise ConfigError(f"{f.name} must be one of {choose}, got {value!r}")
+
+    def replace(self, **changes: Any) -> Any:
+        """A copy with some fields changed (validated again)."""
+        return dataclasses.replace(self, **changes)
+
+
+@dataclass(frozen=True)
+class RecordConfig(_Settings):
+    """Settings of ``identify.record_data``: episodes of a real system (or a task's own
+    data), as a task's ``record_data`` hook takes them."""
+
+    episodes: int = _opt("episodes (throws)", dataclasses.MISSING, "N", high=MAX_WIDTH)
+    controller: str | None = _opt(
+        "a run directory (or model.json) of `diffcontrol train`; random actions if omitted",
+        None,
+        "DIR",
+    )
+    seed: int = _opt("first reset seed", 0, "S", low=0)
+    env_kwargs: dict[str, float] = _opt(
+        "a numeric keyword argument of gymnasium.make (e.g. g=9.0), or a parameter of a task's "
+        "own system (e.g. drag_coefficient=1.5); repeatable",
+        {},
+        "NAME=VALUE",
+        flag="env_arg",
+    )
+    noise_m: float | None = _opt(
+        "trebuchet only: Gaussian noise (m) on the recorded distances (0)",
+        None,
+        "SD",
+        form="nonneg",
+    )
+    max_steps: int | None = _opt("cut episodes at N", None, "N")
+
+
+@dataclass(frozen=True)
+class FitConfig(_Settings):
+    """Settings of ``identify.fit_dir``: a model of a task's system fitted to recorded data
+    (``identify.fit`` takes them as keywords; Adam's ``steps`` and ``learning_rate`` default
+    to the task's route's for the model type)."""
+
+    names: tuple[str, ...] | None = _opt(
+        "--model params: the parameters to fit (default: the task's, e.g. g,friction)",
+        None,
+        "NAMES",
+        flag="params",
+    )
+    hidden: tuple[int, ...] = _opt("hidden layer widths of a network", (32, 32), "W,W")
+    seed: int = _opt("the network's initial weights", 0, "S", low=0)
+    window: int = _opt("steps predicted from every recorded state", 10, "N")
+    steps: int | None = _opt("Adam steps", None, "N", low=0)
+    lm_steps: int = _opt("Levenberg-Marquardt steps of a grey box", 20, "N", low=0)
+    learning_rate: float | None = _opt("Adam learning rate", None, "LR", form="positive")
+    holdout: float = _opt(
+        "fraction of the episodes (throws) held out, the last ones (0 for none)",
+        0.2,
+        "F",
+        form="fraction",
+    )
+
+
+@dataclass(frozen=True)
+class LoopConfig(_Settings):
+    """Settings of ``identify.loop``: record -> fit -> train on a real system, a few rounds."""
+
+    model: str = _opt("what to fit", "params", choices=MODELS)
+    names: tuple[str, ...] | None = _opt(
+        "the parameters a grey box fits (default: the task's)", None, "NAMES", flag="params"
+    )
+    rounds: int = _opt("rounds", 3, "R", high=MAX_WIDTH)
+    episodes: int = _opt("real episodes recorded per round", 2, "N", high=MAX_WIDTH)
+    updates: int | None = _opt("gradient updates of each round (default: the task's)", None, "N")
+    seed: int = _opt("seed of training and recording", 0, "S", low=0)
+    eval_episodes: int = _opt(
+        "evaluation episodes of each round's controller on the real system", 20, "N", high=MAX_WIDTH
+    )
+    eval_seed: int = _opt(
+        "first reset seed of the evaluation episodes on the real system; compare uses 1000",
+        0,
+        "S",
+        low=0,
+    )
+    start: dict[str, float] = _opt(
+        "a parameter the grey box or hybrid starts from instead of the nominal one "
+        "(repeatable), e.g. g=8, so that it is not handed the truth",
+        {},
+        "NAME=VALUE",
+    )
+    explore_noise: float = _opt(
+        "noise on the controller's actions while it records, a fraction of the action's half "
+        "range (0: none; 0.1 suits the Pendulum)",
+        0.0,
+        "F",
+        form="fraction",
+    )
+
+
+@dataclass(frozen=True)
+class CompareConfig(_Settings):
+    """Settings of ``compare.run_comparison``: diffcontrol and the RL baselines on one task,
+    trained on seeds ``0 ... seeds-1`` and evaluated alike; the ``--real`` fields are those of
+    the comparison in the real system's steps (``run_comparison(real=True)``)."""
+
+    seeds: int = _opt("training seeds", 3, "N", high=MAX_WIDTH)
+    methods: tuple[str, ...] | None = _opt(
+        "a subset of the methods, e.g. diffcontrol,ppo (default: all for the task)", None, "M,M"
+    )
+    rl_steps: int | None = _opt(
+        "RL budget in environment steps (default: each baseline's zoo budget)", None, "N"
+    )
+    updates: int | None = _opt(
+        "diffcontrol's gradient updates (default: the task's default config)", None, "N"
+    )
+    eval_every: int | None = _opt(
+        "RL evaluation interval in environment steps (default: cartpole 2000, pendulum 1000, "
+        "trebuchet 1000); diffcontrol is evaluated at its own evaluation points",
+        None,
+        "STEPS",
+    )
+    eval_episodes: int = _opt("episodes per evaluation point", 20, "N", high=MAX_WIDTH)
+    final_episodes: int = _opt(
+        "episodes for each method's returned controller", 100, "N", high=MAX_WIDTH
+    )
+    eval_seed: int = _opt("first reset seed of the evaluation episodes", 1000, "S", low=0)
+    torch_threads: int | None = _opt(
+        "PyTorch threads for the RL baselines (None: PyTorch's own number)", 1, "N"
+    )
+    models: tuple[str, ...] | None = _opt(
+        "--real: a subset of params,hybrid,neural (default all)", None, "M,M"
+    )
+    max_rounds: int = _opt(
+        "--real: the most rounds of a loop; it stops at the first controller that reaches the "
+        "task's threshold",
+        3,
+        "R",
+    )
+    start: dict[str, float] = _opt(
+        "--real: the wrong physics the grey box and hybrid start from (repeatable; default "
+        "for pendulum g=8, friction=0.1)",
+        {},
+        "NAME=VALUE",
+    )
+    explore_noise: float = _opt(
+        "--real: action noise while a controller records, a fraction of the half range",
+        0.1,
+        "F",
+        form="fraction",
+    )
+    rl_results: str | None = _opt(
+        "--real: a comparison (comparison.json, or benchmarks/results/compare.json) whose RL "
+        "runs are drawn beside",
+        None,
+        "FILE",
+    )
