@@ -101,3 +101,22 @@ def test_tasks_without_a_grid_or_bounds_are_refused():
     with pytest.raises(ConfigError, match="horizon"):
         optimal.solve(TASK, points=11, levels=3, horizon=0)
     assert diffcontrol.make("cartpole").state_grid(None) is None
+
+
+def test_evaluate_reports_the_gap_to_the_optimum(pendulum_run, cartpole_run, capsys):
+    import json
+
+    from diffcontrol.cli import main
+
+    argv = ["evaluate", str(pendulum_run), "--episodes", "3", "--optimum", "41", "--json"]
+    assert main(argv) == 0
+    doc = json.loads(capsys.readouterr().out)
+    opt = doc["optimum"]
+    assert opt["seeds"] == [0, 2] and opt["grid_points"] == [41, 41]
+    # the tiny run is barely trained: the optimum on the same seeds is far better
+    assert opt["mean_return"] > doc["mean_return"]
+    gap = (opt["mean_return"] - doc["mean_return"]) / abs(opt["mean_return"])
+    assert doc["gap_to_optimum"] == pytest.approx(gap) and gap > 0
+    assert main(["evaluate", str(cartpole_run), "--episodes", "1", "--optimum", "41"]) == 2
+    err = capsys.readouterr().err
+    assert "state grid" in err and len(err.strip().splitlines()) == 1

@@ -19,6 +19,7 @@ class EvalResult:
     seed: int
     returns: np.ndarray
     lengths: np.ndarray
+    optimum: Any = None  # an ``optimal.OptimumResult`` on the same seeds, where asked for
 
     key = "gym_eval"  # its entry in metrics.json
 
@@ -41,16 +42,23 @@ class EvalResult:
             "max_return": float(np.max(self.returns)),
             "mean_length": float(np.mean(self.lengths)),
             "returns": self.returns.tolist(),
+            **({} if self.optimum is None else {"optimum": self.optimum.to_json()}),
+            **({} if self.optimum is None else {"gap_to_optimum": self.optimum.gap(self.mean)}),
         }
 
     def summary(self) -> str:
-        """One line: the mean and spread of the return and the seeds it was measured on."""
+        """One line: the mean and spread of the return and the seeds it was measured on (and
+        a second with the optimum on the same seeds and the gap to it, where there is one)."""
         n = int(self.returns.size)
-        return (
+        line = (
             f"{self.env_id}: return {self.mean:.2f} ± {self.std:.2f} over {n} episodes "
             f"(seeds {self.seed}-{self.seed + n - 1}; min {self.returns.min():.1f}, "
             f"max {self.returns.max():.1f})"
         )
+        if self.optimum is None:
+            return line
+        gap = self.optimum.gap(self.mean)
+        return f"{line}\n{self.optimum.summary()}; gap to it {100 * gap:.1f} %"
 
     def headline(self) -> str:
         """A few words for the end of ``diffcontrol train``'s last line."""

@@ -37,6 +37,9 @@ def add_parsers(sub: Any) -> None:
          "episodes (default 100), or random targets for aiming tasks (default 1000)"),
         ("--seed", a.nonneg_int, 0, "S",
          "first reset seed, or the seed of the random targets (default 0)"),
+        ("--optimum", a.positive_int, None, "N", "also run the reference optimum (a dynamic "
+         "program on an N x N state grid, e.g. 401) on the same seeds and print the gap to it; "
+         "tasks with a state grid (pendulum)"),
         a.JSON,
         a.RUN_TASK,
     )
@@ -92,6 +95,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         env_kwargs=dict(args.env_arg),
         episodes=args.episodes,
         seed=args.seed,
+        optimum=args.optimum,
     )
     if args.json:
         print(json.dumps({"run_dir": str(args.run_dir), "task": run.task.name, **ev.to_json()}))

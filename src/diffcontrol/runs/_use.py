@@ -19,6 +19,7 @@ def evaluate_dir(
     env_kwargs: dict | None = None,
     episodes: int | None = None,
     seed: int = 0,
+    optimum: int | None = None,
 ) -> tuple[Run, Any]:
     """Evaluate the controller in ``run_dir`` with its task's ``evaluate_run`` hook.
 
@@ -30,9 +31,13 @@ def evaluate_dir(
         env_kwargs: the keyword arguments of ``env_id``.
         episodes: episodes (or random targets); ``None``: the task's default number.
         seed: the first reset seed (or the seed of the random targets).
+        optimum: also run the reference optimum on the same seeds (``optimal.optimal_return``
+            on a grid of ``optimum`` points per state axis, 41 actions) and report the gap to
+            it; for tasks with a state grid (Pendulum), in their own environment.
 
     Returns:
-        The ``Run`` and the task's evaluation result (``summary()``, ``to_json()``).
+        The ``Run`` and the task's evaluation result (``summary()``, ``to_json()``; with
+        ``optimum``, its ``optimum`` is the ``OptimumResult``).
 
     Raises:
         ConfigError: ``env_kwargs`` without ``env_id``, or a task with nothing to evaluate in.
@@ -53,7 +58,33 @@ def evaluate_dir(
             f"--env does not apply to task {run.task.name!r}, whose evaluation is its own "
             f"({ev.key}), not Gymnasium episodes; leave --env out"
         )
+    if optimum is not None:
+        ev.optimum = _optimum(run, ev, optimum)
     return run, ev
+
+
+def _optimum(run: Run, ev: Any, points: int) -> Any:
+    """The grid optimum of the run's task on the seeds ``ev`` was measured on."""
+    from ..optimal import optimal_return
+
+    if ev.key != "gym_eval" or ev.env_id != run.task.gym_label:
+        raise ConfigError(
+            f"--optimum is the optimum of {run.task.gym_label}, and this evaluation ran in "
+            f"{getattr(ev, 'env_id', ev.key)}; leave --optimum out"
+        )
+    if not 3 <= points <= MAX_OPTIMUM_POINTS:
+        raise ConfigError(
+            f"--optimum {points}: the grid needs 3 to {MAX_OPTIMUM_POINTS} points per axis "
+            "(401 is within about 0.3 of the converged optimum for Pendulum)"
+        )
+    seeds = range(ev.seed, ev.seed + int(ev.returns.size))
+    return optimal_return(run.task, seeds, points=points, levels=OPTIMUM_LEVELS)
+
+
+MAX_OPTIMUM_POINTS = 1001
+"""The finest grid ``evaluate_dir`` solves: its value table is about 0.8 GB (Pendulum)."""
+OPTIMUM_LEVELS = 41
+"""Actions per action dimension of ``evaluate_dir``'s optimum (as the benchmarks' tables)."""
 
 
 def animate_dir(
