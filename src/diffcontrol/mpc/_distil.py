@@ -148,11 +148,11 @@ def distil(
     planner: Planner,
     controller: MLPController | None = None,
     *,
-    rounds: int = 10,
-    episodes_per_round: int = 64,
+    rounds: int = 12,
+    episodes_per_round: int = 128,
     beta: float = 0.0,
-    fit_steps: int = 2000,
-    batch_size: int = 256,
+    fit_steps: int = 4000,
+    batch_size: int = 512,
     learning_rate: float = 3e-3,
     eval_episodes: int = 256,
     keep_best: bool = True,
@@ -255,7 +255,9 @@ def distil(
     best, best_index, planner_return, non_finite = controller, 0, math.nan, 0
     for r in range(rounds):
         k_run, k_starts, k_mix, k_fit = jax.random.split(k_run, 4)
-        starts = jax.vmap(task.reset, in_axes=(0, None))(jax.random.split(k_starts, episodes), params)
+        starts = jax.vmap(task.reset, in_axes=(0, None))(
+            jax.random.split(k_starts, episodes), params
+        )
         mix = jnp.asarray(1.0 if r == 0 else beta**r, jnp.float32)
         obs, labels, valid, returns, finite = rollout(
             planner, controller, starts, jax.random.split(k_mix, episodes), mix, steps
@@ -351,15 +353,15 @@ def distil(
         "devices": 1,
         "processes": 1,
     }
-    return TrainResult(task=task, config=config, params=params, controller=controller, metrics=metrics)
+    return TrainResult(
+        task=task, config=config, params=params, controller=controller, metrics=metrics
+    )
 
 
 def _describe(planner: Planner) -> dict[str, Any]:
     """The planner's settings as JSON (for ``metrics.json``)."""
     solver = planner.solver
-    fields = {
-        k: v for k, v in vars(solver).items() if isinstance(v, int | float | bool | str)
-    }
+    fields = {k: v for k, v in vars(solver).items() if isinstance(v, int | float | bool | str)}
     return {
         "solver": type(solver).__name__,
         **fields,
