@@ -252,6 +252,11 @@ def distil(
                                                controller.action_high))  # fmt: skip
     n = 0
     curve: list[dict[str, Any]] = []
+    say(
+        f"distilling the planner into the MLP: {rounds} rounds of {episodes} episodes "
+        f"({episodes * steps} planner calls each), {fit_steps} fit steps per round; "
+        "compiling first"
+    )
     best, best_index, planner_return, non_finite = controller, 0, math.nan, 0
     for r in range(rounds):
         k_run, k_starts, k_mix, k_fit = jax.random.split(k_run, 4)
