@@ -230,6 +230,7 @@ def distil(
 
     _timing.watch_compiles()
     t_start, compiled_before = time.perf_counter(), _timing.compile_seconds()
+    programs_before = _timing.compiled_programs()
     say = progress or (lambda line: None)
     steps = task.episode_length
     params = planner.problem.params
@@ -323,7 +324,11 @@ def distil(
         "seed": seed,
         "train_seconds": wall,
         "compile_seconds": compile_s,
-        "timings": {"compile": compile_s, "train": wall - compile_s},
+        "timings": {
+            "compile": compile_s,
+            "compile_programs": _timing.compiled_programs() - programs_before,
+            "train": wall - compile_s,
+        },
         "updates": rounds * fit_steps,
         "simulated_steps": rounds * episodes * steps,
         "simulated_episodes": float(rounds * episodes),
