@@ -14,7 +14,7 @@ import pytest
 import diffcontrol
 from diffcontrol import mpc
 from diffcontrol.controllers import MLPController, apply_head, head_inverse
-from diffcontrol.errors import ConfigError
+from diffcontrol.errors import ConfigError, SolverFailed
 from diffcontrol.rollout import rollout
 from diffcontrol.tasks import Pendulum
 
@@ -174,3 +174,13 @@ def test_a_planner_of_another_task_or_a_discrete_head_is_refused():
         mpc.distil(task, _planner(task), sign)
     with pytest.raises(ConfigError, match="not a Planner"):
         mpc.distil(task, "ilqr")
+
+
+@pytest.mark.slow
+def test_a_planner_whose_every_solve_is_nan_is_reported_not_fitted():
+    task = ShortLinearQuadratic()
+    planner = mpc.make_planner(
+        task, mpc.ILQR(iterations=2), horizon=5, terminal_cost=lambda x: jnp.nan * x[0]
+    )
+    with pytest.raises(SolverFailed, match="non-finite"):
+        mpc.distil(task, planner, rounds=1, episodes_per_round=2, fit_steps=1, eval_episodes=1)

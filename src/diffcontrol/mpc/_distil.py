@@ -27,7 +27,7 @@ from jaxtyping import Array, Float, PRNGKeyArray
 from .. import _timing
 from ..config import TrainConfig
 from ..controllers import MLPController, head_inverse
-from ..errors import ConfigError
+from ..errors import ConfigError, SolverFailed
 from ..rollout import batch_returns
 from ..training import TrainResult
 from ._planner import Planner
@@ -158,14 +158,15 @@ def distil(
     keep_best: bool = True,
     seed: int = 0,
     progress: Callable[[str], None] | None = None,
-):
+) -> TrainResult:
     """Distil ``planner`` into an MLP controller by DAgger (see the module docstring).
 
     Every round runs ``episodes_per_round`` episodes of ``task.episode_length`` steps from the
     task's reset distribution in the planner's model (``planner.problem.params``), all
     vmapped: round 0 driven by the planner, round ``i >= 1`` by the MLP with the planner's
     action mixed in with probability ``beta ** i`` per step. Every visited state (before any
-    termination) is labelled with the planner's action and added to the data set; then the MLP
+    termination, and where the planner's solve was finite) is labelled with the planner's
+    action and added to the data set; then the MLP
     takes ``fit_steps`` Adam steps (cosine-decayed over all rounds, from ``learning_rate`` to 5 %
     of it) on minibatches of ``batch_size`` drawn from all the data so far, minimising the
     squared action error in units of the action range. After every round the MLP is evaluated
@@ -194,13 +195,14 @@ def distil(
     Returns:
         A ``diffcontrol.TrainResult`` (``result.save(dir)``, then ``diffcontrol.load(dir)``
         and ``diffcontrol.evaluate``), whose ``metrics["curve"]`` has one point per round
-        (the MLP's evaluation return, the imitation error of the data set so far, how many
-        states were labelled) and ``metrics["distillation"]`` the settings, the planner's own
+        (the MLP's evaluation return, its action error on the round's new states before the
+        fit and on all the data after it, how many states were labelled) and ``metrics["distillation"]`` the settings, the planner's own
         simulated return and the number of planner calls.
 
     Raises:
         ConfigError: a count out of range, ``beta`` outside ``[0, 1]``, a non-positive learning
             rate, a task whose controller has a discrete head, or a planner of another task.
+        SolverFailed: every solve of round 0 was non-finite (no data to fit).
     """
     fix = "pass a positive integer"
     rounds = _count("rounds", rounds, 1, "round 0 is the planner's own rollouts; use >= 1")
@@ -268,10 +270,13 @@ def distil(
         obs, labels, valid, returns, finite = rollout(
             planner, controller, starts, jax.random.split(k_mix, episodes), mix, steps
         )
-        valid = np.asarray(valid).reshape(-1)
-        new_obs = np.asarray(obs).reshape(-1, task.observation_size)[valid]
-        new_labels = np.asarray(labels).reshape(-1, planner.action_size)[valid]
-        non_finite += int(np.sum(~np.asarray(finite).reshape(-1)[valid]))
+        # Kept: the states before any termination whose solve was finite (where it was not,
+        # the label would be the planner's fallback, not its plan).
+        valid, finite = np.asarray(valid).reshape(-1), np.asarray(finite).reshape(-1)
+        non_finite += int(np.sum(valid & ~finite))
+        keep = valid & finite
+        new_obs = np.asarray(obs).reshape(-1, task.observation_size)[keep]
+        new_labels = np.asarray(labels).reshape(-1, planner.action_size)[keep]
         if r == 0:
             planner_return = float(np.mean(returns))
         # The MLP's error on the states it (or the planner, in round 0) just visited, before
@@ -282,6 +287,11 @@ def distil(
         obs_buf[rows], label_buf[rows] = new_obs, new_labels
         target_buf[rows] = np.asarray(to_target(new_labels))
         n += len(new_obs)
+        if n == 0:
+            raise SolverFailed(
+                "every planner solve of round 0 was non-finite, so there is nothing to fit; "
+                "check the planner on one state (planner.plan) and its cost for NaN"
+            )
         controller, opt_state, losses = _fit(
             controller, opt_state, optimizer, jnp.asarray(obs_buf), jnp.asarray(target_buf),
             jnp.int32(n), k_fit, fit_steps, batch_size,
