@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import diffcontrol
-from diffcontrol import mpc
+from diffcontrol import _timing, mpc
 from diffcontrol.controllers import MLPController, apply_head, head_inverse
 from diffcontrol.errors import ConfigError, SolverFailed
 from diffcontrol.rollout import rollout
@@ -39,9 +39,13 @@ def _planner(task):
 def distilled():
     task = ShortLinearQuadratic()
     planner = _planner(task)
+    _timing.watch_compiles()
+    programs = []  # compiled so far, at each progress line (the first is before any round)
     result = mpc.distil(
-        task, planner, rounds=3, episodes_per_round=16, fit_steps=400, eval_episodes=16, seed=3
-    )
+        task, planner, rounds=3, episodes_per_round=16, fit_steps=400, eval_episodes=16, seed=3,
+        progress=lambda line: programs.append(_timing.compiled_programs()),
+    )  # fmt: skip
+    result.metrics["test_programs"] = programs
     return task, planner, result
 
 
@@ -119,6 +123,9 @@ def test_every_round_adds_its_episodes_and_is_on_the_curve(distilled):
     # the MLP's error on the states it visits, before each fit: the untrained one's (round 0)
     # against the learnt one's
     assert curve[-1]["on_policy_error"] < 0.2 * curve[0]["on_policy_error"]
+    # the rounds after the first run the programs compiled for it: nothing new compiles
+    programs = result.metrics["test_programs"]
+    assert len(programs) == 4 and programs[3] == programs[2]
     hidden = [layer.out_features for layer in result.controller.layers[:-1]]
     assert tuple(hidden) == result.config.hidden
 

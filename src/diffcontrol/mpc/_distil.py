@@ -123,9 +123,14 @@ def _fit(controller, opt_state, optimizer, obs, targets, n, key, steps, batch_si
 
 
 @eqx.filter_jit
-def _rms_error(controller, obs, labels, span):
-    """Root-mean-square action error, in units of the action range."""
-    return jnp.sqrt(jnp.mean(((jax.vmap(controller)(obs) - labels) / span) ** 2))
+def _rms_error(controller, obs, labels, span, start, stop):
+    """Root-mean-square action error over rows ``start ... stop - 1`` of the fixed-size
+    buffers, in units of the action range (one compiled program whatever the rows)."""
+    rows = jnp.arange(obs.shape[0])
+    inside = (rows >= start) & (rows < stop)
+    squared = jnp.sum(((jax.vmap(controller)(obs) - labels) / span) ** 2, axis=-1)
+    count = jnp.maximum(stop - start, 1) * labels.shape[-1]
+    return jnp.sqrt(jnp.sum(jnp.where(inside, squared, 0.0)) / count)
 
 
 def _default_controller(task: Any, config: TrainConfig, key: PRNGKeyArray) -> MLPController:
@@ -251,8 +256,6 @@ def distil(
     obs_buf = np.zeros((capacity, task.observation_size), np.float32)
     label_buf = np.zeros((capacity, planner.action_size), np.float32)
     target_buf = np.zeros_like(label_buf)  # the labels as the network's raw outputs
-    to_target = jax.jit(lambda u: head_inverse(controller.head, u, controller.action_low,
-                                               controller.action_high))  # fmt: skip
     n = 0
     curve: list[dict[str, Any]] = []
     say(
@@ -279,24 +282,28 @@ def distil(
         new_labels = np.asarray(labels).reshape(-1, planner.action_size)[keep]
         if r == 0:
             planner_return = float(np.mean(returns))
+        rows = slice(n, n + len(new_obs))
+        obs_buf[rows], label_buf[rows] = new_obs, new_labels
+        low, high = controller.action_low, controller.action_high
+        target_buf[rows] = np.asarray(head_inverse(controller.head, new_labels, low, high))
+        obs_all, label_all = jnp.asarray(obs_buf), jnp.asarray(label_buf)
         # The MLP's error on the states it (or the planner, in round 0) just visited, before
         # it is fitted to them: DAgger's measure of how far its own distribution is from the
         # data's.
-        on_policy = float(_rms_error(controller, new_obs, new_labels, span))
-        rows = slice(n, n + len(new_obs))
-        obs_buf[rows], label_buf[rows] = new_obs, new_labels
-        target_buf[rows] = np.asarray(to_target(new_labels))
-        n += len(new_obs)
+        on_policy = float(
+            _rms_error(controller, obs_all, label_all, span, jnp.int32(n), jnp.int32(rows.stop))
+        )
+        n = rows.stop
         if n == 0:
             raise SolverFailed(
                 "every planner solve of round 0 was non-finite, so there is nothing to fit; "
                 "check the planner on one state (planner.plan) and its cost for NaN"
             )
         controller, opt_state, losses = _fit(
-            controller, opt_state, optimizer, jnp.asarray(obs_buf), jnp.asarray(target_buf),
+            controller, opt_state, optimizer, obs_all, jnp.asarray(target_buf),
             jnp.int32(n), k_fit, fit_steps, batch_size,
         )  # fmt: skip
-        fitted = float(_rms_error(controller, obs_buf[:n], label_buf[:n], span))
+        fitted = float(_rms_error(controller, obs_all, label_all, span, jnp.int32(0), jnp.int32(n)))
         eval_returns = np.asarray(evaluate(task, params, controller, eval_keys, steps))
         point = {
             "update": (r + 1) * fit_steps,
