@@ -104,6 +104,20 @@ def apply_head(head: str, z: Array, low: Array, high: Array) -> Array:
     raise ValueError(f"unknown action head {head!r}; choose one of {HEADS}")
 
 
+def head_inverse(head: str, action: Array, low: Array, high: Array, margin: float = 1e-3) -> Array:
+    """The raw output ``z`` that a continuous head maps to ``action`` (the inverse of
+    ``apply_head`` for ``"linear"``, ``"tanh"`` and ``"sigmoid"``), with a bounded head's action
+    first kept ``margin`` of its range inside the bounds, where ``z`` is finite."""
+    if head == "linear":
+        return action
+    s = jnp.clip((action - low) / (high - low), margin / 2, 1 - margin / 2)
+    if head == "tanh":
+        return jnp.arctanh(2 * s - 1)
+    if head == "sigmoid":
+        return jnp.log(s) - jnp.log1p(-s)
+    raise ValueError(f"the {head!r} head has no inverse; use linear, tanh or sigmoid")
+
+
 class MLPController(eqx.Module):
     """A multilayer perceptron policy ``obs -> action``.
 
@@ -184,14 +198,18 @@ class MLPController(eqx.Module):
         self.head = head
 
     def __call__(self, obs: Float[Array, " obs"]) -> Float[Array, " act"]:
+        low, high = jax.lax.stop_gradient((self.action_low, self.action_high))
+        return apply_head(self.head, self.logits(obs), low, high)
+
+    def logits(self, obs: Float[Array, " obs"]) -> Float[Array, " out"]:
+        """The network's raw output ``z``, before the action head."""
         act = ACTIVATIONS[self.activation]
         # The scaling and bounds are constants of the controller, not trainable weights.
         offset, scale = jax.lax.stop_gradient((self.obs_offset, self.obs_scale))
-        low, high = jax.lax.stop_gradient((self.action_low, self.action_high))
         h = (obs - offset) * scale
         for layer in self.layers[:-1]:
             h = act(layer(h))
-        return apply_head(self.head, self.layers[-1](h), low, high)
+        return self.layers[-1](h)
 
     @property
     def num_parameters(self) -> int:
