@@ -115,7 +115,7 @@ def population_scaling(sizes=(1, 8, 64, 512), devices: int = 1) -> list[dict]:
     for n in sizes:
         shard, replicate = _placement(devices)
         keys = shard(jax.random.split(jax.random.PRNGKey(0), n))
-        ts = jax.jit(jax.vmap(trainer.init, in_axes=(0, None)))(keys, params)
+        ts = shard(jax.jit(jax.vmap(trainer.init, in_axes=(0, None)))(keys, params))
         chunk = jax.jit(jax.vmap(trainer.chunk, in_axes=(0, None, None)))
         total = jnp.asarray(10**9, jnp.int32)
         ts, _ = chunk(ts, replicate(params), total)  # compile and warm up
