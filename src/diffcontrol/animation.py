@@ -119,7 +119,8 @@ def animate(recording: Recording, task: Task, path: str | Path, max_frames: int 
 
 def animate_throw(throw: Any, target: float, wind: float, path: str | Path, fps: int = 30) -> Path:
     """Write an animated GIF of a recorded trebuchet throw (``systems.trebuchet.simulate``),
-    played at real time until a little after landing, with the target marked."""
+    played at real time until a little after landing, with the target marked. The scene is
+    drawn once; each frame moves the arm, the sling, the projectile and its path."""
     from .plots import _throw_frame
 
     times = np.asarray(throw.time)
@@ -127,22 +128,28 @@ def animate_throw(throw: Any, target: float, wind: float, path: str | Path, fps:
     last = int(np.argmax(ended)) if ended.any() else len(times) - 1
     dt = float(times[1] - times[0]) if len(times) > 1 else 1 / 60
     every = max(1, int(round(1.0 / (fps * dt))))
-    proj = np.asarray(throw.projectile)
+    arm, cw = np.asarray(throw.arm_tip), np.asarray(throw.counterweight)
+    proj, phases = np.asarray(throw.projectile), np.asarray(throw.phases)
     x_max = max(float(np.max(proj[: last + 1, 0])), target) + 5
     y_max = max(float(np.max(proj[: last + 1, 1])) + 3, 8)
-    frames = []
     hold = int(round(1.0 / (every * dt)))  # hold the landing for about 1 s
     indices = list(range(0, last + 1, every)) + [last] * hold
     fig, ax = plt.subplots(figsize=(6.4, 2.8), dpi=75)
+    moving = _throw_frame(ax, throw, 0, target, wind)
+    ax.set_xlim(-5, x_max)
+    ax.set_ylim(-2.5, y_max)
+    ax.set_aspect("equal", adjustable="box")
+    frames, render = [], _Frames().render
     for i in indices:
-        ax.clear()
-        _throw_frame(ax, throw, i, target, wind)
-        ax.set_xlim(-5, x_max)
-        ax.set_ylim(-2.5, y_max)
-        ax.set_aspect("equal", adjustable="box")
+        moving["arm"].set_data([arm[i, 0], 0.0, cw[i, 0]], [arm[i, 1], 0.0, cw[i, 1]])
+        moving["weight"].set_data([cw[i, 0]], [cw[i, 1]])
+        on_sling = int(phases[i]) < 2
+        moving["sling"].set_data(*(([arm[i, 0], proj[i, 0]], [arm[i, 1], proj[i, 1]])
+                                   if on_sling else ([], [])))  # fmt: skip
+        moving["path"].set_data(proj[: i + 1, 0], proj[: i + 1, 1])
+        moving["stone"].set_data([proj[i, 0]], [proj[i, 1]])
         ax.set_title(f"t = {times[i]:4.2f} s   x = {proj[i, 0]:6.2f} m", fontsize=9)
-        fig.canvas.draw()
-        frames.append(np.asarray(fig.canvas.buffer_rgba())[..., :3].copy())
+        frames.append(render(fig))
     plt.close(fig)
     return _write_gif(frames, 1000.0 * every * dt, path)
 

@@ -89,8 +89,10 @@ def rollout(recording: Recording, task: Task, path: str | Path) -> Path:
     return _save(fig, path)
 
 
-def _throw_frame(ax: Any, throw: Any, i: int, target: float, wind: float) -> None:
-    """Draw the trebuchet and the projectile's path up to step ``i`` of a recorded throw."""
+def _throw_frame(ax: Any, throw: Any, i: int, target: float, wind: float) -> dict[str, Any]:
+    """Draw the trebuchet and the projectile's path up to step ``i`` of a recorded throw.
+    Returns the artists that move during a throw (``arm``, ``weight``, ``sling``, ``path``,
+    ``stone``), for an animation to update."""
     arm, cw, proj = (np.asarray(a) for a in (throw.arm_tip, throw.counterweight, throw.projectile))
     from .systems.trebuchet import TrebuchetParams
 
@@ -98,12 +100,16 @@ def _throw_frame(ax: Any, throw: Any, i: int, target: float, wind: float) -> Non
     ax.axhline(ground, color="0.4", lw=1)
     ax.plot([0.0], [0.0], "ko", ms=4)
     ax.plot([0.0, 0.0], [ground, 0.0], color="0.3", lw=2)
-    ax.plot([arm[i, 0], 0.0, cw[i, 0]], [arm[i, 1], 0.0, cw[i, 1]], color="#8b5a2b", lw=3)
-    ax.plot([cw[i, 0]], [cw[i, 1]], "s", color="0.2", ms=8)
-    if int(np.asarray(throw.phases)[i]) < 2:  # still on the sling
-        ax.plot([arm[i, 0], proj[i, 0]], [arm[i, 1], proj[i, 1]], color="0.5", lw=1)
-    ax.plot(proj[: i + 1, 0], proj[: i + 1, 1], color="C0", lw=1)
-    ax.plot([proj[i, 0]], [proj[i, 1]], "o", color="C3", ms=5)
+    moving = {}
+    (moving["arm"],) = ax.plot(
+        [arm[i, 0], 0.0, cw[i, 0]], [arm[i, 1], 0.0, cw[i, 1]], color="#8b5a2b", lw=3
+    )
+    (moving["weight"],) = ax.plot([cw[i, 0]], [cw[i, 1]], "s", color="0.2", ms=8)
+    on_sling = int(np.asarray(throw.phases)[i]) < 2
+    sling = ([arm[i, 0], proj[i, 0]], [arm[i, 1], proj[i, 1]]) if on_sling else ([], [])
+    (moving["sling"],) = ax.plot(*sling, color="0.5", lw=1)
+    (moving["path"],) = ax.plot(proj[: i + 1, 0], proj[: i + 1, 1], color="C0", lw=1)
+    (moving["stone"],) = ax.plot([proj[i, 0]], [proj[i, 1]], "o", color="C3", ms=5)
     ax.plot([target], [ground], marker="v", color="C2", ms=12, label=f"target {target:.1f} m")
     ax.annotate(
         f"wind {wind:+.1f} m/s",
@@ -111,6 +117,7 @@ def _throw_frame(ax: Any, throw: Any, i: int, target: float, wind: float) -> Non
         xycoords="axes fraction",
         fontsize=9,
     )
+    return moving
 
 
 def throw(throw: Any, target: float, wind: float, path: str | Path, title: str = "") -> Path:
