@@ -154,3 +154,19 @@ def test_a_grey_box_fit_is_planned_through(tmp_path):
     assert json.loads((tmp_path / "p" / "model.json").read_text())["controller"]["model"]["fitted"][
         "all_parameters"
     ] == {"g": 9.0}
+
+
+@pytest.mark.slow
+def test_a_hybrid_fit_is_planned_through_and_judged_on_its_real_system(tmp_path, capsys):
+    data, fit, plan = (str(tmp_path / n) for n in ("data.csv", "fit", "plan"))
+    real = "diffcontrol/PendulumFriction-v0"
+    assert main(["record", real, "--task", "pendulum", "--episodes", "2", "--out", data]) == 0
+    argv = ["fit", "pendulum", "--data", data, "--model", "hybrid", "--steps", "5", "--out", fit]
+    assert main([*argv, "--quiet"]) == 0
+    argv = ["plan", "pendulum", "--model", fit, "--out", plan, "--horizon", "4", "--iterations"]
+    assert main([*argv, "2", "--value-grid", "9", "--final-eval", "1", "--no-animation"]) == 0
+    doc = json.loads((tmp_path / "plan" / "model.json").read_text())
+    assert doc["controller"]["model"]["fitted"]["model"] == "hybrid"  # networks inside
+    capsys.readouterr()
+    assert main(["evaluate", plan, "--episodes", "1"]) == 0
+    assert real in capsys.readouterr().out  # judged where the data came from
