@@ -39,9 +39,9 @@ def add_parsers(sub: Any) -> None:
          "on seeds 0..N-1 (default 100), or random targets for aiming tasks (default 1000); "
          "0 skips"),
         ("--no-animation", FLAG, False, None, "skip the GIF (saves a few seconds)"),
-        ("--model", str, None, "FIT_DIR", "train (plan) through the model fitted by `diffcontrol "
-         "fit` in FIT_DIR instead of the nominal simulator (fitted parameters, or the hybrid/neural "
-         "model), and evaluate on the system its data was recorded from (e.g. "
+        ("--model", str, None, "FIT_DIR", "train (plan) through the model fitted by "
+         "`diffcontrol fit` in FIT_DIR instead of the nominal simulator (fitted parameters, or "
+         "the hybrid/neural model), and evaluate on the system its data was recorded from (e.g. "
          "diffcontrol/PendulumFriction-v0 with its arguments)"),
         ("--env", str, None, "ENV_ID", "with --model: the real system's Gymnasium id, where the "
          "fitted model's data names one in a module of yours (module:Env-v0); diffcontrol "

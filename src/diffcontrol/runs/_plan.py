@@ -107,7 +107,6 @@ def plan_run(
     final_eval: int | None = None,
     animation: bool = True,
     progress: Callable[[str], None] | None = None,
-    command: str | None = None,
 ) -> tuple[Run, list[str]]:
     """Write a planning controller for ``task`` as a run directory: ``model.json`` (the
     settings and the model), ``metrics.json`` (the final evaluation, per-step solve reports
@@ -145,8 +144,9 @@ def plan_run(
 
         fitted = read_fitted(model)
         real = real_system(fitted, trusted=env_id)
-        info = {"kind": "fitted", "fitted": fitted}
-    run = {"task": task.name, "config": config.to_json(), "planner": True, "command": command}
+        stored = {k: v for k, v in fitted.items() if k != "_path"}  # the file, not where it was
+        info = {"kind": "fitted", "fitted": stored}
+    run = {"task": task.name, "config": config.to_json(), "planner": True}
     out = io.prepare_run_dir(out_dir, run, resume=False)
     try:
         t0 = time.perf_counter()
@@ -154,20 +154,14 @@ def plan_run(
         metrics = {
             "created": io.now_iso(),
             "planner": {"settings": config.to_json(), "build_seconds": time.perf_counter() - t0},
-            "model": {"dir": str(model), "real_system": real} if model else {"kind": "simulator"},
+            "model": {"kind": "simulator"},
         }
+        if model is not None:  # as train --model records it: evaluate reads the real system
+            metrics["model"] = {"dir": str(model), "kind": fitted["model"], "real_system": real}
         planner = policy.planner  # judged with its parameters where it plans through the task
         params = planner.problem.params if planner.task is task else task_params(task)
-        result = PlanResult(
-            task,
-            planner,
-            task.default_config(),
-            params,
-            metrics,
-            config,
-            info,
-            policy,
-        )
+        config_ = task.default_config()  # the run's training settings: none, the defaults
+        result = PlanResult(task, planner, config_, params, metrics, config, info, policy)
         run_, files = save_run(
             result, out, final_eval=final_eval, animation=animation, real=real, progress=say
         )
