@@ -1,6 +1,6 @@
 """Settings of the work around training: a recording (``identify.record_data``), a model fit
-(``identify.fit_dir``), a loop on a real system (``identify.loop``) and a comparison with RL
-(``compare.run_comparison``).
+(``identify.fit_dir``), a loop on a real system (``identify.loop``), a comparison with RL
+(``compare.run_comparison``) and a planning controller (``runs.plan_run``).
 Frozen, typed dataclasses, as ``config`` holds the training ones: they validate on
 construction, and their fields are the command line's flags (``diffcontrol record/fit/loop/compare``:
 the name, the default, the bounds and the help).
