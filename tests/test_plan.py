@@ -74,9 +74,11 @@ def test_the_run_is_a_run_like_a_trained_one(planner_run, capsys):
     assert (planner_run / "a.gif").stat().st_size > 0
 
 
-def test_a_numpy_reader_refuses_a_planner_in_one_line(planner_run):
+def test_a_numpy_reader_refuses_a_planner_in_one_line(planner_run, capsys):
     with pytest.raises(ModelFileError, match="holds a planner"):
         io.NumpyPolicy(io.read_model(planner_run))
+    assert main(["train", "--out", str(planner_run), "--resume"]) == 2  # not a training run
+    assert "holds a planner" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize(

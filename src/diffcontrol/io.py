@@ -779,10 +779,11 @@ def prepare_run_dir(out_dir: str | os.PathLike, run: dict, resume: bool) -> Path
     if existing.exists():
         old = read_json(existing, "run file")
         if not resume:
+            seed = (old.get("config") or {}).get("seed")  # a planner's run has none
+            seed = "" if seed is None else f", seed {seed!r}"
             raise RunDirectoryError(
-                f"{out} already holds a run (task {old.get('task')!r}, seed "
-                f"{old.get('config', {}).get('seed')!r}); pass --resume to continue it or "
-                "choose a new --out"
+                f"{out} already holds a run (task {old.get('task')!r}{seed}); pass --resume to "
+                "continue it or choose a new --out"
             )
         check_same_run(out, old, run)
         if old.get("complete"):
