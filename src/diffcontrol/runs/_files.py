@@ -135,7 +135,7 @@ def save_run(
         from .. import plots
 
         files = [MODEL_FILE, METRICS_FILE]
-        if metrics.get("curve"):  # a planner has none
+        if "curve" in metrics:  # a planner has none
             plots.learning_curve(
                 metrics, out / "learning_curve.png", getattr(task, "reward_threshold", None)
             )
