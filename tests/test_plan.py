@@ -172,3 +172,12 @@ def test_a_hybrid_fit_is_planned_through_and_judged_on_its_real_system(tmp_path,
     capsys.readouterr()
     assert main(["evaluate", plan, "--episodes", "1"]) == 0
     assert real in capsys.readouterr().out  # judged where the data came from
+
+
+def test_a_recorder_asking_for_action_and_gym_action_solves_once(planner_run):
+    policy = diffcontrol.load(planner_run)
+    obs = np.array([1.0, 0.0, 0.0], np.float32)  # upright at rest: the same obs every step
+    u = policy.action(obs)
+    assert np.asarray(policy(obs)) == pytest.approx(u) and len(policy.reports) == 1
+    policy(obs), policy(obs)  # plain calls always solve, even on an unchanged observation
+    assert len(policy.reports) == 3
