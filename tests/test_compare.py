@@ -190,3 +190,26 @@ def test_compare_trebuchet_rl_in_the_diffcontrol_environment(tmp_path):
         assert [p["env_steps"] for p in run["curve"]] == [20, 40]
         assert run["episodes"] == run["env_steps"]  # one throw per episode
         assert all(r <= 0 for r in run["final"]["returns"])  # minus the miss in metres
+
+
+def test_compare_pendulum_has_the_planner_and_its_distilled_mlp(tmp_path, capsys, monkeypatch):
+    from diffcontrol.compare import _planning
+    from diffcontrol.compare.run import methods_for
+    from diffcontrol.settings import PlanConfig
+
+    assert methods_for(diffcontrol.make("pendulum"))[:3] == ["diffcontrol", "planner", "distilled"]
+    assert "planner" not in methods_for(diffcontrol.make("cartpole"))  # no action bounds
+    small = PlanConfig(horizon=4, iterations=2, value_grid=9, value_levels=5)
+    monkeypatch.setattr(_planning, "PLANNER", small)
+    tiny = dict(rounds=1, episodes_per_round=4, fit_steps=10, batch_size=16, eval_episodes=4)
+    monkeypatch.setattr(_planning, "DISTIL", tiny)
+    out = tmp_path / "p"
+    args = ["compare", "pendulum", "--out", str(out), "--methods", "planner,distilled"]
+    assert main([*args, "--seeds", "1", "--eval-episodes", "2", "--final-episodes", "2"]) == 0
+    planner = json.loads((out / "runs" / "planner-seed0.json").read_text())
+    assert planner["env_steps"] == 0 and planner["config"] == small.to_json()
+    assert len(planner["final"]["returns"]) == 2 and planner["final"]["mean_return"] < 0
+    distilled = json.loads((out / "runs" / "distilled-seed0.json").read_text())
+    assert distilled["env_steps"] == 4 * 200  # one round of four simulated episodes
+    table = (out / "comparison.md").read_text()
+    assert "planner" in table and "distilled" in table

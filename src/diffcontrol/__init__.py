@@ -84,7 +84,10 @@ def load(run_dir: str | _os.PathLike, task: Task | ContinuousTask | str | None =
     ``policy(obs)`` -> a valid Gymnasium action, which drops into a plain
     ``gymnasium.make(...)`` loop; an ``AimingPolicy`` for the trebuchet
     (``policy(target_m, wind_mps) -> (angle_deg, weight_lb)``); a ``StatePolicy`` for a
-    continuous-time task (``policy(state) -> action`` on the physical state).
+    continuous-time task (``policy(state) -> action`` on the physical state). A planner
+    (written by ``diffcontrol plan``) loads as an ``mpc.PlannerPolicy``, ``policy(obs)`` ->
+    Gymnasium action like the others, but it imports JAX and runs one compiled solve per
+    call (its terminal value grid, if any, is solved again here from the stored settings).
 
     Args:
         run_dir: a directory written by ``diffcontrol train`` or ``result.save``.
@@ -95,7 +98,8 @@ def load(run_dir: str | _os.PathLike, task: Task | ContinuousTask | str | None =
     Raises:
         ModelFileError: the file is missing, corrupt, or of an unsupported version.
     """
-    from . import tasks
+    from . import io, tasks
+    from .errors import ModelFileError
     from .io import NumpyPolicy, StatePolicy, read_model
 
     doc = read_model(_Path(run_dir))
@@ -104,7 +108,11 @@ def load(run_dir: str | _os.PathLike, task: Task | ContinuousTask | str | None =
     if task is None and doc["task"] in tasks.names():
         task = tasks.make(doc["task"])
     if task is not None:
-        return task.load_policy(doc)
+        from .runs import load_policy
+
+        return load_policy(task, doc)  # the task's, or a planner's
+    if io.is_planner(doc):
+        raise ModelFileError(f"the planner's task {doc['task']!r} is not registered; pass task=")
     return StatePolicy(doc) if "features" in doc["observation"] else NumpyPolicy(doc)
 
 

@@ -160,6 +160,8 @@ def record_episode(
     """Record one Gymnasium episode of ``policy`` (a ``NumpyPolicy``) with the true states
     (in ``real``'s environment where given, as for ``evaluate``)."""
     env, label = _env(task, real)
+    if callable(getattr(policy, "reset", None)):  # a planner: start from its initial plan
+        policy.reset()
     try:
         obs, _ = env.reset(seed=seed)
         states = [np.array(env.unwrapped.state, dtype=np.float64)]

@@ -54,7 +54,7 @@ import jax
 import numpy as np
 
 from .controllers import ACTIVATIONS, HEADS, MLPController
-from .errors import ModelFileError, RunDirectoryError
+from .errors import ConfigError, ModelFileError, RunDirectoryError
 
 MAX_JSON_BYTES = 256 * 2**20
 """The largest JSON file read (a model.json of a very wide network is a few MiB)."""
@@ -323,6 +323,61 @@ def model_document(task: Any, controller: MLPController, config: Any, metrics: d
     )
 
 
+def is_planner(doc: dict) -> bool:
+    """Whether a ``model.json`` document holds a planning controller (``planner_document``)."""
+    controller = doc.get("controller")
+    return isinstance(controller, dict) and controller.get("type") == "planner"
+
+
+def planner_document(task: Any, settings: dict, model: dict, metadata: dict) -> dict:
+    """The ``model.json`` document of a planning controller (``diffcontrol plan``)::
+
+        {"format": "diffcontrol-model", "version": 1, "task": "pendulum", "gym_id": ...,
+         "observation": {"size": 3}, "action": {"size": 1, "low": [-2.0], "high": [2.0]},
+         "controller": {"type": "planner",
+                        "settings": {...},     # settings.PlanConfig's fields
+                        "model": {"kind": "simulator"}   # or {"kind": "fitted",
+                       },                                #     "fitted": {fitted.json}}
+         "metadata": {...}}
+
+    It has no ``network``: the controller is the task's model and a solver, so it runs with
+    JAX and the task, not with NumPy alone (``runs.planner_policy`` builds it back).
+    """
+    return {
+        "format": MODEL_FORMAT,
+        "version": MODEL_VERSION,
+        "task": task.name,
+        "gym_id": task.gym_id,
+        "observation": {"size": int(task.observation_size)},
+        "action": {
+            "size": int(task.action_size),
+            "low": np.asarray(task.action_low, float).reshape(-1).tolist(),
+            "high": np.asarray(task.action_high, float).reshape(-1).tolist(),
+        },
+        "controller": {"type": "planner", "settings": dict(settings), "model": dict(model)},
+        "metadata": dict(metadata),
+    }
+
+
+def _check_planner(doc: dict, bad: Any) -> None:
+    from .settings import PlanConfig
+
+    for what in ("observation", "action"):
+        size = (doc.get(what) or {}).get("size")
+        if not isinstance(size, int) or isinstance(size, bool) or size < 1:
+            raise bad(f"the {what} size {size!r} is not a positive integer")
+    if not isinstance(doc.get("task"), str):
+        raise bad("'task' is not a name")
+    controller = doc["controller"]
+    try:
+        PlanConfig.from_json(controller.get("settings"))
+    except ConfigError as e:
+        raise bad(f"planner settings: {e}") from None
+    model = controller.get("model")
+    if not isinstance(model, dict) or model.get("kind") not in ("simulator", "fitted"):
+        raise bad("the planner's model is neither {'kind': 'simulator'} nor a fitted model")
+
+
 def _check_model(doc: Any, path: Path) -> None:
     def bad(problem: str) -> ModelFileError:
         return ModelFileError(
@@ -333,6 +388,8 @@ def _check_model(doc: Any, path: Path) -> None:
         raise bad(f"'format' is not {MODEL_FORMAT!r}")
     if doc.get("version") != MODEL_VERSION:
         raise bad(f"version {doc.get('version')!r} is not supported (this diffcontrol reads 1)")
+    if is_planner(doc):
+        return _check_planner(doc, bad)
     try:
         obs, net, act = doc["observation"], doc["network"], doc["action"]
         if net["activation"] not in ACTIVATIONS:
@@ -418,6 +475,11 @@ class NumpyPolicy:
 
     def __init__(self, doc: dict):
         _check_model(doc, Path("<model>"))
+        if is_planner(doc):
+            raise ModelFileError(
+                "this model.json holds a planner, which runs with JAX and its task, not NumPy "
+                "alone; load it with diffcontrol.load(dir)"
+            )
         self.doc = doc
         self.task = doc["task"]
         self.gym_id = doc.get("gym_id")
@@ -717,10 +779,11 @@ def prepare_run_dir(out_dir: str | os.PathLike, run: dict, resume: bool) -> Path
     if existing.exists():
         old = read_json(existing, "run file")
         if not resume:
+            seed = (old.get("config") or {}).get("seed")  # a planner's run has none
+            seed = "" if seed is None else f", seed {seed!r}"
             raise RunDirectoryError(
-                f"{out} already holds a run (task {old.get('task')!r}, seed "
-                f"{old.get('config', {}).get('seed')!r}); pass --resume to continue it or "
-                "choose a new --out"
+                f"{out} already holds a run (task {old.get('task')!r}{seed}); pass --resume to "
+                "continue it or choose a new --out"
             )
         check_same_run(out, old, run)
         if old.get("complete"):

@@ -1,6 +1,6 @@
 """Settings of the work around training: a recording (``identify.record_data``), a model fit
-(``identify.fit_dir``), a loop on a real system (``identify.loop``) and a comparison with RL
-(``compare.run_comparison``).
+(``identify.fit_dir``), a loop on a real system (``identify.loop``), a comparison with RL
+(``compare.run_comparison``) and a planning controller (``runs.plan_run``).
 Frozen, typed dataclasses, as ``config`` holds the training ones: they validate on
 construction, and their fields are the command line's flags (``diffcontrol record/fit/loop/compare``:
 the name, the default, the bounds and the help).
@@ -33,7 +33,7 @@ class _Settings:
             if declared.startswith("int"):
                 low, high = meta.get("low", 1), meta.get("high", MAX_COUNT)
                 if not isinstance(value, int) or isinstance(value, bool) or low > value:
-                    what = "a positive integer" if low else "an integer >= 0"
+                    what = "a positive integer" if low == 1 else f"an integer >= {low}"
                     raise ConfigError(f"{f.name} must be {what}, got {value!r}")
                 if value > high:
                     raise ConfigError(f"{f.name} must be at most {high:,}, got {value!r}")
@@ -205,3 +205,69 @@ class CompareConfig(_Settings):
         None,
         "FILE",
     )
+
+
+SOLVERS = ("ilqr", "shooting")
+"""The planner's solvers (``mpc.ILQR``, ``mpc.Shooting`` with Adam)."""
+MAX_VALUE_GRID = 1001
+"""The finest terminal-value grid: its table is solved once per load (Pendulum: 0.8 GB)."""
+
+
+@dataclass(frozen=True)
+class PlanConfig(_Settings):
+    """Settings of a planning controller (``mpc.planner_from_config``, ``diffcontrol plan``):
+    what ``model.json`` stores of a planner, with the model it plans through. Pendulum's best
+    (docs/planning.md): ``PlanConfig(horizon=10, value_grid=401)``."""
+
+    solver: str = _opt("the solver of every step's plan", "ilqr", choices=SOLVERS)
+    horizon: int = _opt("H, the actions planned at every step", 20, "H", high=10_000)
+    iterations: int | None = _opt(
+        "solver iterations per step (default 10 for ilqr, 30 for shooting)", None, "N", high=10_000
+    )
+    learning_rate: float = _opt("shooting: Adam's learning rate", 0.3, "LR", form="positive")
+    bound_starts: bool = _opt(
+        "also solve from the constant plans at both action bounds every step and keep the best "
+        "(three times the work; escapes plans that do not swing)",
+        True,
+    )
+    value_grid: int | None = _opt(
+        "terminal cost -V_0 of the task's grid optimum with N points per state axis (tasks "
+        "with a state grid, e.g. pendulum; 401: about 35 s per load on one core); none if "
+        "omitted",
+        None,
+        "N",
+        low=3,
+        high=MAX_VALUE_GRID,
+    )
+    value_levels: int = _opt("actions per action dimension of that grid", 41, "N", low=2, high=1001)
+    terminal_weight: float = _opt("weight of the terminal cost", 1.0, "W", form="nonneg")
+    loss: str | None = _opt("the task's step loss to plan with (default its first)", None, "NAME")
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if not isinstance(self.bound_starts, bool):
+            raise ConfigError(f"bound_starts must be true or false, got {self.bound_starts!r}")
+        for name in ("learning_rate", "terminal_weight"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not math.isfinite(value):
+                raise ConfigError(f"{name} must be a finite number, got {value!r}")
+        if not self.learning_rate > 0:
+            raise ConfigError(f"learning_rate must be > 0, got {self.learning_rate!r}")
+
+    @property
+    def solver_iterations(self) -> int:
+        """``iterations``, or the solver's default."""
+        return self.iterations or (10 if self.solver == "ilqr" else 30)
+
+    def to_json(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_json(cls, data: Any) -> PlanConfig:
+        """Inverse of ``to_json``; unknown keys or bad values are a ``ConfigError``."""
+        if not isinstance(data, dict):
+            raise ConfigError(f"planner settings must be an object, got {data!r}")
+        unknown = set(data) - {f.name for f in dataclasses.fields(cls)}
+        if unknown:
+            raise ConfigError(f"unknown planner settings {sorted(unknown)}")
+        return cls(**data)

@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from ..config import ODETrainConfig, TrainConfig
+from ..settings import PlanConfig
 from . import _args as a
 from ._args import FLAG, REQUIRED, add
 
@@ -32,17 +33,27 @@ def add_parsers(sub: Any) -> None:
         ),
     )
     # fmt: off
+    shared = (  # with plan
+        ("--out", str, REQUIRED, "DIR", "output directory (new or empty)"),
+        ("--final-eval", a.episodes_or_0, None, "N", "evaluate the controller: Gymnasium episodes "
+         "on seeds 0..N-1 (default 100), or random targets for aiming tasks (default 1000); "
+         "0 skips"),
+        ("--no-animation", FLAG, False, None, "skip the GIF (saves a few seconds)"),
+        ("--model", str, None, "FIT_DIR", "train (plan) through the model fitted by "
+         "`diffcontrol fit` in FIT_DIR instead of the nominal simulator (fitted parameters, or "
+         "the hybrid/neural model), and evaluate on the system its data was recorded from (e.g. "
+         "diffcontrol/PendulumFriction-v0 with its arguments)"),
+        ("--env", str, None, "ENV_ID", "with --model: the real system's Gymnasium id, where the "
+         "fitted model's data names one in a module of yours (module:Env-v0); diffcontrol "
+         "imports a module only when you name it"),
+    )
     add(p,
         ("task", str, None, "TASK", "(optional with --resume: the run's own) " + a.TASK_HELP),
-        ("--out", str, REQUIRED, "DIR", "output directory (new or empty)"),
+        *shared,
         ("--recipe", str, None, "NAME",
          "start from a named set of settings, e.g. 'original' for the 2019 Flux recipe"),
         ("--resume", FLAG, False, None, "continue the interrupted run in DIR from its last "
          "checkpoint, with the settings of its run.json (a finished run is left as it is)"),
-        ("--final-eval", a.episodes_or_0, None, "N", "evaluate after training: Gymnasium episodes "
-         "on seeds 0..N-1 (default 100), or random targets for aiming tasks (default 1000); "
-         "0 skips"),
-        ("--no-animation", FLAG, False, None, "skip the GIF (saves a few seconds)"),
         ("--devices", a.positive_int, None, "N", "split the batch of simulations over N "
          "devices (data parallel; default 1, or every device of the hosts below)"),
         ("--coordinator", str, None, "HOST:PORT", "run on several hosts: process 0's address "
@@ -50,13 +61,6 @@ def add_parsers(sub: Any) -> None:
         ("--processes", a.positive_int, 1, "N", "the number of hosts (processes) of the run"),
         ("--process-id", a.nonneg_int, 0, "I", "this host's index, 0 ... N-1"),
         ("--join-timeout", a.positive_float, 60.0, "S", "give up joining the hosts after S s"),
-        ("--model", str, None, "FIT_DIR", "train through the model fitted by `diffcontrol fit` in "
-         "FIT_DIR instead of the nominal simulator (fitted parameters, or the hybrid/neural "
-         "model), and evaluate on the system its data was recorded from (e.g. "
-         "diffcontrol/PendulumFriction-v0 with its arguments)"),
-        ("--env", str, None, "ENV_ID", "with --model: the real system's Gymnasium id, where the "
-         "fitted model's data names one in a module of yours (module:Env-v0); diffcontrol "
-         "imports a module only when you name it"),
         a.NO_COMPILE_CACHE,
         a.QUIET,
     )
@@ -68,6 +72,10 @@ def add_parsers(sub: Any) -> None:
     add(ode, *a.config_specs(ODETrainConfig, skip=_DISCRETE, defaults=False))
     add(group, ("--param", [a.param], None, "NAME=VALUE", "override a physical parameter of "
                 "the simulator (repeatable), e.g. --param g=9.81"))
+    p = sub.add_parser("plan", help="write a planning controller (MPC) as a run", description=(
+        "Write a planning controller for TASK in DIR like a trained run (model.json holds its "
+        "settings and model; it runs with JAX). See docs/planning.md."))
+    add(p, a.TASK, *shared, *a.config_specs(PlanConfig), a.QUIET)
     # fmt: on
     _add_sweep_parser(sub)
 
@@ -98,6 +106,16 @@ def cmd_train(args: argparse.Namespace) -> int:
         print(f"wrote {', '.join(str(Path(args.out) / f) for f in outcome.files)}")
     if outcome.timings:
         print(outcome.timings)
+    return 0
+
+
+def cmd_plan(args: argparse.Namespace) -> int:
+    from ..runs import plan_run
+
+    kw = a.pick(args, "model final_eval") | {"env_id": args.env, "animation": not args.no_animation}
+    config = a.config_of(PlanConfig, args)
+    run, files = plan_run(args.out, args.task, config, progress=a.say(args), **kw)
+    print(f"{run.metrics.get('headline', 'planner')}; wrote {', '.join(files)} in {args.out}")
     return 0
 
 

@@ -1,6 +1,7 @@
 """``diffcontrol compare``: diffcontrol against reinforcement learning on the same task.
 
-``run_comparison`` trains diffcontrol (its default configuration, through ``train``) and the
+``run_comparison`` trains diffcontrol (its default configuration, through ``train``), builds
+the planner and distils it where the task can take them (``compare._planning``), and trains the
 RL baselines of ``diffcontrol.compare.baselines`` (Stable-Baselines3 with rl-baselines3-zoo's
 settings; the ``rl`` extra) with the same training seeds, evaluates them all with the same
 protocol (``diffcontrol.compare.run``), and writes to its output directory:
@@ -23,6 +24,7 @@ from .. import envs, io
 from ..errors import ConfigError, Interrupted, RunDirectoryError
 from ..settings import CompareConfig
 from ..tasks import Task, resolve
+from ._planning import PLANNING_METHODS, run_planning
 from .baselines import BASELINES, INSTALL_HINT, Baseline, require_rl
 from .report import plot, summarize, table
 from .run import (
@@ -129,7 +131,7 @@ def _compare(
             raise ConfigError(
                 f"unknown method {m!r} for task {task.name!r}; choose from {', '.join(known)}"
             )
-    if any(m != "diffcontrol" for m in methods):
+    if any(m not in ("diffcontrol", *PLANNING_METHODS) for m in methods):
         require_rl()
     every = config.eval_every or DEFAULT_EVAL_EVERY[task.name]
     settings = {
@@ -147,7 +149,7 @@ def _compare(
     }
     out = _prepare(out_dir, settings, resume)
     runs_dir = out / "runs"
-    results = []
+    results, memo = [], {}  # memo: the planner, built once for both planning methods
     for method in methods:
         for seed in range(config.seeds):
             path = runs_dir / f"{method}-seed{seed}.json"
@@ -164,6 +166,8 @@ def _compare(
                 )
                 if method == "diffcontrol":
                     result = run_diffcontrol(task, seed, updates=config.updates, **common)
+                elif method in PLANNING_METHODS:
+                    result = run_planning(method, task, seed, memo, **common)
                 else:
                     result = run_rl(
                         task,

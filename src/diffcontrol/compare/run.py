@@ -50,7 +50,8 @@ DEFAULT_EVAL_EVERY = {"cartpole": 2000, "pendulum": 1000, "trebuchet": 1000}
 
 
 def methods_for(task: Task) -> list[str]:
-    """The methods ``compare`` runs for ``task``: ``diffcontrol`` then its RL baselines.
+    """The methods ``compare`` runs for ``task``: ``diffcontrol``, the planner and its distilled
+    MLP where the task can take them (``compare._planning``), then its RL baselines.
 
     Raises:
         ConfigError: no RL baselines are defined for the task.
@@ -60,7 +61,9 @@ def methods_for(task: Task) -> list[str]:
             f"no RL baselines are defined for task {task.name!r}; `compare` supports: "
             f"{', '.join(sorted(BASELINES))}"
         )
-    return ["diffcontrol", *BASELINES[task.name]]
+    from ._planning import planning_methods
+
+    return ["diffcontrol", *planning_methods(task), *BASELINES[task.name]]
 
 
 def make_eval_env(task: Task) -> gymnasium.Env:

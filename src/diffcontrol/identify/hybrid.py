@@ -89,6 +89,9 @@ def model_task(task: Any, model: HybridModel | NeuralModel) -> Any:
             inner = cls.step_loss(self, name)
             return lambda params, *rest: inner(params.params, *rest)
 
+        def state_grid(self, params):  # the physical part's (a planner's terminal value)
+            return cls.state_grid(self, params.params)
+
     _ModelTask.__name__ = _ModelTask.__qualname__ = f"{type(model).__name__}{cls.__name__}"
     return _ModelTask()
 

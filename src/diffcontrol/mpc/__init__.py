@@ -6,10 +6,13 @@
     result = mpc.distil(task, planner, rounds=10)   # the MLP trained on the planner (DAgger)
     result.save("runs/distilled")                  # model.json: a NumPy policy like any other
 
-Two solvers, as values: ``ILQR`` (box-constrained iLQR, as trajax and mpc.pytorch) and
+A planner from stored settings: ``mpc.planner_from_config(task, PlanConfig(horizon=10))``;
+``diffcontrol plan`` (``runs.plan_run``) writes one as a run directory that ``diffcontrol.load``
+builds back. Two solvers, as values: ``ILQR`` (box-constrained iLQR, as trajax and mpc.pytorch) and
 ``Shooting`` (gradient descent on the actions with any optax optimiser).
 """
 
+from ._config import planner_from_config
 from ._distil import distil, labelled_episodes
 from ._ilqr import ILQR
 from ._planner import Planner, make_planner
@@ -27,4 +30,5 @@ __all__ = [
     "distil",
     "labelled_episodes",
     "make_planner",
+    "planner_from_config",
 ]

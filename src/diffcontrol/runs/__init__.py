@@ -4,19 +4,22 @@ pictures, read back, and trained into, for any task (built-in, or the user's own
 A run directory holds ``run.json`` (the task, the settings and how the run was started,
 written when training starts; ``"complete"`` once its files are written), ``checkpoint.npz``
 (for resuming), ``model.json`` (the controller, runnable with NumPy alone), ``metrics.json``
-(what was measured) and whatever pictures the task draws (its ``write_figures`` hook).
+(what was measured) and whatever pictures the task draws (its ``write_figures`` hook). A
+planning controller (``plan_run``) is a run too, with its settings and model in ``model.json``.
 """
 
 from ._files import (
     METRICS_FILE,
     MODEL_FILE,
     Run,
+    load_policy,
     mark_complete,
     open_run,
     read_run_file,
     release_claim,
     save_run,
 )
+from ._plan import plan_run, planner_policy
 from ._sweep import SWEEP_FILE, stored_sweep, sweep_dir
 from ._train import RunInterrupted, RunOutcome, describe, fitted_training, train_run
 from ._use import aim_dir, animate_dir, evaluate_dir
@@ -34,7 +37,10 @@ __all__ = [
     "evaluate_dir",
     "fitted_training",
     "mark_complete",
+    "load_policy",
     "open_run",
+    "plan_run",
+    "planner_policy",
     "read_run_file",
     "release_claim",
     "save_run",

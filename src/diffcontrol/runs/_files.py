@@ -24,7 +24,7 @@ class Run:
     Attributes:
         task: the task whose hooks judge and draw it (for a run trained through a fitted
             model: the modelled system's task, when the real system is given by parameters).
-        controller: the JAX ``MLPController``.
+        controller: the JAX ``MLPController`` (``None`` for a planner read back: see ``policy``).
         config: the training configuration (from ``run.json``, else the task's default).
         params: the physical parameters to simulate with (the real system's where known).
         model: the ``model.json`` document.
@@ -45,8 +45,8 @@ class Run:
 
     @functools.cached_property
     def policy(self) -> Any:
-        """The NumPy policy of ``model`` (the task's ``load_policy``)."""
-        return self.task.load_policy(self.model)
+        """The policy of ``model`` (``load_policy``)."""
+        return load_policy(self.task, self.model)
 
     @property
     def real_env(self) -> tuple[str, dict] | None:
@@ -54,6 +54,16 @@ class Run:
         if self.real and "env_id" in self.real:
             return self.real["env_id"], dict(self.real.get("env_kwargs") or {})
         return None
+
+
+def load_policy(task: AnyTask, doc: dict) -> Any:
+    """The policy of a ``model.json`` document: the task's ``load_policy`` (a NumPy policy),
+    or for a planner its ``mpc.PlannerPolicy`` (which imports JAX)."""
+    if io.is_planner(doc):
+        from ._plan import planner_policy
+
+        return planner_policy(task, doc)
+    return task.load_policy(doc)
 
 
 def _judged(task: AnyTask, params: Any, real: dict | None) -> tuple[AnyTask, Any]:
@@ -100,10 +110,17 @@ def save_run(
     metrics = dict(result.metrics)
     metrics.setdefault("created", io.now_iso())
     timings = metrics["timings"] = dict(metrics.get("timings") or {})
-    doc = io.model_document(result.task, result.controller, result.config, metrics)
+    own = getattr(result, "model_document", None)  # a planner's (runs.plan_run)
+    doc = (
+        own(metrics)
+        if own
+        else io.model_document(result.task, result.controller, result.config, metrics)
+    )
     io.write_json(out / MODEL_FILE, doc)
     task, params = _judged(result.task, result.params, real)
     run = Run(task, result.controller, result.config, params, doc, metrics, real)
+    if getattr(result, "policy", None) is not None:  # built already: not built again
+        run.__dict__["policy"] = result.policy
     if final_eval != 0 or not task.final_eval_skippable:
         t0 = time.perf_counter()
         with _timing.phase(timings, "evaluate"):
@@ -117,10 +134,12 @@ def save_run(
     with _timing.phase(timings, "write"):
         from .. import plots
 
-        plots.learning_curve(
-            metrics, out / "learning_curve.png", getattr(task, "reward_threshold", None)
-        )
-        files = [MODEL_FILE, METRICS_FILE, "learning_curve.png"]
+        files = [MODEL_FILE, METRICS_FILE]
+        if "curve" in metrics:  # a planner has none
+            plots.learning_curve(
+                metrics, out / "learning_curve.png", getattr(task, "reward_threshold", None)
+            )
+            files.append("learning_curve.png")
         files += task.write_figures(run, out, animation=animation)
     if process_total:
         timings["total"] = _timing.process_seconds()
@@ -161,7 +180,8 @@ def open_run(
                 f"{what}s of size {own}; open it with its own task (--task)"
             )
     config = task.default_config()
-    if (directory / io.RUN_FILE).exists():
+    planner = io.is_planner(doc)  # its run.json holds the planner's settings, not training's
+    if (directory / io.RUN_FILE).exists() and not planner:
         stored = io.read_json(directory / io.RUN_FILE, "run file").get("config")
         try:
             config = type(config).from_json(stored)
@@ -188,7 +208,8 @@ def open_run(
     from ..training import task_params
 
     task, params = _judged(task, task_params(task, config.params), real or None)
-    return Run(task, io.controller_from_dict(doc), config, params, doc, metrics, real or None)
+    controller = None if planner else io.controller_from_dict(doc)  # a planner: run.policy
+    return Run(task, controller, config, params, doc, metrics, real or None)
 
 
 def _task_of(doc: dict) -> AnyTask:

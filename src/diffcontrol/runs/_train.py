@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from .. import io
-from ..errors import ConfigError, Interrupted, TrainingDiverged
+from ..errors import ConfigError, Interrupted, RunDirectoryError, TrainingDiverged
 from ..tasks import AnyTask, names, resolve
 from ._files import Run, mark_complete, read_run_file, release_claim, save_run
 
@@ -106,6 +106,8 @@ def train_run(
     note = note or (lambda line: print(line, file=sys.stderr))
     out = Path(out_dir)
     stored = read_run_file(out) if resume else None
+    if stored and stored.get("planner"):
+        raise RunDirectoryError(f"{out} holds a planner (diffcontrol plan); nothing to resume")
     invocation = (stored or {}).get("invocation") or {}
     if task is None:
         task = invocation.get("task") or (stored or {}).get("task")

@@ -1,0 +1,175 @@
+"""Planner run directories: ``plan_run`` (``diffcontrol plan``) writes a planning controller as
+a run, and ``planner_policy`` builds it back from ``model.json`` (``diffcontrol.load``,
+``evaluate``, ``animate``).
+
+A planner's ``model.json`` (see ``io.planner_document``) holds its settings and the model it
+plans through: the task's own simulator (``{"kind": "simulator"}``) or the whole
+``fitted.json`` of ``diffcontrol fit`` (``{"kind": "fitted", "fitted": {...}}``, networks
+included), so the file is self-contained. Unlike an MLP's, it needs JAX at run time: every
+action is one compiled solve.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from .. import io
+from ..errors import ConfigError, ModelFileError
+from ..settings import PlanConfig
+from ..tasks import AnyTask, Task, resolve
+from ._files import Run, mark_complete, release_claim, save_run
+
+
+@dataclasses.dataclass
+class PlanResult:
+    """A planning controller ready to be saved by ``save_run``, as a ``TrainResult`` is."""
+
+    task: AnyTask
+    controller: Any  # the mpc.Planner
+    config: Any  # the task's default training config (the run's own settings are ``plan``)
+    params: Any
+    metrics: dict
+    plan: PlanConfig
+    model: dict
+    policy: Any  # the mpc.PlannerPolicy, built once (its terminal value included)
+
+    def model_document(self, metrics: dict) -> dict:
+        from .. import __version__
+
+        meta = {"diffcontrol_version": __version__, "created": metrics["created"]}
+        return io.planner_document(self.task, self.plan.to_json(), self.model, meta)
+
+
+def planning_model(task: AnyTask, model: dict, where: str = "model.json") -> tuple[AnyTask, Any]:
+    """The task (with its simulator, or a fitted hybrid/neural model's) and the parameters a
+    planner's ``model`` entry names.
+
+    Raises:
+        ModelFileError: a fitted model of another task, or a malformed entry.
+    """
+    from ..training import task_params
+
+    if model.get("kind") == "simulator":
+        return task, task_params(task)
+    from ..identify.fitted import fitted_physics
+
+    doc = model.get("fitted")
+    if model.get("kind") != "fitted" or not isinstance(doc, dict):
+        raise ModelFileError(f"{where}: the planner's model is neither the simulator nor fitted")
+    try:
+        fitted_physics(task, doc)  # refuses a model of another task
+    except ConfigError as e:
+        raise ModelFileError(f"{where}: {e}") from None
+    if doc.get("model") == "params":
+        return task, task_params(task, tuple(sorted(doc["all_parameters"].items())))
+    fitted = task.fitted_task(doc)  # its default parameters are the model
+    return fitted, fitted.default_params()
+
+
+def planner_policy(task: AnyTask, doc: dict, progress: Callable[[str], None] | None = None) -> Any:
+    """The ``mpc.PlannerPolicy`` of a planner's ``model.json`` document, for ``task`` (needs
+    JAX; a terminal value grid is solved again from the stored settings).
+
+    Raises:
+        ModelFileError: the document is of another task, or its settings do not fit the task.
+    """
+    if doc["task"] != task.name:
+        raise ModelFileError(
+            f"the planner in this model.json plans through task {doc['task']!r}'s model, not "
+            f"{task.name!r}'s; open it with its own task"
+        )
+    config = PlanConfig.from_json(doc["controller"]["settings"])
+    try:
+        return _policy(task, config, doc["controller"]["model"], progress)
+    except ConfigError as e:
+        raise ModelFileError(
+            f"model.json: task {task.name!r} cannot take its planner: {e}"
+        ) from None
+
+
+def _policy(task: AnyTask, config: PlanConfig, model: dict, progress: Any) -> Any:
+    from ..mpc import PlannerPolicy, planner_from_config
+
+    model_task, params = planning_model(task, model)
+    return PlannerPolicy(planner_from_config(model_task, config, params, progress=progress))
+
+
+def plan_run(
+    out_dir: str | Path,
+    task: AnyTask | str,
+    config: PlanConfig | None = None,
+    *,
+    model: str | Path | None = None,
+    env_id: str | None = None,
+    final_eval: int | None = None,
+    animation: bool = True,
+    progress: Callable[[str], None] | None = None,
+) -> tuple[Run, list[str]]:
+    """Write a planning controller for ``task`` as a run directory: ``model.json`` (the
+    settings and the model), ``metrics.json`` (the final evaluation, per-step solve reports
+    counted) and the task's pictures; ``diffcontrol.load``, ``evaluate_dir`` and
+    ``animate_dir`` take it like a trained run.
+
+    Args:
+        out_dir: a new or empty directory.
+        task: a discrete-time task with action bounds (or its name).
+        config: the planner's settings (default ``PlanConfig()``).
+        model: a directory (or ``fitted.json``) of ``diffcontrol fit`` to plan through instead
+            of the task's simulator; its data's system is then where it is evaluated.
+        env_id: with ``model``: the real system's Gymnasium id where the fit names one of yours.
+        final_eval: evaluation episodes (``None``: the task's default; 0 skips).
+
+    Returns:
+        The ``Run`` and the names of the files written.
+
+    Raises:
+        ConfigError: settings the task cannot take; RunDirectoryError: ``out_dir`` is in use;
+        ModelFileError: a fitted model of another task.
+    """
+    import time
+
+    from ..training import task_params
+
+    config = PlanConfig() if config is None else config
+    task = resolve(task) if isinstance(task, str) else task
+    if not isinstance(task, Task):
+        raise ConfigError(f"task {task.name!r} is continuous-time; a planner needs a Task")
+    say = progress or (lambda line: None)
+    real, info = None, {"kind": "simulator"}
+    if model is not None:
+        from ..identify.fitted import read_fitted, real_system
+
+        fitted = read_fitted(model)
+        real = real_system(fitted, trusted=env_id)
+        stored = {k: v for k, v in fitted.items() if k != "_path"}  # the file, not where it was
+        info = {"kind": "fitted", "fitted": stored}
+    run = {"task": task.name, "config": config.to_json(), "planner": True}
+    out = io.prepare_run_dir(out_dir, run, resume=False)
+    try:
+        t0 = time.perf_counter()
+        policy = _policy(task, config, info, say)
+        metrics = {
+            "created": io.now_iso(),
+            "planner": {"settings": config.to_json(), "build_seconds": time.perf_counter() - t0},
+            "model": {"kind": "simulator"},
+        }
+        if model is not None:  # as train --model records it: evaluate reads the real system
+            metrics["model"] = {"dir": str(model), "kind": fitted["model"], "real_system": real}
+        planner = policy.planner  # judged with its parameters where it plans through the task
+        params = planner.problem.params if planner.task is task else task_params(task)
+        config_ = task.default_config()  # the run's training settings: none, the defaults
+        result = PlanResult(task, planner, config_, params, metrics, config, info, policy)
+        run_, files = save_run(
+            result, out, final_eval=final_eval, animation=animation, real=real, progress=say
+        )
+    except BaseException:
+        release_claim(out)
+        raise
+    run_.metrics["planner"]["solves"] = policy.summary()
+    io.write_json(out / "metrics.json", {k: v for k, v in run_.metrics.items() if k != "headline"})
+    mark_complete(out)
+    say(f"planner: {policy.summary()}")
+    return run_, files
