@@ -132,3 +132,17 @@ def gym_seeds_benchmark(
     doc = {"machine": machine(), "note": note, "runs": rows, "summary": summary}
     args.out.write_text(json.dumps(doc, indent=1) + "\n")
     print(f"wrote {args.out}")
+
+
+def grid_optima(task, points: int, levels: int, seed_sets: dict[str, list[int]]):
+    """Solve ``task``'s grid dynamic program and run its greedy controller on each seed set:
+    ``(table, {key: OptimumResult}, solve seconds)``, with a line of progress."""
+    from diffcontrol import optimal
+
+    print(f"solving the grid dynamic program ({points}^2 states, {levels} torques)...")
+    t0 = time.perf_counter()
+    table = optimal.solve(task, points, levels)
+    table.values.block_until_ready()
+    seconds = time.perf_counter() - t0
+    optima = {k: optimal.optimal_return(task, s, table=table) for k, s in seed_sets.items()}
+    return table, optima, seconds

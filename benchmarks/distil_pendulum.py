@@ -31,10 +31,10 @@ import equinox as eqx
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from _common import machine  # noqa: E402
+from _common import grid_optima, machine  # noqa: E402
 
 import diffcontrol  # noqa: E402
-from diffcontrol import mpc, optimal  # noqa: E402
+from diffcontrol import mpc  # noqa: E402
 from diffcontrol.tasks import Pendulum  # noqa: E402
 
 SEED_SETS = {"0-99": 0, "1000-1099": 1000}
@@ -62,12 +62,7 @@ def main():
     load_before = os.getloadavg()
     seed_sets = {k: list(range(s, s + args.episodes)) for k, s in SEED_SETS.items()}
 
-    print(f"solving the grid dynamic program ({args.points}^2 states, {args.levels} torques)...")
-    t0 = time.perf_counter()
-    table = optimal.solve(task, args.points, args.levels)
-    table.values.block_until_ready()
-    grid_s = time.perf_counter() - t0
-    optima = {k: optimal.optimal_return(task, s, table=table) for k, s in seed_sets.items()}
+    table, optima, grid_s = grid_optima(task, args.points, args.levels, seed_sets)
     header = (
         f"{'controller':<44} {'seeds':>9} {'return':>9} {'gap':>7} {'seconds':>8} {'planner':>9}"
     )

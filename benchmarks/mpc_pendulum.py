@@ -32,10 +32,10 @@ import optax
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from _common import machine, train_cli  # noqa: E402
+from _common import grid_optima, machine, train_cli  # noqa: E402
 
 import diffcontrol  # noqa: E402
-from diffcontrol import mpc, optimal  # noqa: E402
+from diffcontrol import mpc  # noqa: E402
 from diffcontrol.tasks import Pendulum  # noqa: E402
 
 SOLVERS = {
@@ -119,12 +119,7 @@ def main():
         "1000-1099": list(range(1000, 1000 + args.episodes)),
     }
 
-    print(f"solving the grid dynamic program ({args.points}^2 states, {args.levels} torques)...")
-    t0 = time.perf_counter()
-    table = optimal.solve(task, args.points, args.levels)
-    table.values.block_until_ready()
-    solve_s = time.perf_counter() - t0
-    optima = {k: optimal.optimal_return(task, s, table=table) for k, s in seed_sets.items()}
+    table, optima, solve_s = grid_optima(task, args.points, args.levels, seed_sets)
     header = (
         f"{'controller':<38} {'seeds':>9} {'return':>9} {'gap':>7} {'ms/step':>8} {'not conv.':>12}"
     )
