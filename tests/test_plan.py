@@ -70,6 +70,8 @@ def test_the_run_is_a_run_like_a_trained_one(planner_run, capsys):
     assert main(["evaluate", str(planner_run), "--episodes", "2", "--json"]) == 0
     again = json.loads(capsys.readouterr().out)
     np.testing.assert_allclose(again["returns"], stored, rtol=1e-6)  # same seeds, same actions
+    solves = again["planner_solves"]  # every control step's solve is counted and reported
+    assert int(solves.split()[0]) >= 2 * 200 and "0 non-finite" in solves
     assert main(["animate", str(planner_run), "--out", str(planner_run / "a.gif")]) == 0
     assert (planner_run / "a.gif").stat().st_size > 0
 

@@ -20,6 +20,7 @@ class EvalResult:
     returns: np.ndarray
     lengths: np.ndarray
     optimum: Any = None  # an ``optimal.OptimumResult`` on the same seeds, where asked for
+    solves: str | None = None  # a planner's count of unconverged and non-finite solves
 
     key = "gym_eval"  # its entry in metrics.json
 
@@ -44,6 +45,7 @@ class EvalResult:
             "returns": self.returns.tolist(),
             **({} if self.optimum is None else {"optimum": self.optimum.to_json()}),
             **({} if self.optimum is None else {"gap_to_optimum": self.optimum.gap(self.mean)}),
+            **({} if self.solves is None else {"planner_solves": self.solves}),
         }
 
     def summary(self) -> str:
@@ -55,6 +57,8 @@ class EvalResult:
             f"(seeds {self.seed}-{self.seed + n - 1}; min {self.returns.min():.1f}, "
             f"max {self.returns.max():.1f})"
         )
+        if self.solves is not None:
+            line += f"\nplanner: {self.solves}"
         if self.optimum is None:
             return line
         gap = self.optimum.gap(self.mean)
