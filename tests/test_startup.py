@@ -9,7 +9,18 @@ import sys
 import pytest
 
 HEAVY = ("jax", "equinox", "diffrax", "matplotlib", "imageio", "stable_baselines3", "torch")
-COMMANDS = ("list", "train", "plan", "evaluate", "animate", "aim", "compare", "record", "fit", "loop")
+COMMANDS = (
+    "list",
+    "train",
+    "plan",
+    "evaluate",
+    "animate",
+    "aim",
+    "compare",
+    "record",
+    "fit",
+    "loop",
+)
 
 
 def _imported_after(code: str) -> set[str]:
