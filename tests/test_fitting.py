@@ -184,3 +184,17 @@ def test_cli_fit_refuses_bad_data_in_one_line(tmp_path, capsys):
     code, err = fit(one, "--holdout", "0", "--params", "g,friction,m")
     assert code == 2 and "at least 150 are needed" in err
     assert not (tmp_path / "out").exists()  # nothing created for a refused fit
+
+
+@pytest.mark.slow
+def test_cartpole_grey_box_from_a_wrong_start_recovers_gymnasiums_physics():
+    """CartPole's observation is its state, so its model can be fitted to Gymnasium's own
+    episodes: from gravity 12, length 0.8 and force 7 the default names come back to 9.8, 0.5
+    and 10 (random pushes, 10 episodes)."""
+    task = diffcontrol.make("cartpole")
+    data = diffcontrol.record("CartPole-v1", 10, seed=0)
+    start = {"gravity": 12.0, "length": 0.8, "force_mag": 7.0}
+    fit = identify.fit_parameters(task, data, None, init=start, **FIT)
+    assert tuple(fit.values) == task.fit_parameter_names
+    truth = {"gravity": 9.8, "length": 0.5, "force_mag": 10.0}
+    assert all(abs(fit.values[n] - v) < 1e-3 * v for n, v in truth.items()), fit.values

@@ -52,6 +52,10 @@ class CartPole(Task):
         "x_threshold",
     )
 
+    # What a grey box fits by default: scaling both masses and the force together changes
+    # nothing, so the masses stay nominal and gravity, the pole's length and the push are fitted.
+    fit_parameter_names = ("gravity", "length", "force_mag")
+
     def data_columns(self):
         return ("obs.x [m]", "obs.x_dot [m/s]", "obs.theta [rad]", "obs.theta_dot [rad/s]"), (
             "action.push [index]",
@@ -94,6 +98,10 @@ class CartPole(Task):
 
     def observe(self, state):
         return cp.observe(state)
+
+    def state_from_observation(self, observation):
+        # The observation is the state (Gymnasium's float64 state rounded to float32).
+        return jnp.asarray(observation)
 
     def step_loss(self, name: str) -> StepLoss:
         if name == "shaped":
