@@ -16,6 +16,7 @@ from diffcontrol.cli import main
 from diffcontrol.compare.real import _as_run, _rl_runs
 from diffcontrol.errors import ConfigError
 from diffcontrol.identify._rounds import NoisyPolicy, model_error, predictor_of
+from diffcontrol.tasks import Pendulum, Task
 
 
 class _BrokenPendulum(gymnasium.Env):
@@ -51,6 +52,13 @@ def test_record_refuses_nan_observations_and_an_environment_that_raises(how, mat
     assert "\n" not in str(e.value) and "episode 0 at step 3" in str(e.value)
 
 
+class _Blind(Pendulum):
+    """A Pendulum that cannot reconstruct its state from observations (the default hook)."""
+
+    name = "blind-pendulum"
+    state_from_observation = Task.state_from_observation
+
+
 def test_loop_refuses_other_spaces_and_unknown_start_before_writing(tmp_path, capsys):
     out = tmp_path / "loop"
     assert main(["loop", "pendulum", "--env", "CartPole-v1", "--out", str(out)]) == 2
@@ -58,8 +66,8 @@ def test_loop_refuses_other_spaces_and_unknown_start_before_writing(tmp_path, ca
     assert len(err.strip().splitlines()) == 1 and "CartPole-v1 has the spaces" in err
     assert main(["loop", "pendulum", "--start", "gravity=8", "--out", str(out)]) == 2
     assert "no parameter 'gravity'" in capsys.readouterr().err
-    assert main(["loop", "cartpole", "--out", str(out)]) == 2
-    assert "cannot fit a model of 'cartpole'" in capsys.readouterr().err
+    with pytest.raises(ConfigError, match="cannot fit a model of 'blind-pendulum'"):
+        identify.loop(_Blind(), out)  # a task that cannot reconstruct its state
     assert main(["loop", "trebuchet", "--explore-noise", "0.1", "--out", str(out)]) == 2
     assert "applies to Gymnasium episodes" in capsys.readouterr().err
     assert main(["compare", "trebuchet", "--real", "--out", str(out)]) == 2
