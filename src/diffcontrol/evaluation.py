@@ -49,8 +49,9 @@ class EvalResult:
         }
 
     def summary(self) -> str:
-        """One line: the mean and spread of the return and the seeds it was measured on (and
-        a second with the optimum on the same seeds and the gap to it, where there is one)."""
+        """One line: the mean and spread of the return and the seeds it was measured on; then,
+        where there are, a line with a planner's solves and one with the optimum on the same
+        seeds and the gap to it."""
         n = int(self.returns.size)
         line = (
             f"{self.env_id}: return {self.mean:.2f} ± {self.std:.2f} over {n} episodes "

@@ -58,7 +58,7 @@ def evaluate_dir(
             f"--env does not apply to task {run.task.name!r}, whose evaluation is its own "
             f"({ev.key}), not Gymnasium episodes; leave --env out"
         )
-    if hasattr(run.policy, "reports") and hasattr(ev, "solves"):  # a planner: its solves
+    if hasattr(ev, "solves") and hasattr(run.policy, "reports"):  # a planner: its solves
         ev.solves = run.policy.summary()
     if optimum is not None:
         ev.optimum = _optimum(run, ev, optimum)
