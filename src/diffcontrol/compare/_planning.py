@@ -4,7 +4,8 @@
   starts per step, terminal cost ``-V_0`` of a 401-point grid optimum). It is not trained:
   its environment steps are 0 and its "training" seconds are those of building it (the grid
   solve and the first compilation). It is deterministic, so every seed gives the same
-  controller; it still runs once per seed, so its rows line up with the others.
+  controller; it has a row per seed, so its rows line up with the others, but its episodes
+  are run once per comparison (the later seeds reuse them).
 - ``distilled``: ``mpc.distil(task, planner, seed=seed)`` with its defaults (DAgger into the
   task's default MLP); its steps are the planner's and the MLP's simulated steps, its seconds
   the distillation's. Its evaluation points are the simulator's, so its curve holds the final
@@ -67,7 +68,11 @@ def run_planning(
         steps, seconds, extra = 0, memo["seconds"], {"config": PLANNER.to_json()}
 
         def returns(episodes: int) -> np.ndarray:  # one planner: one episode after another
-            return evaluate(policy, task, episodes, eval_seed).returns
+            # deterministic, so every seed's episodes are the first seed's: run them once
+            key = ("returns", episodes, eval_seed)
+            if key not in memo:
+                memo[key] = evaluate(policy, task, episodes, eval_seed).returns
+            return memo[key]
 
     else:
         from .. import io
