@@ -1,10 +1,6 @@
-"""The ``diffcontrol`` command line. It sits on top of everything; nothing imports it.
-
-Each command parses its options, makes one library call and prints what it returns. One module
-a group of commands: ``_train`` (train), ``_runs`` (list, evaluate, animate, aim), ``_compare``
-(compare), ``_identify`` (record, fit, loop); ``_args`` holds the option specs, the
-argument types and the one-line-error parser.
-"""
+"""The ``diffcontrol`` command line: each command parses its options, makes one library call
+and prints what it returns. ``_train`` (train, plan, sweep), ``_runs`` (list, evaluate,
+animate, aim), ``_compare``, ``_identify`` (record, fit, loop); ``_args`` the option specs."""
 
 from __future__ import annotations
 

@@ -1,12 +1,8 @@
-"""The parser class, the argument types, and ``add``: options from compact specs.
-
-A spec is ``(flag, form, default, metavar, help)``: ``flag`` is ``--name`` (its ``dest`` is
-``name`` with ``_``) or a positional's ``dest``; ``form`` is a type function (``str``,
-``positive_int``, ...), ``FLAG`` (``store_true``), ``[type]`` (repeatable: a list) or a tuple of
-choices; ``default`` is the value, or ``REQUIRED``; a positional whose default is not
-``REQUIRED`` is optional. The options several commands share are specs here. The commands
-list their specs as tables, with ruff's formatter off, so that an option is a line or two.
-"""
+"""The parser class, the argument types, and ``add``: options from compact specs
+``(flag, form, default, metavar, help)``. ``flag`` is ``--name`` or a positional's dest; ``form``
+a type function, ``FLAG`` (store_true), ``[type]`` (repeatable) or a tuple of choices;
+``default`` a value or ``REQUIRED`` (a positional with a default is optional). The commands
+list their specs as tables, with ruff's formatter off, so that an option is a line or two."""
 
 from __future__ import annotations
 
@@ -14,7 +10,7 @@ import argparse
 import dataclasses
 import math
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from typing import Any, NoReturn
 
 from ..config import MAX_COUNT, MAX_WIDTH
@@ -68,14 +64,10 @@ def config_specs(cls: type, skip: Any = (), defaults: bool = True) -> list[tuple
         form, metavar = forms[declared]
         default = f"{f.default:g}" if isinstance(f.default, float) else f.default
         default = ",".join(map(str, default)) if isinstance(default, tuple) else default
-        shown = (
-            ""
-            if not defaults or default in (None, dataclasses.MISSING)
-            else f" (default {default})"
-        )
+        shown = defaults and default not in (None, dataclasses.MISSING)
         flag = "--" + meta.get("flag", f.name).replace("_", "-")
         required = f.default is f.default_factory is dataclasses.MISSING
-        help = (meta["help"] + shown).replace("%", "%%")
+        help = (meta["help"] + (f" (default {default})" if shown else "")).replace("%", "%%")
         metavar = meta.get("metavar") or (None if "choices" in meta else metavar)
         specs.append((flag, form, REQUIRED if required else None, metavar, help))
     return specs
@@ -92,8 +84,7 @@ def config_of(cls: type, args: argparse.Namespace) -> Any:
 
 
 def _number(cast: Callable, expected: str, ok: Callable, must: str) -> Callable[[str], Any]:
-    """A type function: ``cast`` the text, refuse what is not ``ok``, with messages that say
-    what was expected."""
+    """A type function: ``cast`` the text, refuse what is not ``ok``, saying what was expected."""
 
     def parse(text: str) -> Any:
         try:
@@ -124,8 +115,6 @@ finite_float = _number(float, "a number", math.isfinite, "a finite number")
 positive_float = _number(float, "a number", lambda v: 0 < v < math.inf, "a finite positive number")
 nonneg_float = _number(float, "a number", lambda v: 0 <= v < math.inf, "a finite number >= 0")
 fraction = _number(float, "a number", lambda v: 0 <= v < 1, "a fraction in [0, 1)")
-
-
 _FLOATS = {"fraction": fraction, "positive": positive_float, "nonneg": nonneg_float, "any": float}
 
 
@@ -162,10 +151,11 @@ def names(text: str) -> list[str]:
     return names
 
 
-def pick(args: Any, names: str) -> dict[str, Any]:
-    """The options (or settings) ``names`` (space-separated) as keyword arguments of the
-    library call."""
-    return {name: getattr(args, name) for name in names.split()}
+def pick(args: Any, names: str | Iterable[str]) -> dict[str, Any]:
+    """The options (or settings) ``names`` (space-separated, or a collection) as keyword
+    arguments of the library call."""
+    names = names.split() if isinstance(names, str) else names
+    return {name: getattr(args, name) for name in names}
 
 
 def say(args: argparse.Namespace) -> Callable[[str], None] | None:

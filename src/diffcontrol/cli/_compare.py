@@ -15,15 +15,11 @@ def add_parsers(sub: Any) -> None:
         "compare",
         help="compare diffcontrol with RL baselines (Stable-Baselines3) on one task",
         description=(
-            "Train diffcontrol's controller (the task's defaults) and the RL baselines "
-            "(Stable-Baselines3 with rl-baselines3-zoo's published settings: PPO and DQN for "
-            "cartpole, SAC and TD3 for pendulum and trebuchet; `pip install "
-            "'diffcontrol[rl]'`) with the same training seeds 0..N-1. Every method is "
-            "evaluated at regular points during training on the same reset seeds in the same "
-            "environment (Gymnasium's own Pendulum-v1 / CartPole-v1; diffcontrol/Trebuchet-v0). "
-            "Training seconds leave out these evaluations. Writes to DIR: compare.json "
-            "(settings), runs/METHOD-seedS.json (each finished run, as it finishes; --resume "
-            "skips them), comparison.json, comparison.md (the table) and comparison.png."
+            "Train diffcontrol's controller and the RL baselines (Stable-Baselines3 with "
+            "rl-baselines3-zoo's settings; `pip install 'diffcontrol[rl]'`) on training seeds "
+            "0..N-1, evaluate every method at regular points on the same reset seeds in the "
+            "same environment, and write DIR/comparison.{json,md,png} and DIR/runs/ (one file "
+            "per finished run; --resume skips them). See docs/compare.md."
         ),
     )
     # fmt: off
@@ -31,11 +27,9 @@ def add_parsers(sub: Any) -> None:
         ("task", str, REQUIRED, "TASK", "cartpole, pendulum or trebuchet"),
         ("--out", str, None, "DIR", "output directory (default runs/compare-TASK)"),
         ("--resume", FLAG, False, None, "continue the comparison in DIR, keeping its runs"),
-        ("--real", FLAG, False, None,
-         "count the REAL system's steps: diffcontrol learns a model by acting on the real "
-         "environment (the loop: explore, fit, train, act) instead of using the task's "
-         "simulator; rows diffcontrol (grey box), (hybrid), (neural) beside the RL runs of "
-         "--rl-results; writes DIR/loops/ and DIR/runs/ as it goes (--resume)"),
+        ("--real", FLAG, False, None, "count the REAL system's steps: diffcontrol learns a "
+         "model by acting on the real environment (explore, fit, train, act; grey box, hybrid, "
+         "neural) beside the RL runs of --rl-results; writes DIR/loops/ as it goes"),
         *a.config_specs(CompareConfig),
         a.NO_COMPILE_CACHE,
         a.QUIET,
@@ -46,16 +40,9 @@ def add_parsers(sub: Any) -> None:
 def cmd_compare(args: argparse.Namespace) -> int:
     from ..compare import run_comparison
 
-    doc = run_comparison(
-        args.task,
-        args.out,
-        a.config_of(CompareConfig, args),
-        real=args.real,
-        resume=args.resume,
-        progress=a.say(args),
-        compile_cache=not args.no_compile_cache,
-        command=args.command_line,
-    )
+    more = {"real": args.real, "resume": args.resume, "progress": a.say(args)}
+    more |= {"compile_cache": not args.no_compile_cache, "command": args.command_line}
+    doc = run_comparison(args.task, args.out, a.config_of(CompareConfig, args), **more)
     print(doc["table"])
     if args.real:
         print(f"real steps to {doc['threshold']:g} per seed: {doc['real_steps_to_threshold']}")

@@ -19,15 +19,11 @@ def add_parsers(sub: Any) -> None:
         help="record trajectories from a Gymnasium environment (CSV or NPZ)",
         description=(
             "Record N episodes of ENV_ID with the controller saved in DIR, or with random "
-            "actions, and write them as a diffcontrol-trajectories file (CSV or NPZ by the "
-            "extension of FILE; episode i is reset with seed S+i; the last row of an episode "
-            "holds the final observation and no action). ENV_ID is a Gymnasium id (e.g. "
-            "Pendulum-v1, my_module:MyEnv-v0) or a task's name, which records the task's own "
-            "data: the trebuchet's throws (random inputs, or --controller aiming; --env-arg "
-            "sets the real trebuchet's parameters, --noise-m the distance noise; a throw is "
-            "a one-step episode), a swing-up's full state under random forces (--env-arg "
-            "sets its parameters). With --task, ENV_ID is the real system of TASK: its spaces "
-            "must match the task's and the columns are named by the task."
+            "actions, to a diffcontrol-trajectories file (CSV or NPZ by FILE's extension; "
+            "episode i is reset with seed S+i). ENV_ID is a Gymnasium id (e.g. Pendulum-v1, "
+            "my_module:MyEnv-v0) or a task's name, which records the task's own data (the "
+            "trebuchet's throws, a swing-up's full state). With --task, ENV_ID is the real "
+            "system of TASK: its spaces must match and the columns are named by the task."
         ),
     )
     # fmt: off
@@ -43,15 +39,12 @@ def add_parsers(sub: Any) -> None:
         "fit",
         help="fit a model of the task's system to recorded trajectories (or throws)",
         description=(
-            "Fit a model of TASK's system to FILE (recorded by `diffcontrol record`) by "
-            "differentiating it through short windows: from every recorded state, predict "
-            "WINDOW steps with the recorded actions and minimise the squared error. --model "
-            "params fits physical parameters of TASK's simulator (grey box, with standard "
-            "errors); hybrid adds a network to the nominal physics; neural learns the dynamics "
-            "alone. The last episodes (a fraction F) are held out to measure the prediction "
-            "error 1, 10 and 50 steps ahead. Writes DIR/fitted.json and DIR/prediction.png; "
-            "`diffcontrol train TASK --model DIR` trains through it. For the trebuchet, FILE "
-            "holds recorded throws and the distances are fitted."
+            "Fit a model of TASK's system to FILE (from `diffcontrol record`) by predicting "
+            "WINDOW steps from every recorded state and minimising the squared error: params "
+            "fits the simulator's physical parameters (grey box), hybrid adds a network to "
+            "the nominal physics, neural learns the dynamics alone. Writes DIR/fitted.json "
+            "(with held-out prediction errors) and DIR/prediction.png; `diffcontrol train "
+            "TASK --model DIR` trains through it."
         ),
     )
     add(p,
@@ -67,12 +60,11 @@ def add_parsers(sub: Any) -> None:
         "loop",
         help="alternate record -> fit -> train on a real system for a few rounds",
         description=(
-            "Learn a controller for a system you can only run: record N episodes of the real "
-            "environment ENV_ID (random actions at first), fit a model of TASK's system to all "
-            "data so far, train a controller through it, evaluate it on the real environment, "
-            "record N more episodes with it, and repeat for R rounds. Writes DIR/data.csv, "
-            "DIR/round_K/{fit,run}/, DIR/loop.json and DIR/loop.png; the last round's "
-            "controller is DIR/round_R/run/model.json."
+            "Learn a controller for a system you can only run, in R rounds of: record N "
+            "episodes of the real environment ENV_ID (random actions at first, then the last "
+            "controller's), fit a model of TASK's system to all data so far, train through "
+            "it, evaluate on the real environment. Writes DIR/data.csv, DIR/round_K/{fit,run}/, "
+            "DIR/loop.json and DIR/loop.png."
         ),
     )
     add(p,
@@ -90,14 +82,10 @@ def add_parsers(sub: Any) -> None:
 def cmd_fit(args: argparse.Namespace) -> int:
     from .. import identify, tasks
 
+    config = a.config_of(FitConfig, args)
+    more = {"force": args.force, "progress": a.say(args)}
     done = identify.fit_dir(
-        tasks.resolve(args.task),
-        args.data,
-        args.model,
-        args.out,
-        a.config_of(FitConfig, args),
-        force=args.force,
-        progress=a.say(args),
+        tasks.resolve(args.task), args.data, args.model, args.out, config, **more
     )
     print("\n".join(done.lines))
     return 0
@@ -106,15 +94,9 @@ def cmd_fit(args: argparse.Namespace) -> int:
 def cmd_loop(args: argparse.Namespace) -> int:
     from .. import identify, tasks
 
-    identify.loop(
-        tasks.resolve(args.task),
-        args.out,
-        a.config_of(LoopConfig, args),
-        env_id=args.env,
-        env_kwargs=dict(args.env_arg),
-        resume=args.resume,
-        progress=a.say(args),
-    )
+    config = a.config_of(LoopConfig, args)
+    more = {"env_kwargs": dict(args.env_arg), "resume": args.resume, "progress": a.say(args)}
+    identify.loop(tasks.resolve(args.task), args.out, config, env_id=args.env, **more)
     return 0
 
 
@@ -122,13 +104,8 @@ def cmd_record(args: argparse.Namespace) -> int:
     from .. import identify, tasks
 
     t0 = time.perf_counter()
-    data, out = identify.record_data(
-        args.env_id,
-        a.config_of(RecordConfig, args),
-        args.out,
-        task=tasks.resolve(args.task) if args.task else None,
-        force=args.force,
-        progress=a.say(args),
-    )
+    task = tasks.resolve(args.task) if args.task else None
+    more = {"task": task, "force": args.force, "progress": a.say(args)}
+    data, out = identify.record_data(args.env_id, a.config_of(RecordConfig, args), args.out, **more)
     print(f"wrote {out}: {identify.describe(data)} ({time.perf_counter() - t0:.1f} s)")
     return 0

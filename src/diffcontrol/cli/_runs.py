@@ -16,15 +16,11 @@ def add_parsers(sub: Any) -> None:
         "evaluate",
         help="run a trained controller in Gymnasium's own environment",
         description=(
-            "Run the controller saved in DIR in Gymnasium's own environment (Pendulum-v1, "
-            "CartPole-v1) on seeds S ... S+N-1 and print the mean and std of the return. For "
-            "an aiming task (trebuchet), aim at N random targets (20-100 m, wind ~ N(0, 5^2) "
-            "m/s, drawn with seed S) and print the miss statistics over the reachable ones. "
-            "For a continuous-time task (cartpole-swingup*), re-solve the closed loop with a "
-            "float64 reference solver (dopri8 at 1e-9) and print the end state, the peak "
-            "force and the swings. --env (with --env-arg) runs a discrete-time controller in "
-            "another environment instead, e.g. the real system a fitted model came from "
-            "(a run trained with --model is evaluated there by default)."
+            "Run the controller saved in DIR in its task's Gymnasium environment on reset seeds "
+            "S ... S+N-1 and print the return's mean and std. Aiming tasks (trebuchet): aim at "
+            "N random targets drawn with seed S and print the miss statistics; continuous-time "
+            "tasks: re-solve the closed loop with a float64 reference solver. A run trained "
+            "with --model is evaluated on the real system its data came from."
         ),
     )
     # fmt: off
@@ -38,8 +34,7 @@ def add_parsers(sub: Any) -> None:
         ("--seed", a.nonneg_int, 0, "S",
          "first reset seed, or the seed of the random targets (default 0)"),
         ("--optimum", a.positive_int, None, "N", "also run the reference optimum (a dynamic "
-         "program on an N x N state grid, e.g. 401) on the same seeds and print the gap to it; "
-         "tasks with a state grid (pendulum)"),
+         "program on an N x N state grid, e.g. 401; pendulum) and print the gap to it"),
         a.JSON,
         a.RUN_TASK,
     )
@@ -61,9 +56,8 @@ def add_parsers(sub: Any) -> None:
         "aim",
         help="aim a trained trebuchet controller at one target",
         description="Ask the aiming controller in DIR for the release angle and counterweight "
-        "that hit a target at M metres in a wind of W m/s (+ blows toward the target), simulate "
-        "the throw, and print the distance and the miss. --direct also aims by gradient steps "
-        "on the simulator alone, for comparison.",
+        "that hit a target at M metres in a wind of W m/s (+ toward the target), simulate the "
+        "throw, and print the distance and the miss.",
     )
     add(p,
         ("run_dir", str, REQUIRED, "DIR", "a directory written by `diffcontrol train trebuchet`"),
@@ -88,15 +82,8 @@ def cmd_list(args: argparse.Namespace) -> int:
 def cmd_evaluate(args: argparse.Namespace) -> int:
     from ..runs import evaluate_dir
 
-    run, ev = evaluate_dir(
-        args.run_dir,
-        task=args.task,
-        env_id=args.env,
-        env_kwargs=dict(args.env_arg),
-        episodes=args.episodes,
-        seed=args.seed,
-        optimum=args.optimum,
-    )
+    kw = a.pick(args, "task episodes seed optimum")
+    run, ev = evaluate_dir(args.run_dir, env_id=args.env, env_kwargs=dict(args.env_arg), **kw)
     if args.json:
         print(json.dumps({"run_dir": str(args.run_dir), "task": run.task.name, **ev.to_json()}))
     else:
@@ -108,9 +95,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 def cmd_animate(args: argparse.Namespace) -> int:
     from ..runs import animate_dir
 
-    path, what = animate_dir(
-        args.run_dir, args.out, task=args.task, seed=args.seed, target=args.target, wind=args.wind
-    )
+    kw = a.pick(args, "task seed target wind")
+    path, what = animate_dir(args.run_dir, args.out, **kw)
     print(f"wrote {path} ({what})")
     return 0
 

@@ -22,14 +22,11 @@ def add_parsers(sub: Any) -> None:
         "train",
         help="train a controller and write model, metrics, plots and an animation",
         description=(
-            "Train a controller for TASK by differentiating through its simulator, with the "
-            "task's tuned defaults unless options change them: backpropagation through time "
-            "for discrete-time tasks, through an adaptive ODE solve for continuous-time ones "
-            "(cartpole-swingup*). Writes to DIR: model.json (the controller, runnable with "
-            "NumPy alone), metrics.json (timings, simulated steps and episodes, learning "
-            "curve, evaluation), learning_curve.png, rollout.png and rollout.gif (swing-ups: "
-            "data.json with the time series, swingup.png with angle, position and force), "
-            "and checkpoint.npz (for --resume)."
+            "Train a controller for TASK by differentiating through its simulator (through "
+            "time steps, or an ODE solve for cartpole-swingup*), with the task's tuned "
+            "defaults unless options change them. Writes to DIR: model.json (the controller, "
+            "runnable with NumPy alone), metrics.json, plots, an animation and checkpoint.npz "
+            "(for --resume); see docs/cli.md."
         ),
     )
     # fmt: off
@@ -39,13 +36,10 @@ def add_parsers(sub: Any) -> None:
          "on seeds 0..N-1 (default 100), or random targets for aiming tasks (default 1000); "
          "0 skips"),
         ("--no-animation", FLAG, False, None, "skip the GIF (saves a few seconds)"),
-        ("--model", str, None, "FIT_DIR", "train (plan) through the model fitted by "
-         "`diffcontrol fit` in FIT_DIR instead of the nominal simulator (fitted parameters, or "
-         "the hybrid/neural model), and evaluate on the system its data was recorded from (e.g. "
-         "diffcontrol/PendulumFriction-v0 with its arguments)"),
-        ("--env", str, None, "ENV_ID", "with --model: the real system's Gymnasium id, where the "
-         "fitted model's data names one in a module of yours (module:Env-v0); diffcontrol "
-         "imports a module only when you name it"),
+        ("--model", str, None, "FIT_DIR", "train (plan) through the model `diffcontrol fit` "
+         "wrote in FIT_DIR, and evaluate on the system its data was recorded from"),
+        ("--env", str, None, "ENV_ID", "with --model: the real system's Gymnasium id where the "
+         "data names one in a module of yours (module:Env-v0; imported only when named here)"),
     )
     add(p,
         ("task", str, None, "TASK", "(optional with --resume: the run's own) " + a.TASK_HELP),
@@ -90,7 +84,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         outcome = train_run(
             args.out,
             args.task,
-            settings={name: getattr(args, name) for name in _SETTINGS},
+            settings=a.pick(args, _SETTINGS),
             params=tuple(args.param or ()),
             env_id=args.env,
             animation=not args.no_animation,
@@ -124,10 +118,9 @@ def _add_sweep_parser(sub: Any) -> None:
         "sweep",
         help="train a grid of runs (seeds x settings) as one vmapped program",
         description=(
-            "Train every combination of --seeds and --set values of TASK as one compiled, "
-            "vmapped program (sharded over the local devices), and write one run directory per "
-            "member (read by evaluate/animate/load), sweep.txt (the table) and sweep.png; the "
-            "best member also gets the final evaluation. Discrete-time tasks."
+            "Train every combination of --seeds and --set values of TASK as one vmapped "
+            "program (sharded over the local devices); write one run directory per member, "
+            "sweep.txt (the table) and sweep.png. Discrete-time tasks."
         ),
     )
     # fmt: off
@@ -151,16 +144,9 @@ def _add_sweep_parser(sub: Any) -> None:
 def cmd_sweep(args: argparse.Namespace) -> int:
     from ..runs import sweep_dir
 
-    settings = {f: getattr(args, f) for f in _DISCRETE - {"seed", "params"}}
-    _, files = sweep_dir(
-        args.out,
-        args.task,
-        seeds=args.seeds,
-        values=args.set or [],
-        settings=settings,
-        compile_cache=not args.no_compile_cache,
-        progress=a.say(args),
-        **a.pick(args, "recipe devices resume final_eval"),
-    )
+    settings = a.pick(args, _DISCRETE - {"seed", "params"})
+    more = a.pick(args, "recipe devices resume final_eval") | {"values": args.set or []}
+    more |= {"compile_cache": not args.no_compile_cache, "progress": a.say(args)}
+    _, files = sweep_dir(args.out, args.task, seeds=args.seeds, settings=settings, **more)
     print(f"wrote {args.out}: sweep.txt, sweep.png and {len(files) - 3} run directories")
     return 0
