@@ -227,3 +227,85 @@ def test_evaluate_resets_a_stateful_policy_before_every_episode():
     policy = Counting()
     diffcontrol.evaluate(policy, diffcontrol.make("pendulum"), episodes=3)
     assert policy.resets == 3 and policy.steps_since_reset == [200, 200, 200]
+
+
+def _jacobian_and_fd(f, x, eps):
+    """``jax.jacrev(f)(x)`` and the central finite differences of ``f`` along each of ``x``'s
+    entries (columns), float64."""
+    jac = np.asarray(jax.jit(jax.jacrev(f))(x))
+    fj = jax.jit(f)
+    fd = [(fj(x.at[i].add(eps)) - fj(x.at[i].add(-eps))) / (2 * eps) for i in range(x.size)]
+    return jac, np.stack([np.asarray(c) for c in fd], -1)
+
+
+@pytest.mark.parametrize(
+    "solver", [mpc.ILQR(iterations=6), mpc.Shooting(optax.lbfgs(), iterations=60)],
+    ids=["ilqr", "shooting-lbfgs"],
+)  # fmt: skip
+def test_implicit_gradient_of_the_plan_is_the_exact_lqr_gain(solver):
+    # At the optimum of a linear-quadratic problem the plan is linear in the start, u = K x0;
+    # the implicit derivative is K whatever the solver (L-BFGS's line search is a while_loop,
+    # which cannot be unrolled in reverse mode: the implicit gradient does not need to).
+    with jax.enable_x64(True):
+        planner = mpc.make_planner(LinearQuadratic(), solver, horizon=6, gradient="implicit")
+        jac = jax.jit(jax.jacrev(lambda x0: planner.plan(x0, jnp.zeros((6, 1)))[0][:, 0]))
+        exact = np.stack([_lqr_plan(np.eye(2)[i], 6)[:, 0] for i in range(2)], 1)
+        np.testing.assert_allclose(np.asarray(jac(jnp.array([0.8, -0.3]))), exact, atol=1e-8)
+
+
+def test_implicit_gradient_holds_actions_at_their_bounds_and_matches_finite_differences():
+    with jax.enable_x64(True):
+        planner = mpc.make_planner(
+            TightLinearQuadratic(), mpc.ILQR(iterations=15), horizon=6, gradient="implicit"
+        )
+        x0 = jnp.array([0.8, -0.3])
+        plan = planner.plan(x0, jnp.zeros((6, 1)))[0][:, 0]
+        jac, fd = _jacobian_and_fd(lambda x: planner.plan(x, jnp.zeros((6, 1)))[0][:, 0], x0, 1e-4)
+        held = np.abs(np.abs(np.asarray(plan)) - 0.5) < 1e-4
+        assert 0 < held.sum() < 5  # some actions at a bound, some free
+        np.testing.assert_array_equal(jac[held], 0.0)
+        np.testing.assert_allclose(jac, fd, atol=1e-5 * np.abs(fd).max())  # the solve's tol
+        assert np.abs(jac[~held]).max() > 0.1
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("gradient", ["unroll", "implicit"])
+def test_plan_gradients_in_the_start_and_the_model_match_finite_differences(gradient):
+    # Pendulum, a start from which the plan has free and held actions; the derivative in the
+    # model's gravity is what a planner inside a trained controller passes back to the model.
+    with jax.enable_x64(True):
+        planner = mpc.make_planner(Pendulum(), mpc.ILQR(iterations=30), 12, gradient=gradient)
+
+        def plan(z):  # z = (theta, theta_dot, g)
+            p = eqx.tree_at(lambda p: p.problem.params.g, planner, z[2])
+            return p.plan(z[:2], jnp.zeros((12, 1)))[0][:, 0]
+
+        # A step of 1e-3: the solve is exact only to its tolerance, which a smaller step
+        # would divide into the difference.
+        jac, fd = _jacobian_and_fd(plan, jnp.array([0.5, -1.0, 10.0]), 1e-3)
+        assert np.abs(jac).max() > 1.0
+        np.testing.assert_allclose(jac, fd, atol=2e-5 * np.abs(fd).max())
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("gradient", ["unroll", "implicit"])
+def test_closed_loop_gradient_through_the_planner_matches_finite_differences(gradient):
+    # The return of a short closed-loop episode on the system (g = 10), differentiated through
+    # every step's plan in the gravity of the planner's model (g = 9): the system does not
+    # depend on it, so the whole derivative comes through the plans.
+    with jax.enable_x64(True):
+        planner = mpc.make_planner(Pendulum(), mpc.ILQR(iterations=10), 6, gradient=gradient)
+        system = planner.problem.params
+
+        def episode_return(g):
+            p = eqx.tree_at(lambda p: p.problem.params.g, planner, g[0])
+            return p.episode(jnp.array([-0.3, 0.5]), 4, system)[2].sum()
+
+        jac, fd = _jacobian_and_fd(episode_return, jnp.array([9.0]), 1e-3)
+        assert abs(float(jac[0])) > 1e-3
+        np.testing.assert_allclose(jac, fd, rtol=1e-4)
+
+
+def test_an_unknown_gradient_mode_is_refused():
+    with pytest.raises(ConfigError, match="gradient='exact'"):
+        mpc.make_planner(Pendulum(), gradient="exact")

@@ -9,7 +9,9 @@
 A planner from stored settings: ``mpc.planner_from_config(task, PlanConfig(horizon=10))``;
 ``diffcontrol plan`` (``runs.plan_run``) writes one as a run directory that ``diffcontrol.load``
 builds back. Two solvers, as values: ``ILQR`` (box-constrained iLQR, as trajax and mpc.pytorch) and
-``Shooting`` (gradient descent on the actions with any optax optimiser).
+``Shooting`` (gradient descent on the actions with any optax optimiser). A plan is
+differentiable in the state and the model's parameters, through the solver's iterations or, with
+``make_planner(..., gradient="implicit")``, at the optimum (``_implicit``).
 """
 
 from ._config import planner_from_config

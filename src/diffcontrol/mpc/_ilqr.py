@@ -78,7 +78,7 @@ class ILQR(eqx.Module):
         # keep plans a hair inside.
         span = problem.high - problem.low
         low, high = problem.low + 1e-6 * span, problem.high - 1e-6 * span
-        actions = jnp.clip(actions, low, high)
+        actions = jnp.clip(actions, low, high).astype(jnp.result_type(actions, x0))
         states, cost = problem.rollout(x0, actions)
         d = x0.shape[0]
 

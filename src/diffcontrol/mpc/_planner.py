@@ -14,8 +14,12 @@ from jaxtyping import Array, Float, PyTree
 
 from ..errors import ConfigError
 from ._ilqr import ILQR
+from ._implicit import implicit_plan
 from ._problem import Problem, SolveInfo
 from ._shooting import Shooting
+
+GRADIENTS = ("unroll", "implicit")
+"""How a plan is differentiated (``make_planner(gradient=...)``)."""
 
 
 class Planner(eqx.Module):
@@ -33,11 +37,19 @@ class Planner(eqx.Module):
     Where a solve returns a non-finite plan, the planner applies the (finite, clipped) warm
     start instead and reports it in ``SolveInfo.finite``: never a NaN action.
 
+    The plan is differentiable in the state and in the problem's arrays (the model's
+    parameters, the terminal weight), so a planner can sit inside a trained controller or a
+    closed-loop loss: ``gradient="unroll"`` differentiates through the solver's fixed
+    iterations; ``gradient="implicit"`` differentiates the optimum itself by the implicit
+    function theorem (``mpc._implicit``: the solver's iterations are not differentiated).
+
     Attributes:
         task: a ``Task`` with action bounds (``action_low``/``action_high``).
         solver: ``ILQR`` or ``Shooting`` (anything with ``solve(problem, x0, plan)``).
         horizon: H, the actions planned at every step (>= 1).
         problem: the model, costs and bounds (built from the arguments of ``make_planner``).
+        bound_starts: also solve from the two constant plans at the bounds, keep the best.
+        gradient: ``"unroll"`` or ``"implicit"``, how the plan is differentiated.
     """
 
     task: Any = eqx.field(static=True)
@@ -45,6 +57,7 @@ class Planner(eqx.Module):
     horizon: int = eqx.field(static=True)
     problem: Problem
     bound_starts: bool = eqx.field(static=True, default=False)
+    gradient: str = eqx.field(static=True, default="unroll")
 
     @property
     def action_size(self) -> int:
@@ -57,15 +70,20 @@ class Planner(eqx.Module):
 
     def plan(self, state: Array, warm: Float[Array, "H m"]) -> tuple[Array, SolveInfo]:
         """The plan ``[H, m]`` from ``state`` starting at the guess ``warm``, and its report."""
+        problem, start = self.problem, state
+        if self.gradient == "implicit":  # the solve itself is not differentiated
+            problem, state, warm = jax.lax.stop_gradient((problem, state, warm))
         if self.bound_starts:
-            plan, info = self._best_of_starts(state, warm)
+            plan, info = self._best_of_starts(problem, state, warm)
         else:
-            plan, info = self.solver.solve(self.problem, state, warm)
-        safe = jnp.clip(jnp.nan_to_num(warm), self.problem.low, self.problem.high)
-        ok = info.finite
-        return jnp.where(ok, plan, safe), info
+            plan, info = self.solver.solve(problem, state, warm)
+        safe = jnp.clip(jnp.nan_to_num(warm), problem.low, problem.high)
+        plan = jnp.where(info.finite, plan, safe)
+        if self.gradient == "implicit":
+            plan = implicit_plan(self.problem, start, plan)
+        return plan, info
 
-    def _best_of_starts(self, state: Array, warm: Array) -> tuple[Array, SolveInfo]:
+    def _best_of_starts(self, problem: Problem, state: Array, warm: Array):
         # Three solves at once: from the warm start and from the two constant plans at the
         # bounds (full torque either way), which escape the local optimum of a plan that
         # does not swing (a pendulum hanging at rest); the lowest finite cost wins.
@@ -73,11 +91,11 @@ class Planner(eqx.Module):
         starts = jnp.stack(
             [
                 warm,
-                jnp.broadcast_to(self.problem.low, shape),
-                jnp.broadcast_to(self.problem.high, shape),
+                jnp.broadcast_to(problem.low, shape),
+                jnp.broadcast_to(problem.high, shape),
             ]
         )
-        plans, infos = jax.vmap(self.solver.solve, (None, None, 0))(self.problem, state, starts)
+        plans, infos = jax.vmap(self.solver.solve, (None, None, 0))(problem, state, starts)
         best = jnp.argmin(jnp.where(infos.finite, infos.cost, jnp.inf))
         return plans[best], jax.tree.map(lambda leaf: leaf[best], infos)
 
@@ -90,11 +108,14 @@ class Planner(eqx.Module):
         plan, info = self.plan(state, warm)
         return plan[0], self.shift(plan), info
 
-    def episode(self, state: Array, steps: int) -> tuple[Array, Array, Array, SolveInfo]:
+    def episode(
+        self, state: Array, steps: int, system: PyTree | None = None
+    ) -> tuple[Array, Array, Array, SolveInfo]:
         """A closed-loop episode in the task's own simulator (``lax.scan``; jit it, ``vmap``
         it over starts): ``(states [steps+1, d], actions [steps, m], rewards [steps],
-        reports stacked per step)``."""
-        params = self.problem.params
+        reports stacked per step)``. ``system``: the simulated system's parameters where they
+        differ from the planner's model (default the model's own)."""
+        params = self.problem.params if system is None else system
 
         def one(carry, _):
             x, warm = carry
@@ -102,9 +123,8 @@ class Planner(eqx.Module):
             nxt, reward, _ = self.task.step(params, x, u)
             return (nxt, warm), (nxt, u, reward, info)
 
-        _, (xs, us, rewards, infos) = jax.lax.scan(
-            one, (state, self.initial_plan()), None, length=steps
-        )
+        warm = self.initial_plan().astype(jnp.result_type(state, self.problem.low))
+        _, (xs, us, rewards, infos) = jax.lax.scan(one, (state, warm), None, length=steps)
         return jnp.concatenate([state[None], xs]), us, rewards, infos
 
 
@@ -128,6 +148,7 @@ def make_planner(
     terminal_cost: Callable[[Array], Array] | None = None,
     terminal_weight: float = 1.0,
     bound_starts: bool = False,
+    gradient: str = "unroll",
 ) -> Planner:
     """A ``Planner`` for ``task``, with its settings checked.
 
@@ -143,12 +164,16 @@ def make_planner(
         terminal_weight: its weight, finite and >= 0.
         bound_starts: also solve from the two constant plans at the action bounds at every
             step and keep the best of the three (three times the work; escapes local optima).
+        gradient: how a derivative of the plan is taken: ``"unroll"`` (through the solver's
+            iterations) or ``"implicit"`` (at the optimum, by the implicit function theorem).
 
     Raises:
         ConfigError: a horizon < 1, a negative or non-finite weight or solver setting, a task
-            without action bounds or without the loss named.
+            without action bounds or without the loss named, an unknown gradient.
     """
     solver = ILQR() if solver is None else solver
+    if gradient not in GRADIENTS:
+        raise ConfigError(f"gradient={gradient!r} is not one of {GRADIENTS}")
     if isinstance(horizon, bool) or not isinstance(horizon, int | np.integer) or horizon < 1:
         raise ConfigError(f"horizon={horizon!r} must be an integer >= 1 (actions planned per step)")
     weight = _finite_nonneg("terminal_weight", terminal_weight)
@@ -180,5 +205,10 @@ def make_planner(
         terminal_weight=jnp.asarray(weight, jnp.float32),
     )
     return Planner(
-        task=task, solver=solver, horizon=int(horizon), problem=problem, bound_starts=bound_starts
+        task=task,
+        solver=solver,
+        horizon=int(horizon),
+        problem=problem,
+        bound_starts=bound_starts,
+        gradient=gradient,
     )
