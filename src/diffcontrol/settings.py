@@ -122,6 +122,13 @@ class LoopConfig(_Settings):
     )
     rounds: int = _opt("rounds", 3, "R", high=MAX_WIDTH)
     episodes: int = _opt("real episodes recorded per round", 2, "N", high=MAX_WIDTH)
+    steps: int | None = _opt(
+        "real steps recorded per round instead of whole --episodes: episodes until N steps, "
+        "the last cut short (a CartPole episode of random pushes lasts ~20 steps, one of a "
+        "good controller 500)",
+        None,
+        "N",
+    )
     updates: int | None = _opt("gradient updates of each round (default: the task's)", None, "N")
     seed: int = _opt("seed of training and recording", 0, "S", low=0)
     eval_episodes: int = _opt(
