@@ -70,8 +70,9 @@ def test_loop_refuses_other_spaces_and_unknown_start_before_writing(tmp_path, ca
     assert "no parameter 'gravity'" in capsys.readouterr().err
     with pytest.raises(ConfigError, match="cannot fit a model of 'blind-pendulum'"):
         identify.loop(_Blind(), out)  # a task that cannot reconstruct its state
-    assert main(["loop", "trebuchet", "--explore-noise", "0.1", "--out", str(out)]) == 2
-    assert "applies to Gymnasium episodes" in capsys.readouterr().err
+    for flag in ("--explore-noise", "0.1"), ("--real-steps", "100"):
+        assert main(["loop", "trebuchet", *flag, "--out", str(out)]) == 2
+        assert f"{flag[0]} applies to Gymnasium episodes" in capsys.readouterr().err
     assert main(["compare", "trebuchet", "--real", "--out", str(out)]) == 2
     assert "not 'trebuchet'; choose cartpole or pendulum" in capsys.readouterr().err
     assert main(["compare", "pendulum", "--real", "--models", "pid", "--out", str(out)]) == 2
@@ -151,14 +152,18 @@ def test_a_loop_becomes_a_compare_run_on_real_steps(tmp_path):
 
 def test_record_spends_a_budget_of_real_steps():
     task = diffcontrol.make("cartpole")
-    data = identify.record("CartPole-v1", None, seed=0, task=task, steps=100)
+    data = identify.record("CartPole-v1", None, seed=0, task=task, total_steps=100)
     ends = data.metadata["ends"]
     assert data.num_steps == 100 and data.num_episodes == len(ends) > 2  # random: ~20 steps
     assert ends[-1] == "truncated" and set(ends[:-1]) == {"terminated"}  # the last cut short
-    few = identify.record("CartPole-v1", 2, seed=0, task=task, steps=1000)
+    pendulum = diffcontrol.make("pendulum")  # 200-step episodes: 200 steps are one of them
+    one = identify.record("Pendulum-v1", 1, seed=0, task=pendulum)
+    budget = identify.record("Pendulum-v1", None, seed=0, task=pendulum, total_steps=200)
+    assert np.array_equal(one.observations, budget.observations) and budget.num_episodes == 1
+    few = identify.record("CartPole-v1", 2, seed=0, task=task, total_steps=1000)
     assert few.num_episodes == 2 and few.num_steps < 1000  # episodes bound it first
-    with pytest.raises(ConfigError, match="steps must be a positive integer, got 0"):
-        identify.record("CartPole-v1", None, steps=0)
+    with pytest.raises(ConfigError, match="total_steps must be a positive integer, got 0"):
+        identify.record("CartPole-v1", None, total_steps=0)
     with pytest.raises(ConfigError, match="a number of episodes or a budget of steps"):
         identify.record("CartPole-v1", None)
 

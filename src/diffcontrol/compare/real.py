@@ -148,7 +148,7 @@ def run_real_comparison(
                 config = LoopConfig(
                     model=model,
                     rounds=rounds,
-                    steps=steps[model],
+                    real_steps=steps[model],
                     seed=seed,
                     eval_episodes=final_episodes,
                     eval_seed=eval_seed,

@@ -45,7 +45,7 @@ def loop(
     report: Callable[[str], None] = print,
 ) -> dict:
     """Learn a controller for a system you can only run: record ``episodes`` episodes (or
-    ``steps`` steps) of the real environment ``env_id`` (default the task's own; random
+    ``real_steps`` steps) of the real environment ``env_id`` (default the task's own; random
     actions at first), fit a model of ``task``'s system to all data so far, train a controller
     through it, judge it on the real environment, record as many more with it, and repeat for
     ``rounds`` rounds.
@@ -62,9 +62,9 @@ def loop(
             values: a loop that must not be handed the truth states a wrong start (ignored by
             ``neural``); ``explore_noise`` is the noise on the controller's actions while it
             records (``NoisyPolicy``: a fraction of the action's half range; the chance of a
-            random action for a discrete space); ``steps``, where set, is the real steps
-            recorded per round in place of whole ``episodes``: episodes until the budget is
-            spent, the last one cut short (``record``'s ``steps``).
+            random action for a discrete space); ``real_steps``, where set, is the real
+            steps recorded per round in place of whole ``episodes``: episodes until the
+            budget is spent, the last one cut short (``record``'s ``total_steps``).
 
     Raises:
         ConfigError: a task that records no Gymnasium episodes, an environment whose spaces
@@ -91,12 +91,12 @@ def loop(
         )
     c = config or LoopConfig()
     model, rounds, episodes, updates, seed = c.model, c.rounds, c.episodes, c.updates, c.seed
-    steps = c.steps
+    steps = c.real_steps
     eval_episodes, eval_seed, explore_noise = c.eval_episodes, c.eval_seed, c.explore_noise
     names = None if c.names is None else list(c.names)
     env_kwargs = dict(env_kwargs or {})
     start = parse_start(task, c.start)
-    for flag, value in (("--explore-noise", explore_noise), ("--steps", steps)):
+    for flag, value in (("--explore-noise", explore_noise), ("--real-steps", steps)):
         if value and not episodes_of_env:
             raise ConfigError(
                 f"{flag} applies to Gymnasium episodes, not to {task.name!r}'s own recording; "
@@ -150,7 +150,7 @@ def loop(
                     env_kwargs=env_kwargs,
                     source=source,
                     task=task,
-                    steps=steps,
+                    total_steps=steps,
                 )
             else:
                 data = task.record_data(

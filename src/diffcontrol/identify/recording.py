@@ -133,10 +133,10 @@ def record(
     progress: Callable[[str], None] | None = None,
     source: str | None = None,
     task: Any = None,
-    steps: int | None = None,
+    total_steps: int | None = None,
 ) -> TrajectoryData:
     """Record ``episodes`` episodes of ``gymnasium.make(env_id, **env_kwargs)``, or episodes
-    until a budget of ``steps`` transitions is spent.
+    until a budget of ``total_steps`` transitions is spent.
 
     Episode ``i`` is reset with seed ``seed + i``; each step applies ``policy(obs)`` (e.g.
     ``diffcontrol.load(DIR)``), or, without a policy, a random action from the environment's
@@ -149,7 +149,7 @@ def record(
     Args:
         env_id: any registered Gymnasium id with a flat ``Box`` observation space and a flat
             ``Box`` or ``Discrete`` action space.
-        episodes: how many episodes (>= 1); with ``steps``, the most episodes, or None for as
+        episodes: how many episodes (>= 1); with ``total_steps``, the most episodes, or None for as
             many as the budget takes (a CartPole episode of random pushes lasts ~20 steps).
         policy: a callable from one observation to a Gymnasium action; None for random.
         seed: the first reset seed, and the seed of the random actions.
@@ -160,7 +160,7 @@ def record(
             or ``policy <repr>``).
         task: the task whose real system ``env_id`` is: its spaces must match the task's,
             and the columns are the task's ``data_columns()``.
-        steps: a budget of transitions in all (>= 1): recording stops once it is spent, so
+        total_steps: a budget of transitions in all (>= 1): recording stops once it is spent, so
             that the real system's time, not its episodes, is what is asked for.
 
     Returns:
@@ -172,13 +172,13 @@ def record(
         ConfigError: ``episodes < 1``, an unknown ``env_id``, spaces that cannot be recorded,
             a policy that does not fit the environment, or an episode with no end.
     """
-    for name, value in (("episodes", episodes), ("steps", steps)):
+    for name, value in (("episodes", episodes), ("total_steps", total_steps)):
         if value is not None and (not isinstance(value, int) or value < 1):
             raise ConfigError(f"{name} must be a positive integer, got {value!r}")
-    if episodes is None and steps is None:
+    if episodes is None and total_steps is None:
         raise ConfigError("record needs a number of episodes or a budget of steps; give one")
     # each episode takes at least one step, so a budget alone bounds the episodes
-    episodes = steps if episodes is None else episodes
+    episodes = total_steps if episodes is None else episodes
     env = make_env(env_id, env_kwargs)
     obs_columns, act_columns = columns_for(env_id, env)
     if task is not None:
@@ -190,9 +190,9 @@ def record(
     _check_policy(policy, env_id, len(obs_columns))
     if policy is None:
         env.action_space.seed(seed)
-    every = max(1, (episodes if steps is None else max(1, steps // limit)) // 20)
+    every = max(1, (episodes if total_steps is None else max(1, total_steps // limit)) // 20)
     all_obs, all_act, returns, ends = [], [], [], []
-    left = steps  # the budget's transitions still to record (None: no budget)
+    left = total_steps  # the budget's transitions still to record (None: no budget)
     for i in range(episodes):
         if left == 0:
             break
@@ -213,7 +213,11 @@ def record(
         returns.append(total)
         ends.append("terminated" if terminated else "truncated")
         if progress and ((i + 1) % every == 0 or i + 1 == episodes or left == 0):
-            of = f"/{episodes}" if steps is None else f" ({steps - left}/{steps} steps)"
+            of = (
+                f"/{episodes}"
+                if total_steps is None
+                else f" ({total_steps - left}/{total_steps} steps)"
+            )
             progress(
                 f"episode {i + 1}{of} (seed {seed + i}): {len(actions)} steps, return {total:.1f}"
             )
