@@ -146,3 +146,98 @@ def grid_optima(task, points: int, levels: int, seed_sets: dict[str, list[int]])
     seconds = time.perf_counter() - t0
     optima = {k: optimal.optimal_return(task, s, table=table) for k, s in seed_sets.items()}
     return table, optima, seconds
+
+
+def real_benchmark(task: str, rl_method: str, targets: dict[str, int | None], doc: str) -> None:
+    """``diffcontrol compare TASK --real`` with the RL rows of ``results/compare.json``: print
+    the table and, per method, the real steps to the task's highest threshold on every seed
+    against ``targets`` (issue 14's; ``None``: none stated) and ``rl_method``'s steps; write
+    ``results/real_TASK.json`` and ``results/real_TASK.png``. ``doc``: the script's docstring
+    (its first line is the command line's description)."""
+    import argparse
+    import statistics
+
+    from diffcontrol.compare import run_real_comparison
+
+    here = Path(__file__).resolve().parent
+    parser = argparse.ArgumentParser(description=doc.splitlines()[0])
+    parser.add_argument("--seeds", type=int, default=5)
+    parser.add_argument("--models", default="params,hybrid,neural")
+    parser.add_argument("--max-rounds", type=int, default=3)
+    parser.add_argument("--out", default=f"runs/benchmark-real-{task}")
+    parser.add_argument("--resume", action="store_true")
+    args = parser.parse_args()
+    rl_file = here / "results" / "compare.json"
+    t0 = time.perf_counter()
+    cmp = run_real_comparison(
+        task,
+        args.out,
+        seeds=args.seeds,
+        max_rounds=args.max_rounds,
+        models=args.models.split(","),
+        rl_results=rl_file,
+        resume=args.resume,
+        progress=lambda line: print(line, flush=True),
+    )
+    wall = time.perf_counter() - t0
+    goal = cmp["threshold"]
+    # the RL rows as the comparison summarised them: the same thresholds as diffcontrol's
+    rl = next(r for r in cmp["summary"] if r["method"] == rl_method)
+    rl_goal = next(t for t in rl["thresholds"] if t["threshold"] == goal)
+    print(cmp["table"])
+    print(
+        f"\nreal steps to {goal:g} (target; {rl_method.upper()}: median "
+        f"{rl_goal['env_steps']['median'] or float('nan'):,.0f} steps, "
+        f"{rl_goal['train_seconds']['median'] or float('nan'):.0f} s, "
+        f"{rl_goal['reached']}/{rl_goal['of']} seeds)"
+    )
+    rows = []
+    for method, target in targets.items():
+        runs = [r for r in cmp["runs"] if r["method"] == method]
+        if not runs:
+            continue
+        steps = {int(s): v for s, v in cmp["real_steps_to_threshold"].get(method, {}).items()}
+        all100 = cmp["real_steps_to_threshold_over_all_episodes"].get(method, {})
+        steps100 = {int(s): v for s, v in all100.items()}
+        finals = {r["seed"]: r["final"]["mean_return"] for r in runs}
+        points = {r["seed"]: [round(p["mean_return"], 1) for p in r["curve"]] for r in runs}
+        secs = {}
+        for r in runs:
+            hit = next((p for p in r["curve"] if p["mean_return"] >= goal), None)
+            secs[r["seed"]] = hit["train_seconds"] if hit else None
+        reached = [v for v in steps.values() if v is not None]
+        rows.append(
+            {
+                "method": method,
+                "target_steps": target,
+                f"steps_to_{goal:g}_on_20_episodes": steps,
+                f"steps_to_{goal:g}_on_100_episodes": steps100,
+                f"seconds_to_{goal:g}_on_20_episodes": secs,
+                "returns_20_episodes_by_round": points,
+                "last_return_100_episodes": finals,
+                "met_target_on_every_seed_20": target is not None
+                and len(reached) == len(runs)
+                and all(v <= target for v in reached),
+                "median_steps_20": statistics.median(reached) if reached else None,
+            }
+        )
+        for name, table in (("20 ep", steps), ("100 ep", steps100)):
+            cells = ", ".join(
+                f"seed {s}: {table[s] if table[s] is not None else 'missed'}" for s in sorted(table)
+            )
+            print(f"{method:24} ({name}) target <= {target or '-':>5}: {cells}")
+        print(f"{'':24} returns by round (20 ep): {points}; last (100 ep): {finals}")
+    out = here / "results" / f"real_{task}.json"
+    png = here / "results" / f"real_{task}.png"
+    (here / "results").mkdir(exist_ok=True)
+    shutil.copyfile(Path(args.out) / "comparison.png", png)
+    result = {
+        "command": f"python benchmarks/real_{task}.py " + " ".join(sys.argv[1:]),
+        "machine": machine(),
+        "benchmark_wall_seconds": wall,
+        f"{rl_method}_to_{goal:g}": rl_goal,
+        "rows": rows,
+        "comparison": {k: v for k, v in cmp.items() if k not in ("files",)},
+    }
+    out.write_text(json.dumps(result, indent=1) + "\n")
+    print(f"wrote {out} and {png}")

@@ -1,9 +1,11 @@
 """The loop counted in real steps (issue 14): its bookkeeping, a grey box that starts wrong,
-exploration with noise, bad input, and ``compare --real``'s runs."""
+exploration with noise, a budget of real steps per round, bad input, and ``compare --real``'s
+runs (on CartPole-v1 end to end)."""
 
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import gymnasium
 import numpy as np
@@ -13,7 +15,7 @@ from gymnasium import spaces
 import diffcontrol
 from diffcontrol import identify
 from diffcontrol.cli import main
-from diffcontrol.compare.real import _as_run, _rl_runs
+from diffcontrol.compare.real import _as_run, _rl_runs, run_real_comparison
 from diffcontrol.errors import ConfigError
 from diffcontrol.identify._rounds import NoisyPolicy, model_error, predictor_of
 from diffcontrol.tasks import Pendulum, Task
@@ -68,10 +70,11 @@ def test_loop_refuses_other_spaces_and_unknown_start_before_writing(tmp_path, ca
     assert "no parameter 'gravity'" in capsys.readouterr().err
     with pytest.raises(ConfigError, match="cannot fit a model of 'blind-pendulum'"):
         identify.loop(_Blind(), out)  # a task that cannot reconstruct its state
-    assert main(["loop", "trebuchet", "--explore-noise", "0.1", "--out", str(out)]) == 2
-    assert "applies to Gymnasium episodes" in capsys.readouterr().err
+    for flag in ("--explore-noise", "0.1"), ("--real-steps", "100"):
+        assert main(["loop", "trebuchet", *flag, "--out", str(out)]) == 2
+        assert f"{flag[0]} applies to Gymnasium episodes" in capsys.readouterr().err
     assert main(["compare", "trebuchet", "--real", "--out", str(out)]) == 2
-    assert "choose pendulum" in capsys.readouterr().err
+    assert "not 'trebuchet'; choose cartpole or pendulum" in capsys.readouterr().err
     assert main(["compare", "pendulum", "--real", "--models", "pid", "--out", str(out)]) == 2
     assert "unknown model(s) ['pid']" in capsys.readouterr().err
     assert not out.exists()
@@ -134,12 +137,75 @@ def test_a_loop_becomes_a_compare_run_on_real_steps(tmp_path):
          "real_return_std": 80.0, "eval_episodes": 100, "model_error_on_new_data": {"rmse_1": 0.1},
          "work_seconds": {"record": 0.1, "fit": 1.0, "train": None}},
     ]  # fmt: skip
-    run = _as_run("params", 3, {"settings": {}, "rounds": rounds, "start": {}}, 9.0)
+    run = _as_run("params", 3, {"settings": {}, "rounds": rounds, "start": {}}, 9.0, 100)
     assert run["method"] == "diffcontrol (grey box)" and run["seed"] == 3
     assert [p["env_steps"] for p in run["curve"]] == [200, 400]
+    # as compare counts them: real steps in standard episodes (here of 100 steps); recorded ones
+    assert [(p["episodes"], p["episodes_finished"]) for p in run["curve"]] == [(2.0, 1), (4.0, 2)]
     assert run["curve"][-1]["train_seconds"] == pytest.approx(6.2)
     assert run["final"]["mean_return"] == -140.0 and run["env_steps"] == 400
     other = tmp_path / "c.json"
     other.write_text(json.dumps({"task": "pendulum", "eval_seed": 0, "runs": []}))
     with pytest.raises(ConfigError, match="--eval-seed 0"):
         _rl_runs(other, "pendulum", 1000)
+
+
+def test_record_spends_a_budget_of_real_steps():
+    task = diffcontrol.make("cartpole")
+    data = identify.record("CartPole-v1", None, seed=0, task=task, total_steps=100)
+    ends = data.metadata["ends"]
+    assert data.num_steps == 100 and data.num_episodes == len(ends) > 2  # random: ~20 steps
+    assert ends[-1] == "truncated" and set(ends[:-1]) == {"terminated"}  # the last cut short
+    pendulum = diffcontrol.make("pendulum")  # 200-step episodes: 200 steps are one of them
+    one = identify.record("Pendulum-v1", 1, seed=0, task=pendulum)
+    budget = identify.record("Pendulum-v1", None, seed=0, task=pendulum, total_steps=200)
+    assert np.array_equal(one.observations, budget.observations) and budget.num_episodes == 1
+    few = identify.record("CartPole-v1", 2, seed=0, task=task, total_steps=1000)
+    assert few.num_episodes == 2 and few.num_steps < 1000  # episodes bound it first
+    with pytest.raises(ConfigError, match="total_steps must be a positive integer, got 0"):
+        identify.record("CartPole-v1", None, total_steps=0)
+    with pytest.raises(ConfigError, match="a number of episodes or a budget of steps"):
+        identify.record("CartPole-v1", None)
+
+
+@pytest.mark.slow
+def test_compare_real_cartpole_counts_the_loops_real_steps(tmp_path):
+    rl = Path(__file__).resolve().parents[1] / "benchmarks" / "results" / "compare.json"
+    out = tmp_path / "real"
+    kw = dict(seeds=1, models=["params"], max_rounds=2, steps={"params": 150}, updates=2)
+    doc = run_real_comparison("cartpole", out, final_episodes=3, rl_results=rl, **kw)
+    assert doc["threshold"] == 500.0 and doc["steps_per_round"] == {"params": 150}
+    assert doc["start"] == {"gravity": 12.0, "length": 0.8, "force_mag": 7.0}  # the task's
+    for name in ("comparison.json", "comparison.md", "comparison.png", "runs/params-seed0.json"):
+        assert (out / name).stat().st_size > 0
+    loop = json.loads((out / "loops" / "params-seed0" / "loop.json").read_text())
+    assert "gravity = 12 (nominal 9.8)" in loop["start"]["note"]
+    rounds = sorted(loop["rounds"], key=lambda r: r["round"])
+    # 2 updates balance nothing: both rounds run, each recording exactly its 150 real steps
+    # (random pushes, then round 1's controller with noise, cut at the budget)
+    assert [r["real_steps"] for r in rounds] == [150, 300]
+    data = identify.read_trajectories(out / "loops" / "params-seed0" / "data.csv")
+    assert data.num_steps == 300
+    assert (
+        rounds[0]["model_error_on_new_data"]["rmse_1"]
+        > 10 * (rounds[1]["model_error_on_new_data"]["rmse_1"])
+    )  # the wrong start, then the fit of round 1 on the controller's steps
+    assert abs(rounds[-1]["fitted_parameters"]["gravity"] - 9.8) < 0.05
+    # the evaluation episodes (a CartPole return is its steps) are not counted
+    evaluated = json.loads((out / "loops" / "params-seed0" / "round_2" / "eval.json").read_text())
+    assert evaluated["seeds"] == [1000, 1002] and len(evaluated["returns"]) == 3  # first, last
+    assert sum(evaluated["returns"]) >= 3  # steps taken on the real system, not in real_steps
+    run = next(r for r in doc["runs"] if r["method"] == "diffcontrol (grey box)")
+    assert [p["env_steps"] for p in run["curve"]] == [150, 300] and run["env_steps"] == 300
+    assert [p["episodes"] for p in run["curve"]] == [0.3, 0.6]  # in 500-step episodes
+    ppo = next(r for r in doc["summary"] if r["method"] == "ppo")  # read from --rl-results
+    assert [t["threshold"] for t in ppo["thresholds"]] == [475.0, 500.0]
+    assert "| ppo (PPO) |" in doc["table"] and "| diffcontrol (grey box)" in doc["table"]
+    before = (out / "runs" / "params-seed0.json").read_text()
+    again = run_real_comparison("cartpole", out, final_episodes=3, rl_results=rl, resume=True, **kw)
+    assert (out / "runs" / "params-seed0.json").read_text() == before  # nothing run twice
+    assert (
+        again["real_steps_to_threshold"]
+        == doc["real_steps_to_threshold"]
+        == {"diffcontrol (grey box)": {0: None}}
+    )

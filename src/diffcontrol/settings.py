@@ -122,6 +122,13 @@ class LoopConfig(_Settings):
     )
     rounds: int = _opt("rounds", 3, "R", high=MAX_WIDTH)
     episodes: int = _opt("real episodes recorded per round", 2, "N", high=MAX_WIDTH)
+    real_steps: int | None = _opt(
+        "real steps recorded per round instead of whole --episodes: episodes until N steps, "
+        "the last cut short (a CartPole episode of random pushes lasts ~20 steps, one of a "
+        "good controller 500)",
+        None,
+        "N",
+    )
     updates: int | None = _opt("gradient updates of each round (default: the task's)", None, "N")
     seed: int = _opt("seed of training and recording", 0, "S", low=0)
     eval_episodes: int = _opt(
@@ -189,7 +196,8 @@ class CompareConfig(_Settings):
     )
     start: dict[str, float] = _opt(
         "--real: the wrong physics the grey box and hybrid start from (repeatable; default "
-        "for pendulum g=8, friction=0.1)",
+        "the task's: pendulum g=8, friction=0.1; cartpole gravity=12, length=0.8, "
+        "force_mag=7)",
         {},
         "NAME=VALUE",
     )

@@ -5,14 +5,18 @@ when the simulator is the system. Here diffcontrol may not use the task's simula
 system: it learns a model by acting on the real Gymnasium environment (``identify.loop``:
 explore, fit, train through the fit, act) and every real environment step it takes is
 counted: the random exploration and every episode its controllers record (with exploration
-noise); the evaluation episodes are not, as for RL. Each round's controller is evaluated on
-the real environment over ``final_episodes`` episodes with reset seeds ``eval_seed ...``
-(those of ``diffcontrol compare``), and the loop stops at the first round whose controller
-reaches the task's threshold, or after ``max_rounds``.
+noise); the evaluation episodes are not, as for RL. A round records a budget of real steps
+(the task's ``real_steps_per_round``: episodes until it is spent, the last cut short; one
+Pendulum episode, 250 CartPole steps), so that tasks whose episodes end early (a random
+CartPole episode lasts ~20 steps) and tasks whose episodes do not are asked for the same kind
+of thing. Each round's controller is evaluated on the real environment over
+``final_episodes`` episodes with reset seeds ``eval_seed ...`` (those of ``diffcontrol
+compare``), and the loop stops at the first round whose controller reaches the task's highest
+threshold (Pendulum -150, CartPole 500), or after ``max_rounds``.
 
-Methods: ``params`` (the grey box, whose physics starts from the stated wrong ``start``),
-``hybrid`` (the same wrong physics plus a network) and ``neural`` (a network alone). The RL
-rows are those already recorded by ``diffcontrol compare`` (e.g.
+Methods: ``params`` (the grey box, whose physics starts from the stated wrong ``start``: the
+task's ``real_start``), ``hybrid`` (the same wrong physics plus a network) and ``neural`` (a
+network alone). The RL rows are those already recorded by ``diffcontrol compare`` (e.g.
 ``benchmarks/results/compare.json``, same evaluation seeds), read, not re-run.
 
 Writes to ``out``: ``loops/<model>-seed<S>/`` (each loop's directory; resumable),
@@ -32,20 +36,12 @@ import numpy as np
 
 from .. import io
 from ..errors import ConfigError, RunDirectoryError
-from ..tasks import Task, resolve
+from ..tasks import Task, make, names, resolve
 from .report import plot, summarize, table
 from .run import THRESHOLDS, first_reached
 
 LABELS = {"params": "grey box", "hybrid": "hybrid", "neural": "neural"}
 """The rows' names: ``diffcontrol (grey box)`` and so on."""
-
-EPISODES = {"params": 1, "hybrid": 1, "neural": 5}
-"""Real episodes recorded per round: a network alone needs 1,000 transitions to be fitted at all
-(``identify.MIN_TRANSITIONS``), i.e. 5 Pendulum episodes."""
-
-START = {"pendulum": {"g": 8.0, "friction": 0.1}}
-"""The wrong physics the grey box and the hybrid start from (Pendulum-v1: g = 10, no
-friction)."""
 
 
 def run_real_comparison(
@@ -55,7 +51,7 @@ def run_real_comparison(
     seeds: int = 5,
     models: list[str] | None = None,
     max_rounds: int = 3,
-    episodes: dict[str, int] | None = None,
+    steps: dict[str, int] | None = None,
     start: dict[str, float] | None = None,
     explore_noise: float = 0.1,
     updates: int | None = None,
@@ -70,14 +66,17 @@ def run_real_comparison(
 
     Args:
         task: a discrete-time task with a threshold whose state can be reconstructed from
-            observations (``pendulum``; the cart-pole cannot yet).
+            observations (``pendulum``, ``cartpole``).
         out_dir: a new or empty directory, or a previous one with ``resume``.
         seeds: loop seeds ``0 ... seeds-1`` (recording, the networks, training).
         models: a subset of ``params``, ``hybrid``, ``neural`` (default all).
         max_rounds: the most rounds of a loop; it stops at the first controller that reaches
             the task's threshold.
-        episodes: real episodes per round by model (default ``EPISODES``).
-        start: the wrong physics the grey box and hybrid start from (default ``START``).
+        steps: real steps recorded per round by model (default the task's
+            ``real_steps_per_round``: Pendulum 200/200/1,000, CartPole 250/250/1,000).
+        start: the wrong physics the grey box and hybrid start from (default the task's
+            ``real_start``: Pendulum g = 8, friction 0.1; CartPole gravity 12, length 0.8,
+            force_mag 7).
         explore_noise: action noise while a controller records (``identify.loop``).
         updates: gradient updates of each round's training (default the task's, which stops
             early at its target return).
@@ -95,20 +94,19 @@ def run_real_comparison(
     from ..settings import LoopConfig
 
     task = resolve(task) if isinstance(task, str) else task
-    thresholds = THRESHOLDS.get(task.name)
-    if type(task).state_from_observation is Task.state_from_observation:
-        thresholds = None  # no model of it can be fitted to recorded observations
-    if not thresholds:
+    if not _can_learn(task):
+        can = sorted(n for n in names() if _can_learn(make(n)))
         raise ConfigError(
             f"compare --real needs a task with a threshold whose model can be fitted to "
-            f"recorded episodes, not {task.name!r}; choose pendulum"
+            f"recorded episodes, not {task.name!r}; choose {' or '.join(can)}"
         )
+    thresholds = THRESHOLDS[task.name]
     models = list(models or LABELS)
     bad = [m for m in models if m not in LABELS]
     if bad:
         raise ConfigError(f"unknown model(s) {bad} for --real; choose among {list(LABELS)}")
-    episodes = {**EPISODES, **(episodes or {})}
-    start = dict(START.get(task.name, {}) if start is None else start)
+    steps = {m: task.real_steps_per_round(m) for m in models} | (steps or {})
+    start = dict(task.real_start if start is None else start)
     target = max(thresholds)  # returns: the highest is the hardest
     rl = _rl_runs(rl_results, task.name, eval_seed) if rl_results else []
     out = Path(out_dir)
@@ -119,7 +117,7 @@ def run_real_comparison(
         "models": models,
         "seeds": list(range(seeds)),
         "max_rounds": max_rounds,
-        "episodes_per_round": {m: episodes[m] for m in models},
+        "steps_per_round": {m: steps[m] for m in models},
         "start": start,
         "explore_noise": explore_noise,
         "updates": updates,
@@ -150,7 +148,7 @@ def run_real_comparison(
                 config = LoopConfig(
                     model=model,
                     rounds=rounds,
-                    episodes=episodes[model],
+                    real_steps=steps[model],
                     seed=seed,
                     eval_episodes=final_episodes,
                     eval_seed=eval_seed,
@@ -169,19 +167,34 @@ def run_real_comparison(
                 last = max(state["rounds"], key=lambda r: r["round"])
                 if last["real_return"] is not None and last["real_return"] >= target:
                     break
-            run = _as_run(model, seed, state, time.perf_counter() - t0)
+            run = _as_run(model, seed, state, time.perf_counter() - t0, task.episode_length)
             path.parent.mkdir(parents=True, exist_ok=True)
             io.write_json(path, run)
             results.append(run)
     return _report(task, out, settings, results, rl, thresholds)
 
 
-def _as_run(model: str, seed: int, state: dict, wall: float, point_episodes: int = 20) -> dict:
+def _can_learn(task: Task) -> bool:
+    """Whether ``compare --real`` can run on ``task``: a discrete-time task with a threshold
+    whose state can be reconstructed from observations (a model can be fitted to them)."""
+    return (
+        isinstance(task, Task)
+        and bool(THRESHOLDS.get(task.name))
+        and type(task).state_from_observation is not Task.state_from_observation
+    )
+
+
+def _as_run(
+    model: str, seed: int, state: dict, wall: float, episode_length: int, point_episodes: int = 20
+) -> dict:
     """A loop as a run of ``diffcontrol compare`` (``runs/<method>-seed<S>.json``): one curve
     point per round at the real steps used so far and the loop's seconds so far (recording,
-    fitting and training; the evaluations left out, as in ``compare``). A point's return is
-    the mean over the first ``point_episodes`` evaluation episodes (``compare``'s evaluation
-    points: 20, reset seeds 1000-1019); ``final`` and ``return_all`` are over all of them."""
+    fitting and training; the evaluations left out, as in ``compare``). As there, ``episodes``
+    is the real steps in standard episodes (``episode_length`` steps) and
+    ``episodes_finished`` the episodes recorded (a CartPole round of 250 steps: 0.5 and ~10).
+    A point's return is the mean over the first ``point_episodes`` evaluation episodes
+    (``compare``'s evaluation points: 20, reset seeds 1000-1019); ``final`` and
+    ``return_all`` are over all of them."""
     curve, seconds = [], 0.0
     for r in sorted(state["rounds"], key=lambda r: r["round"]):
         seconds += sum(v for v in (r.get("work_seconds") or {}).values() if v)
@@ -189,7 +202,7 @@ def _as_run(model: str, seed: int, state: dict, wall: float, point_episodes: int
         curve.append(
             {
                 "env_steps": r["real_steps"],
-                "episodes": float(r["episodes"]),
+                "episodes": r["real_steps"] / episode_length,
                 "episodes_finished": r["episodes"],
                 "train_seconds": seconds,
                 "mean_return": float(np.mean(returns[:point_episodes])),

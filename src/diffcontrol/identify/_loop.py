@@ -44,10 +44,11 @@ def loop(
     progress: Callable[[str], None] | None = None,
     report: Callable[[str], None] = print,
 ) -> dict:
-    """Learn a controller for a system you can only run: record ``episodes`` episodes of the
-    real environment ``env_id`` (default the task's own; random actions at first), fit a model
-    of ``task``'s system to all data so far, train a controller through it, judge it on the
-    real environment, record ``episodes`` more with it, and repeat for ``rounds`` rounds.
+    """Learn a controller for a system you can only run: record ``episodes`` episodes (or
+    ``real_steps`` steps) of the real environment ``env_id`` (default the task's own; random
+    actions at first), fit a model of ``task``'s system to all data so far, train a controller
+    through it, judge it on the real environment, record as many more with it, and repeat for
+    ``rounds`` rounds.
 
     Writes ``out/data.csv`` (all recorded episodes), ``out/round_K/{fit,run}/``,
     ``out/loop.json`` (per round: data, fit, return on the real system) and ``out/loop.png``;
@@ -61,7 +62,9 @@ def loop(
             values: a loop that must not be handed the truth states a wrong start (ignored by
             ``neural``); ``explore_noise`` is the noise on the controller's actions while it
             records (``NoisyPolicy``: a fraction of the action's half range; the chance of a
-            random action for a discrete space).
+            random action for a discrete space); ``real_steps``, where set, is the real
+            steps recorded per round in place of whole ``episodes``: episodes until the
+            budget is spent, the last one cut short (``record``'s ``total_steps``).
 
     Raises:
         ConfigError: a task that records no Gymnasium episodes, an environment whose spaces
@@ -88,15 +91,17 @@ def loop(
         )
     c = config or LoopConfig()
     model, rounds, episodes, updates, seed = c.model, c.rounds, c.episodes, c.updates, c.seed
+    steps = c.real_steps
     eval_episodes, eval_seed, explore_noise = c.eval_episodes, c.eval_seed, c.explore_noise
     names = None if c.names is None else list(c.names)
     env_kwargs = dict(env_kwargs or {})
     start = parse_start(task, c.start)
-    if explore_noise and not episodes_of_env:
-        raise ConfigError(
-            f"--explore-noise applies to Gymnasium episodes, not to {task.name!r}'s own "
-            "recording; drop it"
-        )
+    for flag, value in (("--explore-noise", explore_noise), ("--real-steps", steps)):
+        if value and not episodes_of_env:
+            raise ConfigError(
+                f"{flag} applies to Gymnasium episodes, not to {task.name!r}'s own recording; "
+                "drop it"
+            )
     if episodes_of_env:
         env_id = env_id or task.gym_id or own_id(task)
         env = make_env(env_id, env_kwargs)  # refuse other spaces before anything is written
@@ -111,13 +116,14 @@ def loop(
         "env_kwargs": env_kwargs,
         "model": model,
         "params": names,
-        "episodes_per_round": episodes,
+        "episodes_per_round": None if steps else episodes,
         "updates": updates,
         "seed": seed,
     }
     # new settings only where set, so a loop written before them still resumes
     settings.update({k: v for k, v in [("start", start), ("explore_noise", explore_noise),
-                                       ("eval_seed", eval_seed)] if v})  # fmt: skip
+                                       ("eval_seed", eval_seed), ("steps_per_round", steps)]
+                     if v})  # fmt: skip
     state = _start(out, settings, resume)
     state["start"] = _start_doc(task, model, start)
     say = progress or (lambda line: None)
@@ -138,12 +144,13 @@ def loop(
                     source += f" with action noise {explore_noise:g}"
                 data = record(
                     env_id,
-                    episodes,
+                    None if steps else episodes,
                     policy=policy,
                     seed=seed + 1000 * k,
                     env_kwargs=env_kwargs,
                     source=source,
                     task=task,
+                    total_steps=steps,
                 )
             else:
                 data = task.record_data(

@@ -125,7 +125,7 @@ def _action_row(action: Any, space: spaces.Space, env_id: str) -> np.ndarray:
 
 def record(
     env_id: str,
-    episodes: int,
+    episodes: int | None,
     policy: Callable[[np.ndarray], Any] | None = None,
     seed: int = 0,
     env_kwargs: dict | None = None,
@@ -133,20 +133,24 @@ def record(
     progress: Callable[[str], None] | None = None,
     source: str | None = None,
     task: Any = None,
+    total_steps: int | None = None,
 ) -> TrajectoryData:
-    """Record ``episodes`` episodes of ``gymnasium.make(env_id, **env_kwargs)``.
+    """Record ``episodes`` episodes of ``gymnasium.make(env_id, **env_kwargs)``, or episodes
+    until a budget of ``total_steps`` transitions is spent.
 
     Episode ``i`` is reset with seed ``seed + i``; each step applies ``policy(obs)`` (e.g.
     ``diffcontrol.load(DIR)``), or, without a policy, a random action from the environment's
     action space seeded once with ``seed``. An episode ends when the environment terminates
-    or truncates it (or after ``max_steps``). Observations are stored as float64 (exactly
-    the environment's float32 values), actions as given to the environment (before any
-    clipping the environment does itself).
+    or truncates it (or after ``max_steps``, or when the ``steps`` budget is spent: the last
+    episode is cut short there and ends as ``truncated``). Observations are stored as float64
+    (exactly the environment's float32 values), actions as given to the environment (before
+    any clipping the environment does itself).
 
     Args:
         env_id: any registered Gymnasium id with a flat ``Box`` observation space and a flat
             ``Box`` or ``Discrete`` action space.
-        episodes: how many episodes (>= 1).
+        episodes: how many episodes (>= 1); with ``total_steps``, the most episodes, or None for as
+            many as the budget takes (a CartPole episode of random pushes lasts ~20 steps).
         policy: a callable from one observation to a Gymnasium action; None for random.
         seed: the first reset seed, and the seed of the random actions.
         env_kwargs: keyword arguments of ``gymnasium.make`` (e.g. ``{"g": 9.0}``).
@@ -156,6 +160,8 @@ def record(
             or ``policy <repr>``).
         task: the task whose real system ``env_id`` is: its spaces must match the task's,
             and the columns are the task's ``data_columns()``.
+        total_steps: a budget of transitions in all (>= 1): recording stops once it is spent, so
+            that the real system's time, not its episodes, is what is asked for.
 
     Returns:
         The ``TrajectoryData``, with metadata ``env_id``, ``env_kwargs``, ``dt_s``,
@@ -166,8 +172,13 @@ def record(
         ConfigError: ``episodes < 1``, an unknown ``env_id``, spaces that cannot be recorded,
             a policy that does not fit the environment, or an episode with no end.
     """
-    if not isinstance(episodes, int) or episodes < 1:
-        raise ConfigError(f"episodes must be a positive integer, got {episodes!r}")
+    for name, value in (("episodes", episodes), ("total_steps", total_steps)):
+        if value is not None and (not isinstance(value, int) or value < 1):
+            raise ConfigError(f"{name} must be a positive integer, got {value!r}")
+    if episodes is None and total_steps is None:
+        raise ConfigError("record needs a number of episodes or a budget of steps; give one")
+    # each episode takes at least one step, so a budget alone bounds the episodes
+    episodes = total_steps if episodes is None else episodes
     env = make_env(env_id, env_kwargs)
     obs_columns, act_columns = columns_for(env_id, env)
     if task is not None:
@@ -179,9 +190,12 @@ def record(
     _check_policy(policy, env_id, len(obs_columns))
     if policy is None:
         env.action_space.seed(seed)
-    every = max(1, episodes // 20)
+    every = max(1, (episodes if total_steps is None else max(1, total_steps // limit)) // 20)
     all_obs, all_act, returns, ends = [], [], [], []
+    left = total_steps  # the budget's transitions still to record (None: no budget)
     for i in range(episodes):
+        if left == 0:
+            break
         obs, _ = _call(env.reset, env_id, i, 0, seed=seed + i)
         observations, actions, total, done = [obs], [], 0.0, False
         while not done:
@@ -191,16 +205,21 @@ def record(
             obs, reward, terminated, truncated, _ = _call(env.step, env_id, i, len(actions), action)
             observations.append(obs)
             total += float(reward)
-            done = terminated or truncated or (limit is not None and len(actions) >= limit)
+            left = None if left is None else left - 1
+            done = terminated or truncated or len(actions) >= limit or left == 0
         _check_finite(obs, env_id, i, len(actions))
         all_obs.append(np.asarray(observations, np.float64))
         all_act.append(np.stack(actions))
         returns.append(total)
         ends.append("terminated" if terminated else "truncated")
-        if progress and ((i + 1) % every == 0 or i + 1 == episodes):
+        if progress and ((i + 1) % every == 0 or i + 1 == episodes or left == 0):
+            of = (
+                f"/{episodes}"
+                if total_steps is None
+                else f" ({total_steps - left}/{total_steps} steps)"
+            )
             progress(
-                f"episode {i + 1}/{episodes} (seed {seed + i}): {len(actions)} steps, "
-                f"return {total:.1f}"
+                f"episode {i + 1}{of} (seed {seed + i}): {len(actions)} steps, return {total:.1f}"
             )
     env.close()
     if source is None:

@@ -319,6 +319,24 @@ class Task(_TaskBase):
         """
         raise NotImplementedError(f"task {self.name!r} cannot reconstruct a state")
 
+    # --- learning by acting on the real system (``compare --real``) ---------------------------
+
+    real_start: ClassVar[tuple[tuple[str, float], ...]] = ()
+    """The wrong physics ``compare --real`` starts a grey box and a hybrid from, as
+    ``(name, value)`` pairs of parameters, so that they are not handed the truth (empty: the
+    nominal parameters, which are the truth when the real system is the task's own)."""
+
+    def real_steps_per_round(self, model: str) -> int:
+        """The real environment steps a round of ``compare --real`` records to learn ``model``
+        (``params``, ``hybrid`` or ``neural``; episodes until the budget is spent, the last cut
+        short). Default: one standard episode (``episode_length``), and at least the
+        transitions a network is fitted to (``identify.MIN_TRANSITIONS``: 1,000 for a network
+        alone), i.e. 200/200/1,000 on the Pendulum. A task whose episodes end early (the
+        CartPole's random ones last ~20 steps) or run long chooses its own."""
+        from ..identify.hybrid import MIN_TRANSITIONS
+
+        return max(self.episode_length, MIN_TRANSITIONS.get(model, 0))
+
     # --- configuration and the outside world ------------------------------------------------
 
     @abc.abstractmethod

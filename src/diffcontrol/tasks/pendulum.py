@@ -40,6 +40,7 @@ class Pendulum(Task):
     positive_params = ("m", "l", "dt", "max_speed")
     nonnegative_params = ("max_torque", "friction")
     fit_parameter_names = ("g", "friction")
+    real_start = (("g", 8.0), ("friction", 0.1))  # Pendulum-v1: g = 10, no friction
     data_env_ids = ("diffcontrol/PendulumFriction-v0",)  # Pendulum-v1 with joint friction
 
     def data_columns(self):
