@@ -17,6 +17,7 @@ from diffcontrol import identify
 from diffcontrol.cli import main
 from diffcontrol.compare.real import _as_run, _rl_runs, run_real_comparison
 from diffcontrol.errors import ConfigError
+from diffcontrol.identify._loop import EVAL_CLEARANCE, _record_seed
 from diffcontrol.identify._rounds import NoisyPolicy, model_error, predictor_of
 from diffcontrol.tasks import Pendulum, Task
 
@@ -150,6 +151,14 @@ def test_a_loop_becomes_a_compare_run_on_real_steps(tmp_path):
         _rl_runs(other, "pendulum", 1000)
 
 
+def test_recording_seeds_keep_clear_of_the_evaluation_seeds():
+    assert _record_seed(1000, 5, None, 100) == 1000  # evaluated on the loop's own seeds
+    assert _record_seed(1000, 5, 2000, 100) == 1000
+    assert _record_seed(995, 5, 1000, 100) == 995 and _record_seed(996, 5, 1000, 100) != 996
+    assert _record_seed(1099, 5, 1000, 100) == 1099 + EVAL_CLEARANCE
+    assert _record_seed(1100, 5, 1000, 100) == 1100
+
+
 def test_record_spends_a_budget_of_real_steps():
     task = diffcontrol.make("cartpole")
     data = identify.record("CartPole-v1", None, seed=0, task=task, total_steps=100)
@@ -186,6 +195,10 @@ def test_compare_real_cartpole_counts_the_loops_real_steps(tmp_path):
     assert [r["real_steps"] for r in rounds] == [150, 300]
     data = identify.read_trajectories(out / "loops" / "params-seed0" / "data.csv")
     assert data.num_steps == 300
+    # round 1 would have recorded from reset seeds 1000...: the evaluation's; moved clear
+    recorded = [out / "loops" / "params-seed0" / f"round_{k}" / "recorded.csv" for k in (0, 1)]
+    firsts = [identify.read_trajectories(f).metadata["seed"] for f in recorded]
+    assert firsts == [0, 1000 + EVAL_CLEARANCE]
     assert (
         rounds[0]["model_error_on_new_data"]["rmse_1"]
         > 10 * (rounds[1]["model_error_on_new_data"]["rmse_1"])

@@ -91,6 +91,10 @@ def run_comparison(
     """
     task = resolve(task) if isinstance(task, str) else task
     config = config or CompareConfig()
+    if compile_cache and not os.environ.get("DIFFCONTROL_NO_COMPILE_CACHE"):
+        from .. import _jax_setup
+
+        _jax_setup.enable_compile_cache()
     if real:
         return run_real_comparison(
             task,
@@ -102,10 +106,6 @@ def run_comparison(
             **{n: getattr(config, n) for n in _REAL_SETTINGS},
         )
     out = Path(out_dir or f"runs/compare-{task.name}")
-    if compile_cache and not os.environ.get("DIFFCONTROL_NO_COMPILE_CACHE"):
-        from .. import _jax_setup
-
-        _jax_setup.enable_compile_cache()
     try:
         return _compare(task, out, config, resume, progress)
     except KeyboardInterrupt:

@@ -134,19 +134,18 @@ def loop(
         part = out / f"round_{k}" / "recorded.csv"
         if not part.exists():
             t0 = time.perf_counter()
+            first = _record_seed(seed + 1000 * k, steps or episodes, eval_seed, eval_episodes)
             if episodes_of_env:
                 policy = None if controller is None else NumpyPolicy(read_model(controller))
                 source = "random actions" if policy is None else f"round {k} controller"
                 if policy is not None and explore_noise:
-                    policy = NoisyPolicy(
-                        policy, task.action_space(), explore_noise, seed + 1000 * k
-                    )
+                    policy = NoisyPolicy(policy, task.action_space(), explore_noise, first)
                     source += f" with action noise {explore_noise:g}"
                 data = record(
                     env_id,
                     None if steps else episodes,
                     policy=policy,
-                    seed=seed + 1000 * k,
+                    seed=first,
                     env_kwargs=env_kwargs,
                     source=source,
                     task=task,
@@ -158,7 +157,7 @@ def loop(
                     env_id=env_id,
                     env_kwargs=env_kwargs,
                     controller=None if controller is None else str(controller),
-                    seed=seed + 1000 * k,
+                    seed=first,
                 )
             part.parent.mkdir(parents=True, exist_ok=True)
             write_json(part.parent / "recorded.json", {"seconds": time.perf_counter() - t0})
@@ -339,3 +338,17 @@ def _plot(state: dict, path: Path) -> None:
     ax.grid(alpha=0.3)
     fig.tight_layout()
     write_figure(fig, path)
+
+
+EVAL_CLEARANCE = 1_000_000
+"""How far a round's recording seeds move when they would meet the evaluation's."""
+
+
+def _record_seed(first: int, count: int, eval_seed: int | None, eval_episodes: int) -> int:
+    """The first reset seed of a round's recording (``count`` episodes at most): ``first``,
+    moved by ``EVAL_CLEARANCE`` where its seeds would meet the explicit evaluation seeds
+    ``eval_seed ...`` (``compare --real``'s 1000-1099), so that no model is fitted to
+    episodes from the starts its controller is judged on."""
+    if eval_seed and first < eval_seed + eval_episodes and eval_seed < first + count:
+        return first + EVAL_CLEARANCE
+    return first
