@@ -17,7 +17,6 @@ from diffcontrol import identify
 from diffcontrol.cli import main
 from diffcontrol.compare.real import _as_run, _rl_runs, run_real_comparison
 from diffcontrol.errors import ConfigError
-from diffcontrol.identify._loop import EVAL_CLEARANCE, _record_seed
 from diffcontrol.identify._rounds import NoisyPolicy, model_error, predictor_of
 from diffcontrol.tasks import Pendulum, Task
 
@@ -151,12 +150,20 @@ def test_a_loop_becomes_a_compare_run_on_real_steps(tmp_path):
         _rl_runs(other, "pendulum", 1000)
 
 
-def test_recording_seeds_keep_clear_of_the_evaluation_seeds():
-    assert _record_seed(1000, 5, None, 100) == 1000  # evaluated on the loop's own seeds
-    assert _record_seed(1000, 5, 2000, 100) == 1000
-    assert _record_seed(995, 5, 1000, 100) == 995 and _record_seed(996, 5, 1000, 100) != 996
-    assert _record_seed(1099, 5, 1000, 100) == 1099 + EVAL_CLEARANCE
-    assert _record_seed(1100, 5, 1000, 100) == 1100
+def _first_observations(data) -> list:
+    return [e.observations[0] for e in data.episodes()]
+
+
+def test_record_skips_the_seeds_it_is_told_to():
+    data = identify.record("CartPole-v1", 4, seed=998, skip_seeds=range(999, 1001))
+    assert data.metadata["skipped_seeds"] == [999, 1001]
+    assert "skipped_seeds" not in identify.record("CartPole-v1", 1, seed=0).metadata
+    firsts = _first_observations(data)
+    for first, seed in zip(firsts, (998, 1001, 1002, 1003)):  # 999 and 1000 skipped
+        alone = identify.record("CartPole-v1", 1, seed=seed)
+        np.testing.assert_array_equal(first, _first_observations(alone)[0])
+    skipped = identify.record("CartPole-v1", 1, seed=999)
+    assert not np.array_equal(firsts[1], _first_observations(skipped)[0])
 
 
 def test_record_spends_a_budget_of_real_steps():
@@ -195,10 +202,10 @@ def test_compare_real_cartpole_counts_the_loops_real_steps(tmp_path):
     assert [r["real_steps"] for r in rounds] == [150, 300]
     data = identify.read_trajectories(out / "loops" / "params-seed0" / "data.csv")
     assert data.num_steps == 300
-    # round 1 would have recorded from reset seeds 1000...: the evaluation's; moved clear
+    # round 1 records from reset seeds 1000... but skips the evaluation's 1000-1002
     recorded = [out / "loops" / "params-seed0" / f"round_{k}" / "recorded.csv" for k in (0, 1)]
-    firsts = [identify.read_trajectories(f).metadata["seed"] for f in recorded]
-    assert firsts == [0, 1000 + EVAL_CLEARANCE]
+    metadata = [identify.read_trajectories(f).metadata for f in recorded]
+    assert [m["skipped_seeds"] for m in metadata] == [[1000, 1003]] * 2
     assert (
         rounds[0]["model_error_on_new_data"]["rmse_1"]
         > 10 * (rounds[1]["model_error_on_new_data"]["rmse_1"])

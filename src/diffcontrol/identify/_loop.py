@@ -127,6 +127,7 @@ def loop(
     state = _start(out, settings, resume)
     state["start"] = _start_doc(task, model, start)
     say = progress or (lambda line: None)
+    judged_on = range(eval_seed, eval_seed + eval_episodes) if eval_seed else range(0)
 
     def record_round(k: int, controller: Path | None) -> None:
         """Record the episodes of round k (random for k = 0, else with round k's controller
@@ -134,18 +135,20 @@ def loop(
         part = out / f"round_{k}" / "recorded.csv"
         if not part.exists():
             t0 = time.perf_counter()
-            first = _record_seed(seed + 1000 * k, steps or episodes, eval_seed, eval_episodes)
             if episodes_of_env:
                 policy = None if controller is None else NumpyPolicy(read_model(controller))
                 source = "random actions" if policy is None else f"round {k} controller"
                 if policy is not None and explore_noise:
-                    policy = NoisyPolicy(policy, task.action_space(), explore_noise, first)
+                    policy = NoisyPolicy(
+                        policy, task.action_space(), explore_noise, seed + 1000 * k
+                    )
                     source += f" with action noise {explore_noise:g}"
                 data = record(
                     env_id,
                     None if steps else episodes,
                     policy=policy,
-                    seed=first,
+                    seed=seed + 1000 * k,
+                    skip_seeds=judged_on,  # never fitted to the starts its controllers face
                     env_kwargs=env_kwargs,
                     source=source,
                     task=task,
@@ -157,7 +160,7 @@ def loop(
                     env_id=env_id,
                     env_kwargs=env_kwargs,
                     controller=None if controller is None else str(controller),
-                    seed=first,
+                    seed=seed + 1000 * k,
                 )
             part.parent.mkdir(parents=True, exist_ok=True)
             write_json(part.parent / "recorded.json", {"seconds": time.perf_counter() - t0})
@@ -338,17 +341,3 @@ def _plot(state: dict, path: Path) -> None:
     ax.grid(alpha=0.3)
     fig.tight_layout()
     write_figure(fig, path)
-
-
-EVAL_CLEARANCE = 1_000_000
-"""How far a round's recording seeds move when they would meet the evaluation's."""
-
-
-def _record_seed(first: int, count: int, eval_seed: int | None, eval_episodes: int) -> int:
-    """The first reset seed of a round's recording (``count`` episodes at most): ``first``,
-    moved by ``EVAL_CLEARANCE`` where its seeds would meet the explicit evaluation seeds
-    ``eval_seed ...`` (``compare --real``'s 1000-1099), so that no model is fitted to
-    episodes from the starts its controller is judged on."""
-    if eval_seed and first < eval_seed + eval_episodes and eval_seed < first + count:
-        return first + EVAL_CLEARANCE
-    return first

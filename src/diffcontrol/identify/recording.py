@@ -12,6 +12,7 @@ written to a CSV or NPZ file.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -134,11 +135,12 @@ def record(
     source: str | None = None,
     task: Any = None,
     total_steps: int | None = None,
+    skip_seeds: range = range(0),
 ) -> TrajectoryData:
     """Record ``episodes`` episodes of ``gymnasium.make(env_id, **env_kwargs)``, or episodes
     until a budget of ``total_steps`` transitions is spent.
 
-    Episode ``i`` is reset with seed ``seed + i``; each step applies ``policy(obs)`` (e.g.
+    Episode ``i`` is reset with seed ``seed + i`` (counting on past ``skip_seeds``); each step applies ``policy(obs)`` (e.g.
     ``diffcontrol.load(DIR)``), or, without a policy, a random action from the environment's
     action space seeded once with ``seed``. An episode ends when the environment terminates
     or truncates it (or after ``max_steps``, or when the ``steps`` budget is spent: the last
@@ -162,6 +164,8 @@ def record(
             and the columns are the task's ``data_columns()``.
         total_steps: a budget of transitions in all (>= 1): recording stops once it is spent, so
             that the real system's time, not its episodes, is what is asked for.
+        skip_seeds: reset seeds not to record from (an evaluation's, so that a model is never
+            fitted to episodes from the starts its controller is judged on).
 
     Returns:
         The ``TrajectoryData``, with metadata ``env_id``, ``env_kwargs``, ``dt_s``,
@@ -193,10 +197,12 @@ def record(
     every = max(1, (episodes if total_steps is None else max(1, total_steps // limit)) // 20)
     all_obs, all_act, returns, ends = [], [], [], []
     left = total_steps  # the budget's transitions still to record (None: no budget)
+    reset_seeds = (s for s in itertools.count(seed) if s not in skip_seeds)
     for i in range(episodes):
         if left == 0:
             break
-        obs, _ = _call(env.reset, env_id, i, 0, seed=seed + i)
+        reset_seed = next(reset_seeds)
+        obs, _ = _call(env.reset, env_id, i, 0, seed=reset_seed)
         observations, actions, total, done = [obs], [], 0.0, False
         while not done:
             _check_finite(obs, env_id, i, len(actions))
@@ -219,7 +225,7 @@ def record(
                 else f" ({total_steps - left}/{total_steps} steps)"
             )
             progress(
-                f"episode {i + 1}{of} (seed {seed + i}): {len(actions)} steps, return {total:.1f}"
+                f"episode {i + 1}{of} (seed {reset_seed}): {len(actions)} steps, return {total:.1f}"
             )
     env.close()
     if source is None:
@@ -230,6 +236,7 @@ def record(
         "env_id": env_id,
         "env_kwargs": dict(env_kwargs or {}),
         "seed": seed,
+        **({"skipped_seeds": [skip_seeds.start, skip_seeds.stop]} if skip_seeds else {}),
         "source": source,
         "returns": [r if np.isfinite(r) else None for r in returns],
         "ends": ends,
