@@ -18,8 +18,8 @@ def add_parsers(sub: Any) -> None:
             "Train diffcontrol's controller and the RL baselines (Stable-Baselines3 with "
             "rl-baselines3-zoo's settings; `pip install 'diffcontrol[rl]'`) on training seeds "
             "0..N-1, evaluate every method at regular points on the same reset seeds in the "
-            "same environment, and write DIR/comparison.{json,md,png} and DIR/runs/ (one file "
-            "per finished run; --resume skips them). See docs/compare.md."
+            "same environment (training seconds leave out these evaluations), and write "
+            "DIR/comparison.{json,md,png} and DIR/runs/ (one file per finished run)."
         ),
     )
     # fmt: off
