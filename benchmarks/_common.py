@@ -134,17 +134,23 @@ def gym_seeds_benchmark(
     print(f"wrote {args.out}")
 
 
-def grid_optima(task, points: int, levels: int, seed_sets: dict[str, list[int]]):
-    """Solve ``task``'s grid dynamic program and run its greedy controller on each seed set:
-    ``(table, {key: OptimumResult}, solve seconds)``, with a line of progress."""
+def grid_optima(
+    task, points: int, levels: int, seed_sets: dict[str, list[int]], params=None, real=None
+):
+    """Solve ``task``'s grid dynamic program (with ``params``, default the nominal physics) and
+    run its greedy controller on each seed set (in ``real``, ``(env_id, env_kwargs)``, where
+    given, else the task's own environment): ``(table, {key: OptimumResult}, solve seconds)``,
+    with a line of progress."""
     from diffcontrol import optimal
 
     print(f"solving the grid dynamic program ({points}^2 states, {levels} torques)...")
     t0 = time.perf_counter()
-    table = optimal.solve(task, points, levels)
+    table = optimal.solve(task, points, levels, params=params)
     table.values.block_until_ready()
     seconds = time.perf_counter() - t0
-    optima = {k: optimal.optimal_return(task, s, table=table) for k, s in seed_sets.items()}
+    optima = {
+        k: optimal.optimal_return(task, s, table=table, real=real) for k, s in seed_sets.items()
+    }
     return table, optima, seconds
 
 
@@ -241,3 +247,32 @@ def real_benchmark(task: str, rl_method: str, targets: dict[str, int | None], do
     }
     out.write_text(json.dumps(result, indent=1) + "\n")
     print(f"wrote {out} and {png}")
+
+
+def planner_episodes(policy, seeds, task=None, real=None):
+    """Gymnasium episodes of a planner's ``PlannerPolicy`` (reset before each) in ``task``'s
+    environment (default Pendulum-v1) or ``real`` (``(env_id, env_kwargs)``): the returns and
+    the wall-clock seconds of every call."""
+    import numpy as np
+
+    from diffcontrol import make
+    from diffcontrol.evaluation import eval_environment
+
+    env, _ = eval_environment(task or make("pendulum"), real)
+    returns, seconds = [], []
+    try:
+        for seed in seeds:
+            obs, _ = env.reset(seed=seed)
+            policy.reset()
+            total, done = 0.0, False
+            while not done:
+                t0 = time.perf_counter()
+                action = policy(obs)
+                seconds.append(time.perf_counter() - t0)
+                obs, reward, terminated, truncated, _ = env.step(action)
+                total += float(reward)
+                done = terminated or truncated
+            returns.append(total)
+    finally:
+        env.close()
+    return np.asarray(returns), np.asarray(seconds)

@@ -49,14 +49,19 @@ EPISODES, FIT_EPISODES, EVAL_EPISODES = 10, 8, 100
 KINDS = ("nominal", "params", "hybrid", "neural", "true")
 
 
+def record_real(seed: int, episodes: int = EPISODES):
+    """``episodes`` episodes of random torques on the real system (reset seeds 100 S ..),
+    with the sensor noise ``NOISE`` (seeded by S) added to the observations."""
+    data = diffcontrol.record(REAL[0], episodes, seed=100 * seed, env_kwargs=REAL[1])
+    rng = np.random.default_rng(seed)
+    noisy = data.observations + rng.normal(size=data.observations.shape) * NOISE
+    return dataclasses.replace(data, observations=noisy)
+
+
 def fit_all(task, seed: int) -> tuple[dict, dict, dict]:
     """The fitted models (label -> (task to train/predict with, its params)), their
     held-out prediction errors and the fit seconds."""
-    data = diffcontrol.record(REAL[0], EPISODES, seed=100 * seed, env_kwargs=REAL[1])
-    rng = np.random.default_rng(seed)
-    noisy = data.observations + rng.normal(size=data.observations.shape) * NOISE
-    data = dataclasses.replace(data, observations=noisy)
-    train, held_out = data.split(FIT_EPISODES)
+    train, held_out = record_real(seed).split(FIT_EPISODES)
     nominal = task.default_params()
     fitted, seconds = {"nominal": (task, nominal)}, {}
     t0 = time.perf_counter()

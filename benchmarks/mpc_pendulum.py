@@ -26,13 +26,12 @@ import time
 from pathlib import Path
 
 import equinox as eqx
-import gymnasium
 import numpy as np
 import optax
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from _common import grid_optima, machine, train_cli  # noqa: E402
+from _common import grid_optima, machine, planner_episodes, train_cli  # noqa: E402
 
 import diffcontrol  # noqa: E402
 from diffcontrol import mpc  # noqa: E402
@@ -42,28 +41,6 @@ SOLVERS = {
     "ilqr": lambda: mpc.ILQR(iterations=10),
     "shooting": lambda: mpc.Shooting(optax.adam(0.3), iterations=30),
 }
-
-
-def planner_episodes(policy, seeds):
-    """Gymnasium episodes of a ``PlannerPolicy`` (reset before each); returns and call times."""
-    env = gymnasium.make("Pendulum-v1")
-    returns, seconds = [], []
-    try:
-        for seed in seeds:
-            obs, _ = env.reset(seed=seed)
-            policy.reset()
-            total, done = 0.0, False
-            while not done:
-                t0 = time.perf_counter()
-                action = policy(obs)
-                seconds.append(time.perf_counter() - t0)
-                obs, reward, terminated, truncated, _ = env.step(action)
-                total += float(reward)
-                done = terminated or truncated
-            returns.append(total)
-    finally:
-        env.close()
-    return np.asarray(returns), np.asarray(seconds)
 
 
 def run_planner(task, label, planner, seeds, optimum):

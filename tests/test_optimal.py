@@ -120,3 +120,55 @@ def test_evaluate_reports_the_gap_to_the_optimum(pendulum_run, cartpole_run, cap
     assert main(["evaluate", str(cartpole_run), "--episodes", "1", "--optimum", "41"]) == 2
     err = capsys.readouterr().err
     assert "state grid" in err and len(err.strip().splitlines()) == 1
+
+
+REAL = ("diffcontrol/PendulumFriction-v0", {"g": 12.0, "friction": 0.1})
+
+
+def test_the_optimum_of_a_real_system_is_solved_on_its_physics():
+    import gymnasium
+
+    params = TASK.params_of_env(*REAL)
+    assert (float(params.g), float(params.friction)) == (12.0, 0.1)
+    assert TASK.params_of_env("Pendulum-v1", {}) == PARAMS
+    # environments or arguments whose physics the task does not know
+    assert TASK.params_of_env("diffcontrol/Pendulum-v0", {}) is None
+    assert TASK.params_of_env(REAL[0], {"g": 12.0, "render_mode": "rgb_array"}) is None
+
+    table = optimal.solve(TASK, points=61, levels=11, params=params)
+    seeds = [0, 1, 2]
+    result = optimal.optimal_return(TASK, seeds, table=table, real=REAL)
+    assert result.env_id.startswith(REAL[0])
+    starts = []
+    for s in seeds:
+        env = gymnasium.make(REAL[0], **REAL[1])
+        env.reset(seed=s)
+        starts.append(np.array(env.unwrapped.state, np.float32))
+    # the greedy controller in the real environment does what it does on the real physics
+    simulated = np.asarray(optimal.greedy_rollout(table, jnp.asarray(np.stack(starts))))
+    np.testing.assert_allclose(result.returns, simulated, rtol=0.02, atol=1.0)
+    # and it is not the nominal physics' table (which values the same starts otherwise)
+    nominal = optimal.optimal_return(TASK, seeds, points=61, levels=11, real=REAL)
+    assert float(np.abs(nominal.predicted - result.predicted).max()) > 3.0
+
+
+def test_evaluate_on_another_system_reports_that_systems_optimum(pendulum_run, capsys):
+    import json
+
+    from diffcontrol.cli import main
+
+    env = ["--env", REAL[0], "--env-arg", "g=12", "--env-arg", "friction=0.1"]
+    argv = ["evaluate", str(pendulum_run), "--episodes", "3", "--optimum", "41", "--json", *env]
+    assert main(argv) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["env_id"].startswith(REAL[0]) and doc["optimum"]["env_id"] == doc["env_id"]
+    real = optimal.optimal_return(TASK, [0, 1, 2], 41, params=TASK.params_of_env(*REAL), real=REAL)
+    nominal = optimal.optimal_return(TASK, [0, 1, 2], 41)
+    assert doc["optimum"]["mean_return"] == pytest.approx(real.mean, abs=1e-6)
+    assert doc["optimum"]["predicted_mean"] == pytest.approx(real.predicted_mean, abs=1e-4)
+    assert abs(doc["optimum"]["predicted_mean"] - nominal.predicted_mean) > 3.0
+    # an environment whose physics the task does not know: one line, exit 2
+    argv = ["evaluate", str(pendulum_run), "--episodes", "1", "--optimum", "41"]
+    assert main([*argv, "--env", "diffcontrol/Pendulum-v0"]) == 2
+    err = capsys.readouterr().err
+    assert "physics" in err and len(err.strip().splitlines()) == 1

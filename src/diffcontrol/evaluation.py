@@ -106,7 +106,7 @@ def evaluate(
     """
     if episodes <= 0:
         raise ValueError(f"episodes must be positive, got {episodes}")
-    env, label = _env(task, real)
+    env, label = eval_environment(task, real)
     returns, lengths = [], []
     try:
         _check_fits(policy, env, label)
@@ -139,8 +139,9 @@ def _check_fits(policy: Any, env: Any, label: str) -> None:
         raise ConfigError(f"the controller cannot act in {label}: {e}") from None
 
 
-def _env(task: Task, real: tuple[str, dict | None] | None) -> tuple[Any, str]:
-    """The environment to evaluate in and its label: the task's own, or ``real``."""
+def eval_environment(task: Task, real: tuple[str, dict | None] | None) -> tuple[Any, str]:
+    """The environment to evaluate in and its label: the task's own, or ``real``
+    (``(env_id, env_kwargs)``, labelled ``env_id(k=v, ...)``)."""
     if real is None:
         return task.make_gym_env(), task.gym_label
     from .envs import make_env
@@ -164,7 +165,7 @@ def record_episode(
 ) -> Recording:
     """Record one Gymnasium episode of ``policy`` (a ``NumpyPolicy``) with the true states
     (in ``real``'s environment where given, as for ``evaluate``)."""
-    env, label = _env(task, real)
+    env, label = eval_environment(task, real)
     if callable(getattr(policy, "reset", None)):  # a planner: start from its initial plan
         policy.reset()
     try:

@@ -264,6 +264,9 @@ def optimal_return(
     points: int | Sequence[int] = 801,
     levels: int = 41,
     table: ValueTable | None = None,
+    *,
+    params: PyTree | None = None,
+    real: tuple[str, dict | None] | None = None,
 ) -> OptimumResult:
     """The reference optimum of ``task`` on Gymnasium reset seeds: the greedy controller of
     the grid dynamic program (``solve``, or the given ``table``) run in the task's Gymnasium
@@ -272,15 +275,25 @@ def optimal_return(
 
     The controller sees Gymnasium's observations and recovers the state with
     ``task.state_from_observation``; the returns are Gymnasium's rewards.
+
+    Args:
+        params: the physical parameters to solve with (default the task's nominal ones);
+            ignored with ``table`` (solved with its own).
+        real: ``(env_id, env_kwargs)`` of another Gymnasium environment to run the episodes
+            in, the system ``params`` describe (e.g. ``("diffcontrol/PendulumFriction-v0",
+            {"g": 12.0, "friction": 0.1})`` with ``task.params_of_env`` of the same), as
+            ``evaluation.evaluate``'s ``real``; the optimum is then that system's.
     """
+    from .evaluation import eval_environment
+
     seeds = [int(s) for s in seeds]
     if not seeds:
         raise ConfigError("seeds is empty; pass at least one Gymnasium reset seed")
-    table = solve(task, points, levels) if table is None else table
+    table = solve(task, points, levels, params=params) if table is None else table
     act = jax.jit(jax.vmap(table.action, in_axes=(None, 0)))
     value = jax.jit(jax.vmap(table.value, in_axes=(None, 0)))
     to_state = jax.jit(jax.vmap(task.state_from_observation))
-    envs = [task.make_gym_env() for _ in seeds]
+    envs, labels = zip(*(eval_environment(task, real) for _ in seeds))
     try:
         obs = np.stack([env.reset(seed=s)[0] for env, s in zip(envs, seeds)])
         predicted = np.asarray(value(0, to_state(jnp.asarray(obs))))
@@ -300,4 +313,4 @@ def optimal_return(
         for env in envs:
             env.close()
     sizes = tuple(table.values.shape[1:])
-    return OptimumResult(task.gym_label, seeds, returns, predicted, sizes, len(table.actions))
+    return OptimumResult(labels[0], seeds, returns, predicted, sizes, len(table.actions))

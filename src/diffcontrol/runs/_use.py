@@ -33,7 +33,9 @@ def evaluate_dir(
         seed: the first reset seed (or the seed of the random targets).
         optimum: also run the reference optimum on the same seeds (``optimal.optimal_return``
             on a grid of ``optimum`` points per state axis, 41 actions) and report the gap to
-            it; for tasks with a state grid (Pendulum), in their own environment.
+            it; for tasks with a state grid (Pendulum), on the system evaluated: the task's own,
+            or a real system whose physics the task knows (``Task.params_of_env``:
+            ``diffcontrol/PendulumFriction-v0`` with ``g`` and ``friction``).
 
     Returns:
         The ``Run`` and the task's evaluation result (``summary()``, ``to_json()``; with
@@ -66,13 +68,23 @@ def evaluate_dir(
 
 
 def _optimum(run: Run, ev: Any, points: int) -> Any:
-    """The grid optimum of the run's task on the seeds ``ev`` was measured on."""
+    """The grid optimum, on the seeds ``ev`` was measured on, of the system it was measured
+    on: the task's own, or the run's real system (``--env``, or the one a fitted model's data
+    came from) solved with its physics (the task's ``params_of_env``)."""
     from ..optimal import optimal_return
 
-    if ev.key != "gym_eval" or ev.env_id != run.task.gym_label:
+    real, params = run.real_env, None
+    if real is not None and ev.key == "gym_eval":
+        params = run.task.params_of_env(*real)
+    if (
+        ev.key != "gym_eval"
+        or (real is None and ev.env_id != run.task.gym_label)
+        or (real is not None and params is None)
+    ):
         raise ConfigError(
-            f"--optimum is the optimum of {run.task.gym_label}, and this evaluation ran in "
-            f"{getattr(ev, 'env_id', ev.key)}; leave --optimum out"
+            f"--optimum needs the physics of the system evaluated, and task "
+            f"{run.task.name!r} does not know those of {getattr(ev, 'env_id', ev.key)}; "
+            "leave --optimum out"
         )
     if not 3 <= points <= MAX_OPTIMUM_POINTS:
         raise ConfigError(
@@ -80,7 +92,9 @@ def _optimum(run: Run, ev: Any, points: int) -> Any:
             "(401 is within about 0.3 of the converged optimum for Pendulum)"
         )
     seeds = range(ev.seed, ev.seed + int(ev.returns.size))
-    return optimal_return(run.task, seeds, points=points, levels=OPTIMUM_LEVELS)
+    return optimal_return(
+        run.task, seeds, points=points, levels=OPTIMUM_LEVELS, params=params, real=real
+    )
 
 
 MAX_OPTIMUM_POINTS = 1001

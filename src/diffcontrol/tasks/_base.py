@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import abc
+import dataclasses
 from collections.abc import Callable
 from typing import Any, ClassVar
 
@@ -309,6 +310,36 @@ class Task(_TaskBase):
         """
         del params
         return None
+
+    def params_of_env(self, env_id: str, env_kwargs: dict | None = None) -> PyTree | None:
+        """The physical parameters of a Gymnasium environment that is this task's system with
+        other physics, or ``None`` where it is not (or they are unknown): what grid methods
+        (the reference optimum of ``evaluate --optimum``) solve when a controller is judged
+        on another system than the task's own.
+
+        Default: for ``gym_id`` or one of ``data_env_ids`` whose keyword arguments all name
+        fields of ``default_params()`` with numbers (e.g. ``diffcontrol/PendulumFriction-v0``
+        with ``g=12, friction=0.1``), the default parameters with those values; ``None`` for
+        any other environment or argument (``render_mode``, an option of the environment that
+        is not a parameter). A task whose environments name their physics otherwise overrides
+        it.
+        """
+        if env_id not in (self.gym_id, *self.data_env_ids):
+            return None
+        params = self.default_params()
+        kwargs = dict(env_kwargs or {})
+        known = {f.name for f in dataclasses.fields(params)}
+        numbers = all(
+            isinstance(v, int | float) and not isinstance(v, bool) for v in kwargs.values()
+        )
+        if not set(kwargs) <= known or not numbers:
+            return None
+        names = sorted(kwargs)
+        return eqx.tree_at(
+            lambda p: tuple(getattr(p, n) for n in names),
+            params,
+            tuple(float(kwargs[n]) for n in names),
+        )
 
     def state_from_observation(self, observation: Array) -> Array:
         """The state that ``observe`` maps to ``observation`` (the inverse of ``observe``), so
