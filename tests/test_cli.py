@@ -148,6 +148,7 @@ def test_unknown_task(capsys, tmp_path):
         ("--hidden", "64,x", "--hidden"),
         ("--param", "g", "--param"),
         ("--keep-best", "maybe", "--keep-best"),
+        ("--final-window", "-1", "--final-window"),
     ],
 )
 def test_bad_option_values(capsys, tmp_path, option, value, needle):
@@ -165,6 +166,7 @@ def test_bad_option_values(capsys, tmp_path, option, value, needle):
         (["--loss", "nope"], "'nope'"),
         (["--param", "gravity=3"], "'gravity'"),
         (["--recipe", "fancy"], "'fancy'"),
+        (["--final-window-fraction", "0"], "final_window_fraction"),
     ],
 )
 def test_bad_settings(capsys, tmp_path, args, needle):

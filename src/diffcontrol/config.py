@@ -258,6 +258,18 @@ class TrainConfig(_Config):
         "Share of the updates over which the curriculum's horizon grows to the full one.",
         default=0.5,
     )
+    final_window: int = _opt(
+        "Window curriculum: the last final_window_fraction of the updates use windows of this "
+        "many steps, so that an action is credited with what it does over a longer stretch once "
+        "the short window has learned the basics (a long window from the start can settle in a "
+        "poor local optimum); 0 keeps window throughout.",
+        default=0,
+        metavar="STEPS",
+        low=0,
+    )
+    final_window_fraction: float = _opt(
+        "Share of the updates, at the end of the run, that use final_window.", default=0.25
+    )
 
     def __post_init__(self) -> None:
         self._check_types()
@@ -275,7 +287,26 @@ class TrainConfig(_Config):
                 f"horizon must be 0 (the task's) or a positive integer, got {self.horizon!r}"
             )
         _check_curriculum(self)
+        if not (0 < self.final_window_fraction <= 1):
+            raise ConfigError(
+                f"final_window_fraction must be a fraction in (0, 1], got "
+                f"{self.final_window_fraction!r}"
+            )
         self._check_common()
+
+    @property
+    def final_window_start(self) -> int:
+        """The first update whose window is ``final_window`` long (``updates`` when no update
+        is: ``final_window`` is 0 or equal to ``window``)."""
+        if self.final_window in (0, self.window):
+            return self.updates
+        return self.updates - round(self.final_window_fraction * self.updates)
+
+    def simulated_steps(self, updates: int) -> int:
+        """Simulator steps taken by the first ``updates`` updates of one run (one population
+        member): ``batch`` simulations times the windows' lengths."""
+        short = min(updates, self.final_window_start)
+        return self.batch * (short * self.window + (updates - short) * self.final_window)
 
 
 GRADIENT_METHODS = ("checkpoint", "backsolve", "forward")

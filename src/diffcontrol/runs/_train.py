@@ -256,8 +256,11 @@ def describe(task: AnyTask, config: Any, out: Path | str) -> str:
             f"solve(s) over {config.horizon_s:g} s ({config.solver}, rtol {config.rtol:g}, atol "
             f"{config.atol:g}, gradient {config.gradient}; seed {config.seed}) -> {out}"
         )
+    window = f"window {config.window}"
+    if config.final_window_start < config.updates:  # the window curriculum's last stage
+        window += f" (from update {config.final_window_start}: {config.final_window})"
     return (
-        f"training {task.name}: {config.updates} updates x window {config.window} x batch "
+        f"training {task.name}: {config.updates} updates x {window} x batch "
         f"{config.batch} (seed {config.seed}) -> {out}"
     )
 

@@ -10,6 +10,7 @@ updates under one ``jit``; the Python driver calls the same compiled chunk again
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Any
 
@@ -62,9 +63,14 @@ def make_optimizer(config: TrainConfig, learning_rate: Any = None) -> optax.Grad
         schedule = optax.cosine_decay_schedule(lr, config.updates, alpha=config.lr_final_fraction)
     else:
         warmup = max(1, config.updates // 20)
-        schedule = optax.warmup_cosine_decay_schedule(
-            0.0, lr, warmup, max(config.updates, warmup + 1), end_value=final
-        )
+        steps = max(config.updates, warmup + 1)
+        if isinstance(lr, int | float):
+            schedule = optax.warmup_cosine_decay_schedule(0.0, lr, warmup, steps, end_value=final)
+        else:  # traced (a sweep's): optax divides by the peak in Python, so scale a unit one
+            unit = optax.warmup_cosine_decay_schedule(
+                0.0, 1.0, warmup, steps, end_value=config.lr_final_fraction
+            )
+            schedule = lambda count: lr * unit(count)  # noqa: E731
     parts = [optax.clip_by_global_norm(config.grad_clip)] if config.grad_clip > 0 else []
     return optax.chain(*parts, optax.adam(schedule))
 
@@ -77,6 +83,9 @@ class Trainer(eqx.Module):
     step_loss: StepLoss = eqx.field(static=True)
     optimizer: optax.GradientTransformation = eqx.field(static=True)
     horizon: int = eqx.field(static=True)
+    window: int = eqx.field(static=True)
+    """The simulated steps per update of this trainer's chunks (``config.window``, or
+    ``config.final_window`` for the last stage of a window curriculum: ``stages``)."""
 
     def init(self, key: PRNGKeyArray, params: PyTree) -> TrainState:
         """A fresh training state: a random controller and ``batch`` reset simulations."""
@@ -144,7 +153,7 @@ class Trainer(eqx.Module):
         """One truncated-BPTT update (one window)."""
         cfg = self.config
         key, k_win = jax.random.split(ts.key)
-        keys = jax.random.split(k_win, (cfg.window, cfg.batch))
+        keys = jax.random.split(k_win, (self.window, cfg.batch))
 
         grad_fn = eqx.filter_value_and_grad(self.window_loss, has_aux=True)
         (loss, (carry, n_done, ret_sum)), grads = grad_fn(
@@ -208,8 +217,18 @@ class Trainer(eqx.Module):
         """The controller to keep for this evaluation point (there is only one)."""
         return controller
 
+    def stages(self) -> list[tuple[int, Trainer]]:
+        """The run's stages in order, as ``(end update, trainer)``: one, or two when the
+        window curriculum (``config.final_window``) switches to longer windows."""
+        cfg = self.config
+        switch = cfg.final_window_start
+        if switch >= cfg.updates:
+            return [(cfg.updates, self)]
+        long = dataclasses.replace(self, window=cfg.final_window)
+        return [(switch, self), (cfg.updates, long)] if switch > 0 else [(cfg.updates, long)]
+
     def counts(self, ts: TrainState) -> dict[str, Any]:
-        steps = int(ts.update) * self.config.window * self.config.batch
+        steps = self.config.simulated_steps(int(ts.update))
         return {"simulated_steps": steps, "simulated_episodes": steps / self.task.episode_length}
 
     def point_extras(self, ts: TrainState, returns: np.ndarray) -> dict[str, Any]:
@@ -266,6 +285,10 @@ class PopulationTrainer(eqx.Module):
     @property
     def episode_length(self) -> int:
         return self.base.episode_length
+
+    def stages(self) -> list[tuple[int, PopulationTrainer]]:
+        """The base trainer's stages (``Trainer.stages``), each for the whole population."""
+        return [(end, PopulationTrainer(t, self.population)) for end, t in self.base.stages()]
 
     def init(self, key: PRNGKeyArray, params: PyTree) -> PopulationState:
         keys = jax.random.split(key, self.population)
@@ -374,6 +397,7 @@ def make_trainer(
         step_loss=step_loss,
         optimizer=make_optimizer(config),
         horizon=config.horizon or task.episode_length,
+        window=config.window,
     )
     if config.population > 1:
         return PopulationTrainer(trainer, config.population)

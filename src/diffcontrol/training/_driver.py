@@ -288,9 +288,12 @@ def train(
         best = trainer.pick(ts.controller, np.zeros(_population(config)))
 
     total = np.int32(config.updates)
+    chunks = []  # (end update, compiled chunk) per stage still to run: see Trainer.stages
     with interrupts_deferred():
-        chunk = jax.jit(trainer.chunk, **_outputs(ts_sharding and (ts_sharding, whole)))
-        chunk = chunk.lower(ts, params, total).compile()
+        for end, stage in _stages(trainer):
+            if end > int(ts.update):
+                chunk = jax.jit(stage.chunk, **_outputs(ts_sharding and (ts_sharding, whole)))
+                chunks.append((end, chunk.lower(ts, params, total).compile()))
 
     stopped_early = False
     target = config.target_return
@@ -298,7 +301,8 @@ def train(
         if not math.isnan(target) and curve and curve[-1]["eval_return"] >= target:
             stopped_early = True
             break
-        new_ts, stats = chunk(ts, params, total)
+        end, chunk = next((end, c) for end, c in chunks if int(ts.update) < end)
+        new_ts, stats = chunk(ts, params, np.int32(end))  # a stage's last chunk may be short
         done = int(new_ts.update) - int(ts.update)  # updates past the budget were skipped
         losses = np.asarray(stats.loss)[:done]
         try:
@@ -435,6 +439,12 @@ def _check_head(task: AnyTask, head: str) -> None:
 def _outputs(shardings: Any) -> dict[str, Any]:
     """``jax.jit``'s keyword for the outputs' placement, when there is one to keep."""
     return {} if shardings is None else {"out_shardings": shardings}
+
+
+def _stages(trainer: Any) -> list[tuple[int, Any]]:
+    """The trainer's stages, ``(end update, trainer)`` (one for continuous-time runs)."""
+    stages = getattr(trainer, "stages", None)
+    return stages() if stages else [(trainer.config.updates, trainer)]
 
 
 def _population(config: Any) -> int:

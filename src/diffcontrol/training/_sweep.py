@@ -272,6 +272,7 @@ def _run_program(
         step_loss=step_loss,
         optimizer=optax.inject_hyperparams(factory)(learning_rate=cfg.learning_rate),
         horizon=cfg.horizon or task.episode_length,
+        window=cfg.window,
     )
     n = len(configs)
     keys = jnp.stack([jax.random.split(jax.random.PRNGKey(c.seed)) for c in configs])
@@ -287,7 +288,10 @@ def _run_program(
     params = replicate(params)
     t0 = time.perf_counter()
     evaluate = jax.jit(jax.vmap(trainer.evaluate, in_axes=(0, None, 0)))
-    chunk = jax.jit(jax.vmap(trainer.chunk, in_axes=(0, None, 0)))
+    # one chunk per stage of the window curriculum (Trainer.stages; its members share it)
+    chunks = [
+        (end, jax.jit(jax.vmap(t.chunk, in_axes=(0, None, 0)))) for end, t in trainer.stages()
+    ]
     totals = np.full(n, cfg.updates, np.int32)
     with interrupts_deferred():
         ts = eqx.filter_jit(jax.vmap(init))(shard(k_train), shard(lrs))
@@ -298,7 +302,7 @@ def _run_program(
         ts = eqx.combine(shard(arrays), rest)
         if ndev == 1:  # compiled ahead, to measure compilation apart from training
             evaluate = evaluate.lower(ts.controller, params, k_eval).compile()
-            chunk = chunk.lower(ts, params, jnp.asarray(totals)).compile()
+            chunks = [(e, c.lower(ts, params, jnp.asarray(totals)).compile()) for e, c in chunks]
     compile_seconds = time.perf_counter() - t0
 
     curves: list[list[dict[str, Any]]] = [[] for _ in range(n)]
@@ -318,7 +322,7 @@ def _run_program(
         improved = np.zeros(n, bool)
         for i in np.flatnonzero(active):
             mean, std = trainer.summarize(returns[i])
-            steps = int(updates[i]) * cfg.window * cfg.batch
+            steps = cfg.simulated_steps(int(updates[i]))
             fin = int(finished[i])
             curves[i].append(
                 {
@@ -370,6 +374,9 @@ def _run_program(
         totals = np.where(stopped | diverged, updates, cfg.updates).astype(np.int32)
         if np.all(updates >= totals):
             break
+        # the stage of the members still training (they step together)
+        end, chunk = next((e, c) for e, c in chunks if np.min(updates[updates < totals]) < e)
+        totals = np.minimum(totals, end).astype(np.int32)
         new, stats = chunk(ts, params, shard(jnp.asarray(totals)))
         losses, grads = np.asarray(stats.loss), np.asarray(stats.grad_norm)
         done = np.asarray(new.update) - updates
@@ -399,7 +406,7 @@ def _run_program(
         chosen = curves[i][best_index[i]] if c.keep_best else curves[i][-1]
         controller = _member(best if c.keep_best else ts.controller, i)
         done_updates = int(ts.update[i])
-        steps = done_updates * c.window * c.batch
+        steps = c.simulated_steps(done_updates)
         metrics = {
             "task": task.name,
             "gym_id": task.gym_id,
