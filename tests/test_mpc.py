@@ -173,6 +173,8 @@ def test_policy_runs_in_gymnasium_and_reports_each_solve():
         (dict(solver=mpc.Shooting(tol=float("nan"))), "tol=nan"),
         (dict(solver="adam"), "not a solver"),
         (dict(loss="nope"), "loss='nope'"),
+        (dict(bounds=((1.0,), (-1.0,))), "low < high"),
+        (dict(bounds=((-1.0, -1.0), (1.0, 1.0))), "1 finite numbers"),
     ],
 )
 def test_bad_settings_are_one_line_config_errors(kwargs, match):
@@ -182,8 +184,22 @@ def test_bad_settings_are_one_line_config_errors(kwargs, match):
 
 
 def test_a_task_without_bounds_is_refused():
-    with pytest.raises(ConfigError, match="action bounds"):
+    with pytest.raises(ConfigError, match="action bounds.*bounds=") as caught:
         mpc.make_planner(diffcontrol.make("pendulum-unclipped"))
+    assert "\n" not in str(caught.value)
+
+
+def test_a_sign_head_task_plans_its_relaxed_push_within_given_bounds():
+    # CartPole: Discrete(2) pushes; the plan is the push u in [-1, 1] (force u * force_mag),
+    # Gymnasium gets its sign. From a tilted start the planner keeps the pole up.
+    task = diffcontrol.make("cartpole")
+    planner = mpc.make_planner(task, mpc.ILQR(iterations=3), 10, loss="quadratic",
+                               bounds=((-1,), (1,)))  # fmt: skip
+    episode = jax.jit(lambda x0: planner.episode(x0, 200))
+    states, actions, _, info = episode(jnp.array([0.0, 0.0, 0.15, 0.0]))
+    assert bool(jnp.all(jnp.abs(states[:, 2]) < task.default_params().theta_threshold))
+    assert bool(jnp.all(jnp.abs(actions) <= 1.0)) and bool(info.finite.all())
+    assert task.gym_action(np.asarray(actions[0])) in (0, 1)
 
 
 @pytest.mark.parametrize(

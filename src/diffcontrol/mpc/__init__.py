@@ -2,7 +2,7 @@
 
     planner = mpc.make_planner(task, mpc.ILQR(iterations=10), horizon=20)
     policy = mpc.PlannerPolicy(planner)        # obs -> Gymnasium action (needs JAX)
-    states, actions, rewards, reports = jax.jit(planner.episode, static_argnums=1)(x0, 200)
+    states, actions, rewards, reports = eqx.filter_jit(planner.episode)(x0, 200)
     result = mpc.distil(task, planner, rounds=10)   # the MLP trained on the planner (DAgger)
     result.save("runs/distilled")                  # model.json: a NumPy policy like any other
 

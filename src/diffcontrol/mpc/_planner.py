@@ -149,6 +149,7 @@ def make_planner(
     terminal_weight: float = 1.0,
     bound_starts: bool = False,
     gradient: str = "unroll",
+    bounds: tuple[Any, Any] | None = None,
 ) -> Planner:
     """A ``Planner`` for ``task``, with its settings checked.
 
@@ -166,6 +167,10 @@ def make_planner(
             step and keep the best of the three (three times the work; escapes local optima).
         gradient: how a derivative of the plan is taken: ``"unroll"`` (through the solver's
             iterations) or ``"implicit"`` (at the optimum, by the implicit function theorem).
+        bounds: ``(low, high)`` of the planned actions, default the task's ``action_low`` and
+            ``action_high``. A task whose head makes a discrete action (the CartPole's sign)
+            has none: the planner then plans the relaxed action within the bounds given (the
+            CartPole's push in ``((-1,), (1,))``) and Gymnasium gets ``task.gym_action`` of it.
 
     Raises:
         ConfigError: a horizon < 1, a negative or non-finite weight or solver setting, a task
@@ -185,8 +190,18 @@ def make_planner(
         raise ConfigError(f"mu={solver.mu!r} must be > 0 (the regularisation of Q_uu)")
     if not hasattr(solver, "solve"):
         raise ConfigError(f"solver={solver!r} is not a solver; use mpc.ILQR() or mpc.Shooting()")
-    if task.action_low is None or task.action_high is None:
-        raise ConfigError(f"task {task.name!r} has no action bounds; a planner needs them")
+    low, high = (task.action_low, task.action_high) if bounds is None else bounds
+    if low is None or high is None:
+        raise ConfigError(
+            f"task {task.name!r} has no action bounds; a planner needs them: pass "
+            "bounds=(low, high) of the relaxed action"
+        )
+    low, high = (np.asarray(b, np.float32).reshape(-1) for b in (low, high))
+    if low.shape != (task.action_size,) or high.shape != low.shape or not np.all(low < high):
+        raise ConfigError(
+            f"bounds={bounds!r} must be two sequences of {task.action_size} finite numbers, "
+            "low < high"
+        )
     if step_loss is None:
         if not task.losses and loss is None:
             raise ConfigError(f"task {task.name!r} has no built-in loss; pass step_loss=...")
@@ -200,8 +215,8 @@ def make_planner(
         step_loss=step_loss,
         terminal_cost=terminal_cost,
         params=params,
-        low=jnp.asarray(task.action_low, jnp.float32),
-        high=jnp.asarray(task.action_high, jnp.float32),
+        low=jnp.asarray(low),
+        high=jnp.asarray(high),
         terminal_weight=jnp.asarray(weight, jnp.float32),
     )
     return Planner(
