@@ -175,6 +175,8 @@ def test_policy_runs_in_gymnasium_and_reports_each_solve():
         (dict(loss="nope"), "loss='nope'"),
         (dict(bounds=((1.0,), (-1.0,))), "low < high"),
         (dict(bounds=((-1.0, -1.0), (1.0, 1.0))), "1 finite numbers"),
+        (dict(bounds=((-np.inf,), (1.0,))), "1 finite numbers"),
+        (dict(bounds=(("a",), (1.0,))), "1 finite numbers"),
     ],
 )
 def test_bad_settings_are_one_line_config_errors(kwargs, match):

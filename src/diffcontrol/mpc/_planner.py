@@ -196,8 +196,14 @@ def make_planner(
             f"task {task.name!r} has no action bounds; a planner needs them: pass "
             "bounds=(low, high) of the relaxed action"
         )
-    low, high = (np.asarray(b, np.float32).reshape(-1) for b in (low, high))
-    if low.shape != (task.action_size,) or high.shape != low.shape or not np.all(low < high):
+    try:
+        low, high = (np.asarray(b, np.float32).reshape(-1) for b in (low, high))
+    except (TypeError, ValueError):
+        low = high = np.zeros(0, np.float32)  # refused below
+    finite = np.all(np.isfinite(low)) and np.all(np.isfinite(high))
+    if low.shape != (task.action_size,) or high.shape != low.shape or not finite:
+        low = high = np.zeros(0, np.float32)
+    if low.size == 0 or not np.all(low < high):
         raise ConfigError(
             f"bounds={bounds!r} must be two sequences of {task.action_size} finite numbers, "
             "low < high"
