@@ -140,10 +140,11 @@ def record(
     """Record ``episodes`` episodes of ``gymnasium.make(env_id, **env_kwargs)``, or episodes
     until a budget of ``total_steps`` transitions is spent.
 
-    Episode ``i`` is reset with seed ``seed + i`` (counting on past ``skip_seeds``); each step applies ``policy(obs)`` (e.g.
-    ``diffcontrol.load(DIR)``), or, without a policy, a random action from the environment's
-    action space seeded once with ``seed``. An episode ends when the environment terminates
-    or truncates it (or after ``max_steps``, or when the ``steps`` budget is spent: the last
+    Episode ``i`` is reset with seed ``seed + i`` (counting on past ``skip_seeds``); each step
+    applies ``policy(obs)`` (e.g. ``diffcontrol.load(DIR)``), or, without a policy, a random
+    action from the environment's action space seeded once with ``seed``. An episode ends when
+    the environment terminates or truncates it (or after ``max_steps``, or when the
+    ``total_steps`` budget is spent: the last
     episode is cut short there and ends as ``truncated``). Observations are stored as float64
     (exactly the environment's float32 values), actions as given to the environment (before
     any clipping the environment does itself).
