@@ -144,10 +144,10 @@ def record(
     applies ``policy(obs)`` (e.g. ``diffcontrol.load(DIR)``), or, without a policy, a random
     action from the environment's action space seeded once with ``seed``. An episode ends when
     the environment terminates or truncates it (or after ``max_steps``, or when the
-    ``total_steps`` budget is spent: the last
-    episode is cut short there and ends as ``truncated``). Observations are stored as float64
-    (exactly the environment's float32 values), actions as given to the environment (before
-    any clipping the environment does itself).
+    ``total_steps`` budget is spent: the last episode is cut short there and ends as
+    ``truncated``). Observations are stored as float64 (exactly the environment's float32
+    values), actions as given to the environment (before any clipping the environment does
+    itself).
 
     Args:
         env_id: any registered Gymnasium id with a flat ``Box`` observation space and a flat
