@@ -202,6 +202,8 @@ def test_a_sign_head_task_plans_its_relaxed_push_within_given_bounds():
     assert bool(jnp.all(jnp.abs(states[:, 2]) < task.default_params().theta_threshold))
     assert bool(jnp.all(jnp.abs(actions) <= 1.0)) and bool(info.finite.all())
     assert task.gym_action(np.asarray(actions[0])) in (0, 1)
+    default = mpc.make_planner(task, horizon=5).problem  # a sign head's relaxation: [-1, 1]
+    assert (float(default.low[0]), float(default.high[0])) == (-1.0, 1.0)
 
 
 @pytest.mark.parametrize(

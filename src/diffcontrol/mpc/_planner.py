@@ -168,9 +168,10 @@ def make_planner(
         gradient: how a derivative of the plan is taken: ``"unroll"`` (through the solver's
             iterations) or ``"implicit"`` (at the optimum, by the implicit function theorem).
         bounds: ``(low, high)`` of the planned actions, default the task's ``action_low`` and
-            ``action_high``. A task whose head makes a discrete action (the CartPole's sign)
-            has none: the planner then plans the relaxed action within the bounds given (the
-            CartPole's push in ``((-1,), (1,))``) and Gymnasium gets ``task.gym_action`` of it.
+            ``action_high``. A task whose head makes a discrete action has none: the planner
+            then plans the relaxed action within the bounds given, by default [-1, 1] for a
+            ``sign`` head (the CartPole's push, the force ``u * force_mag``), and Gymnasium
+            gets ``task.gym_action`` of it (the push's sign).
 
     Raises:
         ConfigError: a horizon < 1, a negative or non-finite weight or solver setting, a task
@@ -191,6 +192,8 @@ def make_planner(
     if not hasattr(solver, "solve"):
         raise ConfigError(f"solver={solver!r} is not a solver; use mpc.ILQR() or mpc.Shooting()")
     low, high = (task.action_low, task.action_high) if bounds is None else bounds
+    if bounds is None and low is None and task.action_head == "sign":
+        low, high = (-1.0,) * task.action_size, (1.0,) * task.action_size  # sign's relaxation
     if low is None or high is None:
         raise ConfigError(
             f"task {task.name!r} has no action bounds; a planner needs them: pass "
