@@ -112,7 +112,7 @@ def test_bad_input_on_the_command_line_is_one_line(tmp_path, capsys):
     fails(["plan", "pendulum", "--out", out, "--terminal-weight", "nan"], "--terminal-weight")
     for argv, needle in [
         (["plan", "pendulum", "--out", out, "--loss", "nope"], "nope"),
-        (["plan", "cartpole", "--out", out], "action bounds"),
+        (["plan", "pendulum-unclipped", "--out", out], "action bounds"),
     ]:
         assert main(argv) == 2
         err = capsys.readouterr().err.strip()
