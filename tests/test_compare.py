@@ -198,7 +198,7 @@ def test_compare_pendulum_has_the_planner_and_its_distilled_mlp(tmp_path, capsys
     from diffcontrol.settings import PlanConfig
 
     assert methods_for(diffcontrol.make("pendulum"))[:3] == ["diffcontrol", "planner", "distilled"]
-    assert "planner" not in methods_for(diffcontrol.make("cartpole"))  # no action bounds
+    assert "planner" not in methods_for(diffcontrol.make("cartpole"))  # no state grid
     small = PlanConfig(horizon=4, iterations=2, value_grid=9, value_levels=5)
     monkeypatch.setattr(_planning, "PLANNER", small)
     tiny = dict(rounds=1, episodes_per_round=4, fit_steps=10, batch_size=16, eval_episodes=4)
