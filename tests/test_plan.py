@@ -120,15 +120,14 @@ def test_bad_input_on_the_command_line_is_one_line(tmp_path, capsys):
     assert not (tmp_path / "p").exists()  # the refused run gave its directory back
 
 
+def _write_grey_box_fit(where, task: str, **parameters: float) -> None:
+    """A minimal ``fitted.json`` of a grey-box fit of ``task`` in ``where``."""
+    fit = {"format": "diffcontrol-fitted-model", "version": 1, "task": task, "model": "params"}
+    (where / "fitted.json").write_text(json.dumps({**fit, "all_parameters": parameters}))
+
+
 def test_a_model_file_of_another_task_is_refused(planner_run, tmp_path):
-    fit = {
-        "format": "diffcontrol-fitted-model",
-        "version": 1,
-        "task": "cartpole",
-        "model": "params",
-        "all_parameters": {"gravity": 9.0},
-    }
-    (tmp_path / "fitted.json").write_text(json.dumps(fit))
+    _write_grey_box_fit(tmp_path, "cartpole", gravity=9.0)
     with pytest.raises(ModelFileError, match="cartpole"):
         runs.plan_run(tmp_path / "p", "pendulum", SMALL, model=tmp_path, final_eval=0)
     doc = json.loads((planner_run / "model.json").read_text())
@@ -143,14 +142,7 @@ def test_a_model_file_of_another_task_is_refused(planner_run, tmp_path):
 
 
 def test_a_grey_box_fit_is_planned_through(tmp_path):
-    fit = {
-        "format": "diffcontrol-fitted-model",
-        "version": 1,
-        "task": "pendulum",
-        "model": "params",
-        "all_parameters": {"g": 9.0},
-    }
-    (tmp_path / "fitted.json").write_text(json.dumps(fit))
+    _write_grey_box_fit(tmp_path, "pendulum", g=9.0)
     config = PlanConfig(horizon=5, iterations=2)
     run, _ = runs.plan_run(tmp_path / "p", "pendulum", config, model=tmp_path, final_eval=0)
     loaded = diffcontrol.load(tmp_path / "p")
