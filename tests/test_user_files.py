@@ -76,6 +76,9 @@ def test_user_files_train_save_load_evaluate_and_loop(
     assert json.loads(capsys.readouterr().out)["env_id"] == gym_id
     loop = d / f"loop-{system}"
     argv = ["loop", spec, "--env", gym_id, "--model", "neural", "--rounds", "1"]
-    argv += ["--episodes", "2", "--updates", "2", "--eval-episodes", "1", "--out", str(loop)]
-    assert main([*argv, "--quiet"]) == 0
-    assert (loop / "loop.json").exists() and (loop / "round_1" / "run" / "model.json").exists()
+    argv += ["--episodes", "2", "--updates", "2", "--fit-steps", "20", "--eval-episodes", "1"]
+    assert main([*argv, "--out", str(loop), "--quiet"]) == 0
+    assert (loop / "round_1" / "run" / "model.json").exists()
+    assert json.loads((loop / "loop.json").read_text())["settings"]["fit_steps"] == 20
+    fitted = json.loads((loop / "round_1" / "fit" / "fitted.json").read_text())
+    assert len(fitted["fit"]["loss_history"]) == 20  # the fit took the steps asked for

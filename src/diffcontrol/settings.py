@@ -130,6 +130,10 @@ class LoopConfig(_Settings):
         "N",
     )
     updates: int | None = _opt("gradient updates of each round (default: the task's)", None, "N")
+    fit_steps: int | None = _opt(
+        "Adam steps of each round's fit (default: the model's, 2000 for a network)", None, "N",
+        low=0,
+    )
     seed: int = _opt("seed of training and recording", 0, "S", low=0)
     eval_episodes: int = _opt(
         "evaluation episodes of each round's controller on the real system", 20, "N", high=MAX_WIDTH

@@ -122,7 +122,8 @@ def loop(
     }
     # new settings only where set, so a loop written before them still resumes
     settings.update({k: v for k, v in [("start", start), ("explore_noise", explore_noise),
-                                       ("eval_seed", eval_seed), ("steps_per_round", steps)]
+                                       ("eval_seed", eval_seed), ("steps_per_round", steps),
+                                       ("fit_steps", c.fit_steps)]
                      if v})  # fmt: skip
     state = _start(out, settings, resume)
     state["start"] = _start_doc(task, model, start)
@@ -183,8 +184,9 @@ def loop(
             model_error(predictor_of(task, before, model, start), new) if episodes_of_env else None
         )
         if not (here / "fit" / "fitted.json").exists():
+            fit_config = FitConfig(names=names, holdout=0.0, steps=c.fit_steps)
             fitted = fit_dir(
-                task, out / "data.csv", model, here / "fit", FitConfig(names=names, holdout=0.0),
+                task, out / "data.csv", model, here / "fit", fit_config,
                 progress=progress, **_start_settings(task, model, start),
             )  # fmt: skip
             for line in fitted.lines:
