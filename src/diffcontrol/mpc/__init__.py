@@ -15,6 +15,7 @@ differentiable in the state and the model's parameters, through the solver's ite
 """
 
 from ._config import planner_from_config
+from ._discretise import DiscretisedTask, discretise, ode_episode
 from ._distil import distil, labelled_episodes
 from ._ilqr import ILQR
 from ._planner import Planner, make_planner
@@ -23,14 +24,17 @@ from ._problem import Problem, SolveInfo
 from ._shooting import Shooting
 
 __all__ = [
+    "DiscretisedTask",
     "ILQR",
     "Planner",
     "PlannerPolicy",
     "Problem",
     "Shooting",
     "SolveInfo",
+    "discretise",
     "distil",
     "labelled_episodes",
     "make_planner",
+    "ode_episode",
     "planner_from_config",
 ]
