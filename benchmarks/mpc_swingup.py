@@ -40,8 +40,8 @@ from _common import machine  # noqa: E402
 
 import diffcontrol  # noqa: E402
 from diffcontrol import io, mpc  # noqa: E402
+from diffcontrol.evaluation import ContinuousRecording, swingup_result  # noqa: E402
 from diffcontrol.rollout import solve_closed_loop  # noqa: E402
-from diffcontrol.systems.cartpole_swingup import wrap_angle  # noqa: E402
 
 HORIZON_S = 10.0
 SETTINGS = [(0.05, 40, 6.0, 5), (0.05, 40, 5.0, 5), (0.05, 40, 4.5, 5), (0.05, 40, 4.0, 5)]
@@ -60,18 +60,18 @@ def starts(task, params, n: int) -> np.ndarray:
 
 
 def end_figures(ys: np.ndarray, force: np.ndarray, dt: float) -> dict:
-    theta = np.asarray(wrap_angle(jnp.asarray(ys[:, 2])))
-    near = np.abs(theta) < ANGLE_BAR
-    # The time from which the pole stays within the angle bar to the end (None: never).
-    stays = np.flatnonzero(~near)
-    first = 0 if stays.size == 0 else stays[-1] + 1
-    upright_from = None if first >= len(theta) else first * dt
+    """The end state, peak force, swings and upright time of a closed loop saved every ``dt``
+    (``evaluation.swingup_result``: swings are the pole's reversals before it first comes
+    within 0.1 rad of upright; ``upright_from_s`` the time from which it stays there)."""
+    t = dt * np.arange(len(ys))
+    res = swingup_result(ContinuousRecording("cartpole-swingup-limited", t, ys, force, np.nan))
     end = {
-        "abs_theta_end": float(abs(theta[-1])),
-        "abs_theta_dot_end": float(abs(ys[-1, 3])),
-        "x_end": float(ys[-1, 0]),
-        "peak_force": float(np.max(np.abs(force))),
-        "upright_from_s": upright_from,
+        "abs_theta_end": abs(res.final_theta),
+        "abs_theta_dot_end": abs(res.final_theta_dot),
+        "x_end": res.final_x,
+        "peak_force": res.peak_force,
+        "swings": res.swings,
+        "upright_from_s": res.upright_time,
     }
     end["upright"] = end["abs_theta_end"] < ANGLE_BAR and end["abs_theta_dot_end"] < RATE_BAR
     return end
@@ -145,7 +145,8 @@ def summary(rows: list[dict]) -> str:
     peaks = [r["peak_force"] for r in rows]
     return (f"{up}/{len(rows)} upright, peak |F| median {np.median(peaks):.2f} N "
             f"(max {max(peaks):.2f}), worst |θ| {max(r['abs_theta_end'] for r in rows):.3f}, "
-            f"worst |θ̇| {max(r['abs_theta_dot_end'] for r in rows):.3f}")  # fmt: skip
+            f"worst |θ̇| {max(r['abs_theta_dot_end'] for r in rows):.3f}, "
+            f"swings {min(r['swings'] for r in rows)}-{max(r['swings'] for r in rows)}")  # fmt: skip
 
 
 def main() -> None:
