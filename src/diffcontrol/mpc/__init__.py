@@ -6,6 +6,10 @@
     result = mpc.distil(task, planner, rounds=10)   # the MLP trained on the planner (DAgger)
     result.save("runs/distilled")                  # model.json: a NumPy policy like any other
 
+A continuous-time task (the swing-ups) is planned through its discrete-time view,
+``mpc.discretise(task, dt)`` (the action held for ``dt``, RK4), and run against its true ODE by
+``mpc.ode_episode(planner, y0, steps)``.
+
 A planner from stored settings: ``mpc.planner_from_config(task, PlanConfig(horizon=10))``;
 ``diffcontrol plan`` (``runs.plan_run``) writes one as a run directory that ``diffcontrol.load``
 builds back. Two solvers, as values: ``ILQR`` (box-constrained iLQR, as trajax and mpc.pytorch) and
