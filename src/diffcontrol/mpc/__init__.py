@@ -6,6 +6,10 @@
     result = mpc.distil(task, planner, rounds=10)   # the MLP trained on the planner (DAgger)
     result.save("runs/distilled")                  # model.json: a NumPy policy like any other
 
+A continuous-time task (the swing-ups) is planned through its discrete-time view,
+``mpc.discretise(task, dt)`` (the action held for ``dt``, RK4), and run against its true ODE by
+``mpc.ode_episode(planner, y0, steps)``.
+
 A planner from stored settings: ``mpc.planner_from_config(task, PlanConfig(horizon=10))``;
 ``diffcontrol plan`` (``runs.plan_run``) writes one as a run directory that ``diffcontrol.load``
 builds back. Two solvers, as values: ``ILQR`` (box-constrained iLQR, as trajax and mpc.pytorch) and
@@ -15,6 +19,7 @@ differentiable in the state and the model's parameters, through the solver's ite
 """
 
 from ._config import planner_from_config
+from ._discretise import DiscretisedTask, discretise, ode_episode
 from ._distil import distil, labelled_episodes
 from ._ilqr import ILQR
 from ._planner import Planner, make_planner
@@ -23,14 +28,17 @@ from ._problem import Problem, SolveInfo
 from ._shooting import Shooting
 
 __all__ = [
+    "DiscretisedTask",
     "ILQR",
     "Planner",
     "PlannerPolicy",
     "Problem",
     "Shooting",
     "SolveInfo",
+    "discretise",
     "distil",
     "labelled_episodes",
     "make_planner",
+    "ode_episode",
     "planner_from_config",
 ]

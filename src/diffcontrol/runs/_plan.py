@@ -136,7 +136,10 @@ def plan_run(
     config = PlanConfig() if config is None else config
     task = resolve(task) if isinstance(task, str) else task
     if not isinstance(task, Task):
-        raise ConfigError(f"task {task.name!r} is continuous-time; a planner needs a Task")
+        raise ConfigError(
+            f"task {task.name!r} is continuous-time: diffcontrol plan takes discrete-time tasks; "
+            "plan it from Python through mpc.discretise(task, dt) (docs/planning.md)"
+        )
     say = progress or (lambda line: None)
     real, info = None, {"kind": "simulator"}
     if model is not None:

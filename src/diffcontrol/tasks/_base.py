@@ -529,6 +529,26 @@ class ContinuousTask(_TaskBase):
         """
         raise ConfigError(_no_builtin_loss(self, name, "trajectory_loss"))
 
+    # --- planning (``mpc.discretise``): a running cost and an end cost per loss ------------
+
+    planning_losses: ClassVar[tuple[str, ...]] = ()
+    """The losses a planner can plan with (``running_cost``); none by default."""
+
+    def running_cost(self, name: str) -> Callable[[PyTree, Array, Array], Array]:
+        """``rate(params, y, action)``: the cost per second of the planning loss ``name``,
+        the additive counterpart of the trajectory loss of that name (``mpc.discretise``
+        integrates it over each control period).
+
+        Raises:
+            ConfigError: the task defines none (the default).
+        """
+        raise ConfigError(f"task {self.name!r} has no planning loss {name!r} (running_cost)")
+
+    def terminal_cost(self, name: str) -> Callable[[PyTree, Array], Array] | None:
+        """``cost(params, y)`` at the end of a plan for the planning loss ``name``, or
+        ``None`` (the default)."""
+        return None
+
     def load_policy(self, doc: dict) -> Any:
         """A ``StatePolicy``: ``policy(state) -> action`` on the physical state."""
         from ..io import StatePolicy

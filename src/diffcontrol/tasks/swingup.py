@@ -91,6 +91,59 @@ def energy_loss(tr: SwingUpTrajectory) -> Array:
     return swingup_loss(tr) + ENERGY_WEIGHT * tr.dissipated_energy[-1]
 
 
+# --- planning (``mpc.discretise``): the limited_hold loss as a running and an end cost ------
+
+PLAN_ANGLE_WEIGHT = 1.0
+"""Weight of ``2 (1 - cos theta)`` per second in the planning cost."""
+PLAN_POSITION_WEIGHT = 0.1
+"""Weight of ``x^2`` per second (the loss's ``0.1 sum(x^2)/N``)."""
+PLAN_FORCE_WEIGHT = 0.01
+"""Weight of ``F^2`` (N^2) per second (the loss's peak-force term; the bound caps the peak)."""
+PLAN_ENERGY_WEIGHT = 10.0
+"""Weight of the end cost's squared energy gap, relative to the upright energy."""
+PLAN_END_WEIGHT = 0.1
+"""Weight of the loss's own end terms in the end cost of a plan (see ``limited_hold_end``)."""
+
+
+def limited_hold_rate(params: cp.SwingUpParams, y: Array, force: Array) -> Array:
+    """The cost per second of the planning ``limited_hold`` loss.
+
+    ``2 (1 - cos theta)`` is the smooth counterpart of the wrapped ``theta^2`` (equal to
+    within ``theta^4 / 12``, and with no kink at the hanging position where the wrap flips
+    sign, which the planner's second-order model would see); plus ``0.1 x^2`` and a small
+    ``F^2`` standing in for the peak-force penalty (a maximum is not additive over time; the
+    planner's action bounds cap the peak instead).
+    """
+    del params
+    f = jnp.reshape(force, ())
+    return (
+        PLAN_ANGLE_WEIGHT * 2 * (1 - jnp.cos(y[2]))
+        + PLAN_POSITION_WEIGHT * y[0] ** 2
+        + PLAN_FORCE_WEIGHT * f**2
+    )
+
+
+def limited_hold_end(params: cp.SwingUpParams, y: Array) -> Array:
+    """The end cost of a plan: the pole's energy gap, and the loss's end terms, weakly.
+
+    ``PLAN_ENERGY_WEIGHT ((E_p - E_up) / E_up)^2`` with the pole's energy about its pivot
+    ``E_p = m L^2 theta_dot^2 / 2 + m g L (1 + cos theta)`` and ``E_up = 2 m g L`` (upright at
+    rest): energy shaping, which tells a plan much shorter than the pump (2 s of a 7 s pump)
+    that more energy is the way up, and is zero upright at rest. Plus ``PLAN_END_WEIGHT``
+    times the loss's end terms ``4 * 2 (1 - cos theta) + x_dot^2 + theta_dot^2`` (the angle
+    smoothed). Those have a small weight because a plan ends at any phase of the pump: at
+    full weight, ``theta_dot^2`` at the bottom of a swing (``4 g / L`` with the upright
+    energy) outweighs the energy gap, and the planner stops pumping (measured: it never
+    gets above a fifth of the upright energy).
+    """
+    p = params
+    mgl = p.pole_mass * p.g * p.length
+    e_pole = 0.5 * p.pole_mass * p.length**2 * y[3] ** 2 + mgl * (1 + jnp.cos(y[2]))
+    gap = (e_pole - 2 * mgl) / (2 * mgl)
+    end_terms = 8 * (1 - jnp.cos(y[2])) + y[1] ** 2 + y[3] ** 2
+    return PLAN_ENERGY_WEIGHT * gap**2 + PLAN_END_WEIGHT * end_terms
+
+
 LOSSES: dict[str, TrajectoryLoss] = {
     "swingup": swingup_loss,
     "limited": limited_loss,
@@ -154,6 +207,18 @@ class CartPoleSwingUp(ContinuousTask):
 
     def trajectory_loss(self, name: str) -> TrajectoryLoss:
         return LOSSES[name]
+
+    planning_losses = ("limited_hold",)
+
+    def running_cost(self, name: str):
+        """``limited_hold_rate`` (the planning form of ``limited_hold``)."""
+        if name != "limited_hold":
+            return super().running_cost(name)
+        return limited_hold_rate
+
+    def terminal_cost(self, name: str):
+        """``limited_hold_end``: the pole's energy gap and the loss's end terms."""
+        return limited_hold_end if name == "limited_hold" else None
 
     def default_config(self) -> ODETrainConfig:
         # The post's recipe (Tsit5 at reltol 1e-3 / abstol 1e-6, 50 saves, 3-8-1 tanh net with
