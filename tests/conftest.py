@@ -10,7 +10,8 @@ import tempfile
 os.environ.setdefault("DIFFCONTROL_CACHE_DIR", tempfile.mkdtemp(prefix="diffcontrol-test-cache-"))
 # The tests' programs are small and most run a few steps: XLA's backend optimisation costs
 # more than it saves there (measured on tests/test_trebuchet_task.py and test_swingup.py,
-# 12 % less CPU time in all). It changes how fast the code runs, not what it computes.
+# 12 % less CPU time in all). It changes how fast the code runs, not what it computes (up to
+# the rounding of fused operations, which the tests' tolerances are for).
 if "xla_backend_optimization_level" not in os.environ.get("XLA_FLAGS", ""):
     flags = os.environ.get("XLA_FLAGS", "") + " --xla_backend_optimization_level=0"
     os.environ["XLA_FLAGS"] = flags.strip()
