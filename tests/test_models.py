@@ -213,6 +213,9 @@ def test_loop_records_fits_trains_and_resumes(tmp_path, capsys):
         assert abs(r["fitted_parameters"]["g"] - 12.0) < 0.01
         assert np.isfinite(r["real_return"])
     sources = json.loads((out / "data.csv").read_text().splitlines()[0][2:])["metadata"]
+    # the evaluation's reset seeds (0 and 1, the default) are not recorded from
+    first = json.loads((out / "round_0" / "recorded.csv").read_text().splitlines()[0][2:])
+    assert first["metadata"]["skipped_seeds"] == [0, 2]
     assert sources["sources"][0] == "random actions"  # round 1 records with its controller:
     assert sources["sources"][1] == "round 1 controller"
     assert (out / "round_2" / "run" / "model.json").exists() and (out / "loop.png").exists()

@@ -128,7 +128,9 @@ def loop(
     state = _start(out, settings, resume)
     state["start"] = _start_doc(task, model, start)
     say = progress or (lambda line: None)
-    judged_on = range(eval_seed, eval_seed + eval_episodes) if eval_seed else range(0)
+    # the reset seeds the controllers are judged on (save_run's own, 0..., by default): no
+    # round records from them, so a model is never fitted to the starts it is judged on
+    judged_on = range(eval_seed, eval_seed + eval_episodes)
 
     def record_round(k: int, controller: Path | None) -> None:
         """Record the episodes of round k (random for k = 0, else with round k's controller
@@ -149,7 +151,7 @@ def loop(
                     None if steps else episodes,
                     policy=policy,
                     seed=seed + 1000 * k,
-                    skip_seeds=judged_on,  # never fitted to the starts its controllers face
+                    skip_seeds=judged_on,
                     env_kwargs=env_kwargs,
                     source=source,
                     task=task,
