@@ -131,7 +131,9 @@ class LoopConfig(_Settings):
     )
     updates: int | None = _opt("gradient updates of each round (default: the task's)", None, "N")
     fit_steps: int | None = _opt(
-        "Adam steps of each round's fit (default: the model's, 2000 for a network)", None, "N",
+        "Adam steps of each round's fit (default: the model's, 2000 for a network)",
+        None,
+        "N",
         low=0,
     )
     seed: int = _opt("seed of training and recording", 0, "S", low=0)
