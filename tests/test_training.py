@@ -189,15 +189,19 @@ def test_corrupt_checkpoint_is_a_clear_error(tmp_path):
 
 
 @pytest.mark.slow
-def test_persistent_compile_cache_hits_on_a_second_run(tmp_path):
+@pytest.mark.parametrize("task", ["cartpole", "cartpole-swingup"])
+def test_persistent_compile_cache_hits_on_a_second_run(tmp_path, task):
     """A second identical command loads every program from the cache and compiles nothing.
 
-    JAX refuses to cache programs with host callbacks (such as Equinox's runtime checks), so
-    this also guards against one sneaking into the training programs.
+    JAX refuses to cache programs with host callbacks (such as Equinox's runtime checks, in
+    every Diffrax solve unless the command line turns them into NaN), so this also guards
+    against one sneaking into the training programs, of a discrete-time task and of an ODE.
     """
     env = dict(os.environ, DIFFCONTROL_CACHE_DIR=str(tmp_path / "cache"))
-    args = ["train", "cartpole", "--updates", "4", "--eval-every", "2", "--eval-episodes", "2"]
-    args += ["--final-eval", "1", "--no-animation", "--quiet", "--hidden", "5,5"]
+    env.pop("EQX_ON_ERROR", None)  # what the command sets itself, not the test session's
+    args = ["train", task, "--updates", "4", "--eval-every", "2", "--final-eval", "1"]
+    args += ["--no-animation", "--quiet", "--hidden", "5,5"]
+    args += ["--eval-episodes", "2"] if task == "cartpole" else []
     caches = []
     for i in range(2):
         cmd = [sys.executable, "-m", "diffcontrol.cli", *args, "--out", str(tmp_path / f"r{i}")]
@@ -205,6 +209,8 @@ def test_persistent_compile_cache_hits_on_a_second_run(tmp_path):
         caches.append(
             json.loads((tmp_path / f"r{i}" / "metrics.json").read_text())["compile_cache"]
         )
+    # JAX does not even look up a program with a host callback: such a program shows as a
+    # request neither hit nor missed, so every request must be a miss, then a hit
     assert caches[0]["misses"] >= 2 and caches[0]["hits"] == 0
-    assert caches[1]["misses"] == 0
-    assert caches[1]["hits"] >= caches[0]["misses"]
+    assert caches[0]["misses"] == caches[0]["requests"]
+    assert caches[1]["misses"] == 0 and caches[1]["hits"] == caches[1]["requests"]

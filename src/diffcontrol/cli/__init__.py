@@ -40,6 +40,12 @@ COMMANDS = {n[4:]: f for m in _MODULES for n, f in vars(m).items() if n.startswi
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``diffcontrol`` command; returns the exit status."""
+    # Equinox's runtime checks (Diffrax's, inside every ODE solve) are host callbacks unless
+    # EQX_ON_ERROR says otherwise, and JAX stores no program with one in the persistent cache:
+    # a continuous-time run compiled everything again each time. As NaN instead, a failed
+    # check is a non-finite value, which the driver reports. Read once, when Equinox is first
+    # imported (so not for a process that imported it before calling main).
+    os.environ.setdefault("EQX_ON_ERROR", "nan")
     argv = sys.argv[1:] if argv is None else list(argv)
     args = build_parser().parse_args(argv)
     args.command_line = " ".join(["diffcontrol", *argv])  # to continue a long command
