@@ -5,6 +5,7 @@
     states, actions, rewards, reports = eqx.filter_jit(planner.episode)(x0, 200)
     result = mpc.distil(task, planner, rounds=10)   # the MLP trained on the planner (DAgger)
     result.save("runs/distilled")                  # model.json: a NumPy policy like any other
+    learned = mpc.learn_value(task, planner)        # a terminal value network, through the plan
 
 A planner from stored settings: ``mpc.planner_from_config(task, PlanConfig(horizon=10))``;
 ``diffcontrol plan`` (``runs.plan_run``) writes one as a run directory that ``diffcontrol.load``
@@ -17,10 +18,12 @@ differentiable in the state and the model's parameters, through the solver's ite
 from ._config import planner_from_config
 from ._distil import distil, labelled_episodes
 from ._ilqr import ILQR
+from ._learn import ValueResult, closed_loop_loss, learn_value, load_value
 from ._planner import Planner, make_planner
 from ._policy import PlannerPolicy
 from ._problem import Problem, SolveInfo
 from ._shooting import Shooting
+from ._value import ValueNetwork
 
 __all__ = [
     "ILQR",
@@ -29,8 +32,13 @@ __all__ = [
     "Problem",
     "Shooting",
     "SolveInfo",
+    "ValueNetwork",
+    "ValueResult",
+    "closed_loop_loss",
     "distil",
     "labelled_episodes",
+    "learn_value",
+    "load_value",
     "make_planner",
     "planner_from_config",
 ]
