@@ -35,6 +35,9 @@ from ..errors import ConfigError
 from ._planner import GRADIENTS, Planner
 from ._value import ValueNetwork
 
+TARGETS = ("rollout", "plan", "best")
+"""What a visited state is labelled with in the initialisation (``learn_value(target=...)``)."""
+
 
 def _install(planner: Planner, trainable: tuple[Any, Any]) -> Planner:
     """``planner`` with the terminal cost and the warm-start policy of ``trainable``."""
@@ -59,7 +62,7 @@ def _rollouts(planner: Planner, starts: Array, steps: int):
     """Episodes from ``starts``: the states, the running costs, the returns, the finite flags."""
     xs, us, rewards, infos = jax.vmap(lambda x: planner.episode(x, steps))(starts)
     costs = jax.vmap(jax.vmap(planner.problem.running_cost))(xs[:, :-1], us)
-    return xs, costs, rewards.sum(1), infos.finite
+    return xs, costs, rewards.sum(1), infos.finite, infos.cost
 
 
 @eqx.filter_jit
@@ -90,7 +93,7 @@ def _through_planner_step(trainable, opt_state, optimizer, planner, starts, step
     value, grads = eqx.filter_value_and_grad(loss)(trainable)
     params = eqx.filter(trainable, eqx.is_inexact_array)
     updates, opt_state = optimizer.update(grads, opt_state, params)
-    return eqx.apply_updates(trainable, updates), opt_state, value, optax.global_norm(grads)
+    return eqx.apply_updates(trainable, updates), opt_state, value, optax.tree.norm(grads)
 
 
 @dataclasses.dataclass
@@ -142,6 +145,7 @@ def learn_value(
     episodes: int = 64,
     fit_steps: int = 3000,
     fit_learning_rate: float = 3e-3,
+    target: str = "rollout",
     steps: int = 30,
     batch: int = 16,
     window: int | None = None,
@@ -150,6 +154,7 @@ def learn_value(
     eval_every: int = 5,
     eval_episodes: int = 64,
     starts: Float[Array, "B d"] | None = None,
+    keep_best: bool = True,
     seed: int = 0,
     progress: Callable[[str], None] | None = None,
 ) -> ValueResult:
@@ -167,6 +172,12 @@ def learn_value(
             then needs ``value``).
         episodes: rollouts per round (from ``task.reset``), each ``task.episode_length`` steps.
         fit_steps: Adam steps of the regression per round (``fit_learning_rate``).
+        target: the label of a visited state (each round fits the states of its own
+            rollouts only, the values of the planner as it now is):
+            ``"rollout"``, its cost-to-go along the rollout (to the episode's end, plus the
+            network's value of the last state); ``"plan"``, the cost of the plan the planner
+            made there (H steps and the network's value of the plan's end: a Bellman backup
+            over H steps, fitted value iteration); ``"best"``, the lower of the two.
         steps: Adam steps through the planner (0: the initialisation alone).
         batch: start states per step (fresh draws from ``task.reset`` each step, or ``starts``).
         window: steps of each closed-loop episode of the loss (default the episode length): a
@@ -177,6 +188,8 @@ def learn_value(
         eval_every: through-planner steps between evaluations (and at the last step).
         eval_episodes: simulated episodes of each evaluation (the same starts every time).
         starts: a fixed batch of start states for every through-planner step instead.
+        keep_best: return the network of the best evaluation (else the last step's; the
+            end-to-end stage starts from the best of the initialisation either way).
         seed: PRNG seed: the run is a function of it.
         progress: called with one line per round and per evaluation.
 
@@ -195,6 +208,8 @@ def learn_value(
         _positive("learning_rate", learning_rate),
         _positive("fit_learning_rate", fit_learning_rate),
     )
+    if target not in TARGETS:
+        raise ConfigError(f"target={target!r} is not one of {TARGETS}")
     if gradient not in GRADIENTS:
         raise ConfigError(f"gradient={gradient!r} is not one of {GRADIENTS}")
     if not isinstance(planner, Planner):
@@ -235,9 +250,11 @@ def learn_value(
     for r in range(init_rounds):
         k_run, k_starts, k_fit = jax.random.split(k_run, 3)
         round_starts = reset(jax.random.split(k_starts, episodes), params)
-        xs, costs, returns, finite = _rollouts(current, round_starts, length)
+        xs, costs, returns, finite, planned = _rollouts(current, round_starts, length)
         tail = jax.vmap(current.problem.final_cost)(xs[:, -1])
         to_go = jnp.flip(jnp.cumsum(jnp.flip(costs, 1), 1), 1) + tail[:, None]
+        if target != "rollout" and value is not None:  # the planner's own H-step backup
+            to_go = planned if target == "plan" else jnp.minimum(to_go, planned)
         states = xs[:, :-1].reshape(-1, xs.shape[-1])
         labels = to_go.reshape(-1)
         if value is None:  # the unit and the input's normalisation from the first data
@@ -261,7 +278,11 @@ def learn_value(
 
     # Stage 2: Adam on the closed-loop loss, differentiated through every plan.
     through = dataclasses.replace(planner, gradient=gradient)
-    optimizer = optax.chain(optax.clip_by_global_norm(1.0), optax.adam(lr))
+    # Clipped: near a plan whose Hessian is nearly singular the implicit derivative can be huge;
+    # a non-finite gradient skips the step rather than poisoning Adam's moments.
+    optimizer = optax.apply_if_finite(
+        optax.chain(optax.clip_by_global_norm(1.0), optax.adam(lr)), max_consecutive_errors=20
+    )
     trainable = best[1]
     opt_state = optimizer.init(eqx.filter(trainable, eqx.is_inexact_array))
     for i in range(steps):
@@ -284,6 +305,7 @@ def learn_value(
         "task": task.name,
         "seed": seed,
         "settings": {
+            "target": target,
             "hidden": list(best[1][0].hidden),
             "init_rounds": init_rounds,
             "episodes": episodes,
@@ -303,7 +325,7 @@ def learn_value(
         "train_seconds": time.perf_counter() - t_start,
         "curve": curve,
     }
-    value_best, policy_best = best[1]
+    value_best, policy_best = best[1] if keep_best else trainable
     return ValueResult(
         planner=_install(planner, (value_best, policy_best)),
         value=value_best,
