@@ -166,3 +166,28 @@ def test_bad_value_networks_and_terminal_costs_are_refused():
         mpc.make_planner(task, terminal_cost=3)
     with pytest.raises(ConfigError, match="plans for task 'pendulum', not 'cartpole'"):
         mpc.learn_value(CartPole(), mpc.make_planner(task))
+
+
+def test_a_planner_with_a_learned_value_round_trips_through_model_json(tmp_path):
+    import diffcontrol
+    from diffcontrol import runs
+    from diffcontrol.settings import PlanConfig
+
+    task = Pendulum()
+    value = _value(task, key=7, hidden=(5,), gain=20.0)
+    config = PlanConfig(horizon=3, iterations=2, bound_starts=False)
+    runs.plan_run(tmp_path / "p", task, config, final_eval=0, animation=False, value=value)
+    doc = json.loads((tmp_path / "p" / "model.json").read_text())
+    assert doc["controller"]["value"]["hidden"] == [5]
+    policy = diffcontrol.load(tmp_path / "p")
+    back = policy.planner.problem.terminal_cost
+    x = jnp.array([2.0, 0.5])
+    assert float(back(x)) == pytest.approx(float(value(x)), rel=1e-6) and abs(float(value(x))) > 0
+    with pytest.raises(ConfigError, match="two terminal costs"):
+        mpc.planner_from_config(task, PlanConfig(value_grid=11), value=value)
+    with pytest.raises(ConfigError, match="not an mpc.ValueNetwork of task 'pendulum'"):
+        runs.plan_run(tmp_path / "q", task, config, final_eval=0, value="net")
+    doc["controller"]["value"]["layers"] = []
+    (tmp_path / "p" / "model.json").write_text(json.dumps(doc))
+    with pytest.raises(ModelFileError, match="malformed value network"):
+        diffcontrol.load(tmp_path / "p")
