@@ -29,7 +29,7 @@ def _weights(net):
     return eqx.filter(net, eqx.is_inexact_array)
 
 
-@pytest.mark.parametrize("gradient", ["unroll", "implicit"])
+@pytest.mark.parametrize("gradient", [pytest.param("unroll", marks=pytest.mark.slow), "implicit"])
 def test_closed_loop_gradient_in_the_value_weights_matches_finite_differences(gradient):
     # The loss of a short closed loop from two starts, differentiated in the value network's
     # weights through every step's plan, against a central difference along a random direction.
@@ -62,6 +62,7 @@ def test_closed_loop_gradient_in_the_value_weights_matches_finite_differences(gr
         np.testing.assert_allclose(float(along), float(fd), rtol=1e-3)
 
 
+@pytest.mark.slow
 def test_a_few_steps_through_the_planner_lower_the_closed_loop_loss_on_a_fixed_batch():
     task = Pendulum()
     planner = mpc.make_planner(task, mpc.ILQR(iterations=5), 5)
@@ -80,6 +81,7 @@ def test_a_few_steps_through_the_planner_lower_the_closed_loop_loss_on_a_fixed_b
     assert result.metrics["curve"][-1]["stage"] == "through planner"
 
 
+@pytest.mark.slow
 def test_fitted_value_iteration_gives_a_planner_that_swings_up():
     # Two rounds of the initialisation alone at H = 5, where the planner without a terminal
     # cost cannot see a swing-up: the learned value must lift its simulated return.
@@ -112,6 +114,7 @@ def test_a_value_network_round_trips_through_json(tmp_path):
         mpc.ValueNetwork.from_json(task, doc)
 
 
+@pytest.mark.slow
 def test_a_warm_policy_is_one_more_start_and_only_the_unrolled_gradient_reaches_it():
     task = Pendulum()
     policy = MLPController(jax.random.PRNGKey(0), 3, 1, hidden=(8,), action_low=(-2.0,),
