@@ -76,7 +76,7 @@ def main():
     parser.add_argument("--window", type=int, default=100)
     parser.add_argument("--learning-rate", type=float, default=3e-4)
     parser.add_argument("--gradient", default="implicit", choices=["implicit", "unroll"])
-    parser.add_argument("--target", default="rollout", choices=["rollout", "plan", "best"])
+    parser.add_argument("--target", default="plan", choices=["rollout", "plan", "best"])
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--gym-episodes", type=int, default=100)
     parser.add_argument("--out", type=Path, default=HERE / "results" / "mpc_value.json")

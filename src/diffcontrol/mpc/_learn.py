@@ -145,7 +145,7 @@ def learn_value(
     episodes: int = 64,
     fit_steps: int = 3000,
     fit_learning_rate: float = 3e-3,
-    target: str = "rollout",
+    target: str = "plan",
     steps: int = 30,
     batch: int = 16,
     window: int | None = None,
@@ -177,7 +177,8 @@ def learn_value(
             ``"rollout"``, its cost-to-go along the rollout (to the episode's end, plus the
             network's value of the last state); ``"plan"``, the cost of the plan the planner
             made there (H steps and the network's value of the plan's end: a Bellman backup
-            over H steps, fitted value iteration); ``"best"``, the lower of the two.
+            over H steps, fitted value iteration; the default); ``"best"``, the lower of the two.
+            The first round, when there is no network yet, takes the rollout's.
         steps: Adam steps through the planner (0: the initialisation alone).
         batch: start states per step (fresh draws from ``task.reset`` each step, or ``starts``).
         window: steps of each closed-loop episode of the loss (default the episode length): a
