@@ -329,7 +329,9 @@ def is_planner(doc: dict) -> bool:
     return isinstance(controller, dict) and controller.get("type") == "planner"
 
 
-def planner_document(task: Any, settings: dict, model: dict, metadata: dict) -> dict:
+def planner_document(
+    task: Any, settings: dict, model: dict, metadata: dict, value: dict | None = None
+) -> dict:
     """The ``model.json`` document of a planning controller (``diffcontrol plan``)::
 
         {"format": "diffcontrol-model", "version": 1, "task": "pendulum", "gym_id": ...,
@@ -337,12 +339,17 @@ def planner_document(task: Any, settings: dict, model: dict, metadata: dict) -> 
          "controller": {"type": "planner",
                         "settings": {...},     # settings.PlanConfig's fields
                         "model": {"kind": "simulator"}   # or {"kind": "fitted",
-                       },                                #     "fitted": {fitted.json}}
+                                                         #     "fitted": {fitted.json}}
+                        "value": {...}   # optional: a learned terminal value network
+                       },                #   (mpc.ValueNetwork.to_json, weights as lists)
          "metadata": {...}}
 
     It has no ``network``: the controller is the task's model and a solver, so it runs with
     JAX and the task, not with NumPy alone (``runs.planner_policy`` builds it back).
     """
+    controller = {"type": "planner", "settings": dict(settings), "model": dict(model)}
+    if value is not None:
+        controller["value"] = dict(value)
     return {
         "format": MODEL_FORMAT,
         "version": MODEL_VERSION,
@@ -354,7 +361,7 @@ def planner_document(task: Any, settings: dict, model: dict, metadata: dict) -> 
             "low": np.asarray(task.action_low, float).reshape(-1).tolist(),
             "high": np.asarray(task.action_high, float).reshape(-1).tolist(),
         },
-        "controller": {"type": "planner", "settings": dict(settings), "model": dict(model)},
+        "controller": controller,
         "metadata": dict(metadata),
     }
 
@@ -376,6 +383,8 @@ def _check_planner(doc: dict, bad: Any) -> None:
     model = controller.get("model")
     if not isinstance(model, dict) or model.get("kind") not in ("simulator", "fitted"):
         raise bad("the planner's model is neither {'kind': 'simulator'} nor a fitted model")
+    if "value" in controller and not isinstance(controller["value"], dict):
+        raise bad("the planner's value network is not an object")
 
 
 def _check_model(doc: Any, path: Path) -> None:

@@ -5,6 +5,7 @@
     states, actions, rewards, reports = eqx.filter_jit(planner.episode)(x0, 200)
     result = mpc.distil(task, planner, rounds=10)   # the MLP trained on the planner (DAgger)
     result.save("runs/distilled")                  # model.json: a NumPy policy like any other
+    learned = mpc.learn_value(task, planner)        # a terminal value network, through the plan
 
 A continuous-time task (the swing-ups) is planned through its discrete-time view,
 ``mpc.discretise(task, dt)`` (the action held for ``dt``, RK4), and run against its true ODE by
@@ -22,10 +23,12 @@ from ._config import planner_from_config
 from ._discretise import DiscretisedTask, discretise, ode_episode
 from ._distil import distil, labelled_episodes
 from ._ilqr import ILQR
+from ._learn import ValueResult, closed_loop_loss, learn_value, load_value
 from ._planner import Planner, make_planner
 from ._policy import PlannerPolicy
 from ._problem import Problem, SolveInfo
 from ._shooting import Shooting
+from ._value import ValueNetwork
 
 __all__ = [
     "DiscretisedTask",
@@ -35,9 +38,14 @@ __all__ = [
     "Problem",
     "Shooting",
     "SolveInfo",
+    "ValueNetwork",
+    "ValueResult",
+    "closed_loop_loss",
     "discretise",
     "distil",
     "labelled_episodes",
+    "learn_value",
+    "load_value",
     "make_planner",
     "ode_episode",
     "planner_from_config",

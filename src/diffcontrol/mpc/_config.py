@@ -10,6 +10,7 @@ import equinox as eqx
 import optax
 from jaxtyping import PyTree
 
+from ..errors import ConfigError
 from ..settings import PlanConfig
 from ._ilqr import ILQR
 from ._planner import Planner, make_planner
@@ -21,6 +22,7 @@ def planner_from_config(
     config: PlanConfig,
     params: PyTree | None = None,
     progress: Callable[[str], None] | None = None,
+    value: Any = None,
 ) -> Planner:
     """The ``Planner`` that ``config`` describes, planning through ``task.step`` with
     ``params`` (default ``task.default_params()``).
@@ -30,17 +32,24 @@ def planner_from_config(
     ``config.value_levels`` actions, solved here with the same model and parameters; only
     ``V_0`` is kept). The table is solved again each time a planner is built from a file,
     rather than stored: it is deterministic given the settings, and for Pendulum's 401 grid it
-    takes about half a minute on one core against 130 MB of values.
+    takes about half a minute on one core against 130 MB of values. A learned terminal value
+    (``value``, an ``mpc.ValueNetwork`` from ``mpc.learn_value``) is stored: it is the terminal
+    cost instead.
 
     Raises:
         ConfigError: settings the task cannot take (a loss it does not have, a value grid for
-            a task without a state grid, no action bounds).
+            a task without a state grid, no action bounds, both a value grid and a network).
     """
+    if value is not None and config.value_grid is not None:
+        raise ConfigError(
+            f"value_grid={config.value_grid} and a value network are two terminal costs; "
+            "drop the value grid to plan with the network"
+        )
     if config.solver == "ilqr":
         solver: Any = ILQR(iterations=config.solver_iterations)
     else:
         solver = Shooting(optax.adam(config.learning_rate), iterations=config.solver_iterations)
-    terminal_cost = None
+    terminal_cost = value
     if config.value_grid is not None:
         from .. import optimal
 

@@ -21,7 +21,7 @@ import jax.numpy as jnp
 from jax import lax
 from jaxtyping import Array, Float
 
-from ._problem import Problem
+from ._problem import Problem, stop_gradient
 
 FREE = 1e-4
 """An action within ``FREE`` times the bounds' span of a bound counts as held there."""
@@ -39,7 +39,7 @@ def implicit_plan(problem: Problem, x0: Array, plan: Float[Array, "H m"]) -> Arr
         return jax.grad(lambda u: p.cost(x, u.reshape(shape)))(plan.ravel())
 
     g = gradient(problem, x0)  # carries the derivatives in x0 and the problem
-    fixed_problem, fixed_x0 = lax.stop_gradient((problem, x0))
+    fixed_problem, fixed_x0 = stop_gradient((problem, x0))
     hessian = jax.hessian(lambda u: fixed_problem.cost(fixed_x0, u.reshape(shape)))(plan.ravel())
     both = free[:, None] & free[None, :]
     reduced = jnp.where(both, hessian, jnp.eye(n, dtype=hessian.dtype))

@@ -15,7 +15,7 @@ from jaxtyping import Array, Float, PyTree
 from ..errors import ConfigError
 from ._ilqr import ILQR
 from ._implicit import implicit_plan
-from ._problem import Problem, SolveInfo
+from ._problem import Problem, SolveInfo, as_terminal_cost, stop_gradient
 from ._shooting import Shooting
 
 GRADIENTS = ("unroll", "implicit")
@@ -50,6 +50,12 @@ class Planner(eqx.Module):
         problem: the model, costs and bounds (built from the arguments of ``make_planner``).
         bound_starts: also solve from the two constant plans at the bounds, keep the best.
         gradient: ``"unroll"`` or ``"implicit"``, how the plan is differentiated.
+        warm_policy: a controller ``observation -> action`` (an ``MLPController`` or any
+            ``eqx.Module``), or ``None``: every solve also starts from the plan it proposes
+            (the policy run through the model for H steps) beside the shifted plan, and keeps
+            the better result. Part of the PyTree, so it is trained through the planner
+            (``mpc.learn_value``); with ``gradient="implicit"`` the optimum does not depend on
+            where the solve started, so the policy gets no gradient there (use ``"unroll"``).
     """
 
     task: Any = eqx.field(static=True)
@@ -58,6 +64,7 @@ class Planner(eqx.Module):
     problem: Problem
     bound_starts: bool = eqx.field(static=True, default=False)
     gradient: str = eqx.field(static=True, default="unroll")
+    warm_policy: Any = None
 
     @property
     def action_size(self) -> int:
@@ -68,34 +75,46 @@ class Planner(eqx.Module):
         mid = (self.problem.low + self.problem.high) / 2
         return jnp.broadcast_to(mid, (self.horizon, self.action_size))
 
+    def proposal(self, state: Array) -> Float[Array, "H m"]:
+        """The warm start ``warm_policy`` proposes from ``state``: the policy run through the
+        model for H steps (its actions clipped to the bounds)."""
+        problem, observe = self.problem, self.task.observe
+
+        def one(x, _):
+            u = jnp.clip(self.warm_policy(observe(x)), problem.low, problem.high)
+            return problem.dynamics(x, u), u
+
+        return jax.lax.scan(one, state, None, length=self.horizon)[1].astype(state.dtype)
+
     def plan(self, state: Array, warm: Float[Array, "H m"]) -> tuple[Array, SolveInfo]:
-        """The plan ``[H, m]`` from ``state`` starting at the guess ``warm``, and its report."""
+        """The plan ``[H, m]`` from ``state`` starting at the guess ``warm`` (and, where set,
+        at ``warm_policy``'s proposal and the bounds: the best solve is kept), and its report."""
         problem, start = self.problem, state
+        starts = [warm]
+        if self.warm_policy is not None:
+            starts.append(self.proposal(state))
         if self.gradient == "implicit":  # the solve itself is not differentiated
-            problem, state, warm = jax.lax.stop_gradient((problem, state, warm))
+            problem, state, starts = stop_gradient((problem, state, starts))
         if self.bound_starts:
-            plan, info = self._best_of_starts(problem, state, warm)
+            shape = (self.horizon, self.action_size)
+            starts += [jnp.broadcast_to(b, shape) for b in (problem.low, problem.high)]
+        if len(starts) > 1:
+            plan, info = self._best_of_starts(problem, state, jnp.stack(starts))
         else:
-            plan, info = self.solver.solve(problem, state, warm)
+            plan, info = self.solver.solve(problem, state, starts[0])
+        warm = starts[0]
         safe = jnp.clip(jnp.nan_to_num(warm), problem.low, problem.high)
         plan = jnp.where(info.finite, plan, safe)
         if self.gradient == "implicit":
             plan = implicit_plan(self.problem, start, plan)
         return plan, info
 
-    def _best_of_starts(self, problem: Problem, state: Array, warm: Array):
-        # Three solves at once: from the warm start and from the two constant plans at the
-        # bounds (full torque either way), which escape the local optimum of a plan that
-        # does not swing (a pendulum hanging at rest); the lowest finite cost wins.
-        shape = (self.horizon, self.action_size)
-        starts = jnp.stack(
-            [
-                warm,
-                jnp.broadcast_to(problem.low, shape),
-                jnp.broadcast_to(problem.high, shape),
-            ]
-        )
-        plans, infos = jax.vmap(self.solver.solve, (None, None, 0))(problem, state, starts)
+    def _best_of_starts(self, problem: Problem, state: Array, starts: Array):
+        # Several solves at once: from the warm start, the policy's proposal and the two
+        # constant plans at the bounds (full torque either way), which escape the local
+        # optimum of a plan that does not swing (a pendulum hanging at rest); the lowest
+        # finite cost wins. The problem is closed over (not vmapped: it may hold functions).
+        plans, infos = jax.vmap(lambda s: self.solver.solve(problem, state, s))(starts)
         best = jnp.argmin(jnp.where(infos.finite, infos.cost, jnp.inf))
         return plans[best], jax.tree.map(lambda leaf: leaf[best], infos)
 
@@ -150,6 +169,7 @@ def make_planner(
     bound_starts: bool = False,
     gradient: str = "unroll",
     bounds: tuple[Any, Any] | None = None,
+    warm_policy: Any = None,
 ) -> Planner:
     """A ``Planner`` for ``task``, with its settings checked.
 
@@ -161,7 +181,9 @@ def make_planner(
         loss: the name of the task's built-in step loss (default its first, ``task.losses[0]``).
         step_loss: a loss ``(params, state, action, next_state, reward) -> scalar`` instead.
         terminal_cost: ``cost(state) -> scalar`` of the plan's last state (e.g. minus a value
-            function), or ``None``.
+            function), or ``None``: a plain function (a constant of the solve) or an
+            ``eqx.Module`` such as ``mpc.ValueNetwork``, whose arrays are part of the planner's
+            PyTree and can be trained through it (``mpc.learn_value``).
         terminal_weight: its weight, finite and >= 0.
         bound_starts: also solve from the two constant plans at the action bounds at every
             step and keep the best of the three (three times the work; escapes local optima).
@@ -172,12 +194,18 @@ def make_planner(
             then plans the relaxed action within the bounds given, by default [-1, 1] for a
             ``sign`` head (the CartPole's push, the force ``u * force_mag``), and Gymnasium
             gets ``task.gym_action`` of it (the push's sign).
+        warm_policy: a controller ``observation -> action`` whose H-step rollout through the
+            model is one more start of every solve (see ``Planner``), or ``None``.
 
     Raises:
         ConfigError: a horizon < 1, a negative or non-finite weight or solver setting, a task
-            without action bounds or without the loss named, an unknown gradient.
+            without action bounds or without the loss named, an unknown gradient, a terminal
+            cost or warm policy that is not callable.
     """
     solver = ILQR() if solver is None else solver
+    for name, value in (("terminal_cost", terminal_cost), ("warm_policy", warm_policy)):
+        if value is not None and not callable(value):
+            raise ConfigError(f"{name}={value!r} is not callable; pass a function or a module")
     if gradient not in GRADIENTS:
         raise ConfigError(f"gradient={gradient!r} is not one of {GRADIENTS}")
     if isinstance(horizon, bool) or not isinstance(horizon, int | np.integer) or horizon < 1:
@@ -222,7 +250,7 @@ def make_planner(
     problem = Problem(
         task=task,
         step_loss=step_loss,
-        terminal_cost=terminal_cost,
+        terminal_cost=as_terminal_cost(terminal_cost),
         params=params,
         low=jnp.asarray(low),
         high=jnp.asarray(high),
@@ -235,4 +263,5 @@ def make_planner(
         problem=problem,
         bound_starts=bound_starts,
         gradient=gradient,
+        warm_policy=warm_policy,
     )

@@ -18,11 +18,15 @@ class Problem(eqx.Module):
     ``f`` and the per-step loss are the task's own ``step`` and step loss (for Pendulum the
     Gymnasium dynamics and cost); the model's terminations are ignored (a planner treats the
     plan as if the episode went on).
+
+    ``terminal_cost`` is part of the PyTree: an ``eqx.Module`` (a ``mpc.ValueNetwork``) is
+    differentiated and trained like the model's parameters; a plain function is held in a
+    ``FixedCost`` (static, a constant of the compiled solve).
     """
 
     task: Any = eqx.field(static=True)
     step_loss: Callable = eqx.field(static=True)
-    terminal_cost: Callable | None = eqx.field(static=True)
+    terminal_cost: Any
     params: PyTree
     low: Float[Array, " m"]
     high: Float[Array, " m"]
@@ -53,6 +57,24 @@ class Problem(eqx.Module):
 
     def cost(self, x0: Array, actions: Float[Array, "H m"]) -> Array:
         return self.rollout(x0, actions)[1]
+
+
+class FixedCost(eqx.Module):
+    """A plain function ``cost(state) -> scalar`` as a terminal cost: static (not trained), so
+    that the problem's PyTree holds only arrays."""
+
+    function: Callable = eqx.field(static=True)
+
+    def __call__(self, state: Array) -> Array:
+        return self.function(state)
+
+
+def as_terminal_cost(cost: Any) -> Any:
+    """``cost`` as a ``Problem.terminal_cost``: an ``eqx.Module`` (trainable) as it is, a plain
+    function wrapped in ``FixedCost``, ``None`` as ``None``."""
+    if cost is None or isinstance(cost, eqx.Module):
+        return cost
+    return FixedCost(cost)
 
 
 class SolveInfo(eqx.Module):
@@ -87,6 +109,12 @@ class SolveInfo(eqx.Module):
             converged=last <= tol * jnp.abs(cost),
             finite=jnp.all(jnp.isfinite(plan)) & jnp.isfinite(cost),
         )
+
+
+def stop_gradient(tree: Any) -> Any:
+    """``lax.stop_gradient`` on the arrays of ``tree``, other leaves (a network's activation
+    function) as they are."""
+    return jax.tree.map(lambda x: jax.lax.stop_gradient(x) if eqx.is_array(x) else x, tree)
 
 
 def squash(z: Array, low: Array, high: Array) -> Array:

@@ -35,12 +35,14 @@ class PlanResult:
     plan: PlanConfig
     model: dict
     policy: Any  # the mpc.PlannerPolicy, built once (its terminal value included)
+    value: Any = None  # a learned mpc.ValueNetwork as the terminal cost, stored in model.json
 
     def model_document(self, metrics: dict) -> dict:
         from .. import __version__
 
         meta = {"diffcontrol_version": __version__, "created": metrics["created"]}
-        return io.planner_document(self.task, self.plan.to_json(), self.model, meta)
+        value = None if self.value is None else self.value.to_json()
+        return io.planner_document(self.task, self.plan.to_json(), self.model, meta, value)
 
 
 def planning_model(task: AnyTask, model: dict, where: str = "model.json") -> tuple[AnyTask, Any]:
@@ -82,19 +84,30 @@ def planner_policy(task: AnyTask, doc: dict, progress: Callable[[str], None] | N
             f"{task.name!r}'s; open it with its own task"
         )
     config = PlanConfig.from_json(doc["controller"]["settings"])
+    value = None
+    if "value" in doc["controller"]:
+        from ..mpc import ValueNetwork
+
+        try:
+            value = ValueNetwork.from_json(task, doc["controller"]["value"])
+        except ModelFileError as e:
+            raise ModelFileError(f"model.json: {e}") from None
     try:
-        return _policy(task, config, doc["controller"]["model"], progress)
+        return _policy(task, config, doc["controller"]["model"], progress, value)
     except ConfigError as e:
         raise ModelFileError(
             f"model.json: task {task.name!r} cannot take its planner: {e}"
         ) from None
 
 
-def _policy(task: AnyTask, config: PlanConfig, model: dict, progress: Any) -> Any:
+def _policy(
+    task: AnyTask, config: PlanConfig, model: dict, progress: Any, value: Any = None
+) -> Any:
     from ..mpc import PlannerPolicy, planner_from_config
 
     model_task, params = planning_model(task, model)
-    return PlannerPolicy(planner_from_config(model_task, config, params, progress=progress))
+    planner = planner_from_config(model_task, config, params, progress=progress, value=value)
+    return PlannerPolicy(planner)
 
 
 def plan_run(
@@ -107,6 +120,7 @@ def plan_run(
     final_eval: int | None = None,
     animation: bool = True,
     progress: Callable[[str], None] | None = None,
+    value: Any = None,
 ) -> tuple[Run, list[str]]:
     """Write a planning controller for ``task`` as a run directory: ``model.json`` (the
     settings and the model), ``metrics.json`` (the final evaluation, per-step solve reports
@@ -121,6 +135,8 @@ def plan_run(
             of the task's simulator; its data's system is then where it is evaluated.
         env_id: with ``model``: the real system's Gymnasium id where the fit names one of yours.
         final_eval: evaluation episodes (``None``: the task's default; 0 skips).
+        value: a learned terminal value (``mpc.ValueNetwork``, from ``mpc.learn_value``) as
+            the terminal cost; its weights are stored in ``model.json``.
 
     Returns:
         The ``Run`` and the names of the files written.
@@ -141,6 +157,11 @@ def plan_run(
             "plan it from Python through mpc.discretise(task, dt) (docs/planning.md)"
         )
     say = progress or (lambda line: None)
+    if value is not None:
+        from ..mpc import ValueNetwork
+
+        if not isinstance(value, ValueNetwork) or value.task.name != task.name:
+            raise ConfigError(f"value={value!r} is not an mpc.ValueNetwork of task {task.name!r}")
     real, info = None, {"kind": "simulator"}
     if model is not None:
         from ..identify.fitted import read_fitted, real_system
@@ -153,7 +174,7 @@ def plan_run(
     out = io.prepare_run_dir(out_dir, run, resume=False)
     try:
         t0 = time.perf_counter()
-        policy = _policy(task, config, info, say)
+        policy = _policy(task, config, info, say, value)
         metrics = {
             "created": io.now_iso(),
             "planner": {"settings": config.to_json(), "build_seconds": time.perf_counter() - t0},
@@ -164,7 +185,7 @@ def plan_run(
         planner = policy.planner  # judged with its parameters where it plans through the task
         params = planner.problem.params if planner.task is task else task_params(task)
         config_ = task.default_config()  # the run's training settings: none, the defaults
-        result = PlanResult(task, planner, config_, params, metrics, config, info, policy)
+        result = PlanResult(task, planner, config_, params, metrics, config, info, policy, value)
         run_, files = save_run(
             result, out, final_eval=final_eval, animation=animation, real=real, progress=say
         )
