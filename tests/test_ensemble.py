@@ -203,3 +203,23 @@ def test_cli_fits_an_ensemble_whose_file_predicts_as_the_fit_did(task, data, tmp
     code = _exit_code(argv)
     err = capsys.readouterr().err.strip()
     assert code == 2 and "member 1" in err and len(err.splitlines()) == 1, err
+
+
+@pytest.mark.slow
+def test_the_loop_fits_ensembles_and_books_their_spread_on_the_new_data(tmp_path, capsys):
+    out = tmp_path / "loop"
+    argv = ["loop", "pendulum", "--env", "diffcontrol/PendulumFriction-v0", "--env-arg", "g=12"]
+    argv += ["--env-arg", "friction=0.1", "--rounds", "2", "--episodes", "1", "--updates", "4"]
+    argv += ["--eval-episodes", "2", "--out", str(out), "--quiet", "--model", "hybrid"]
+    assert _exit_code([*argv, "--members", "2", "--model", "params"]) == 2
+    assert "grey box has no network" in capsys.readouterr().err
+    assert not (out / "loop.json").exists()
+    assert _exit_code([*argv, "--members", "2"]) == 0
+    doc = json.loads((out / "loop.json").read_text())
+    assert doc["settings"]["members"] == 2
+    first, second = doc["rounds"]
+    assert "spread" not in first["model_error_on_new_data"]  # the start physics: no members
+    assert second["model_error_on_new_data"]["spread"] > 0  # round 1's ensemble, before refit
+    assert "the members' spread there" in capsys.readouterr().out
+    fitted = json.loads((out / "round_2" / "fit" / "fitted.json").read_text())
+    assert len(fitted["network"]["members"]) == 2
