@@ -22,6 +22,12 @@ on the real system. The held-out prediction errors (RMS over the 3 observations,
 
 Prints two tables and writes benchmarks/results/fit_gap_pendulum.json (machine, date, every
 figure).
+
+With ``--members K`` an ensemble of K black boxes (``fit_model(..., members=K)``, fitted once)
+is added, trained through with each weight of ``--penalties`` (the members' spread in the
+training loss; a column ``ensemble-wW`` each); ``--kinds`` runs a subset of the columns
+(nominal and true are always run: the gap needs them). The file is then
+``fit_gap_pendulum-ensembleK.json``.
 """
 
 from __future__ import annotations
@@ -58,26 +64,43 @@ def record_real(seed: int, episodes: int = EPISODES):
     return dataclasses.replace(data, observations=noisy)
 
 
-def fit_all(task, seed: int) -> tuple[dict, dict, dict]:
+def fit_all(task, seed: int, kinds: tuple, members: int, penalties: tuple, bootstrap: bool):
     """The fitted models (label -> (task to train/predict with, its params)), their
-    held-out prediction errors and the fit seconds."""
+    held-out prediction errors, the fit seconds and (for an ensemble) its mean spread."""
     train, held_out = record_real(seed).split(FIT_EPISODES)
     nominal = task.default_params()
-    fitted, seconds = {"nominal": (task, nominal)}, {}
-    t0 = time.perf_counter()
-    grey = identify.fit_parameters(task, train, ("g", "friction"))
-    seconds["params"] = time.perf_counter() - t0
-    fitted["params"] = (task, grey.params)
-    for kind in ("hybrid", "neural"):
+    fitted, seconds, extra = {"nominal": (task, nominal)}, {}, {}
+    if "params" in kinds:
         t0 = time.perf_counter()
-        result = identify.fit_model(task, train, kind, seed=seed)
-        seconds[kind] = time.perf_counter() - t0
-        fitted[kind] = (identify.model_task(task, result.model), result.model)
+        grey = identify.fit_parameters(task, train, ("g", "friction"))
+        seconds["params"] = time.perf_counter() - t0
+        fitted["params"] = (task, grey.params)
+        extra = {"params_values": grey.values, "params_standard_errors": grey.standard_errors}
+    for kind in ("hybrid", "neural"):
+        if kind in kinds:
+            t0 = time.perf_counter()
+            result = identify.fit_model(task, train, kind, seed=seed)
+            seconds[kind] = time.perf_counter() - t0
+            fitted[kind] = (identify.model_task(task, result.model), result.model)
+    if members > 1:
+        t0 = time.perf_counter()
+        result = identify.fit_model(
+            task, train, "neural", seed=seed, members=members, bootstrap=bootstrap
+        )
+        seconds["ensemble"] = time.perf_counter() - t0
+        for w in penalties:
+            model = dataclasses.replace(
+                result.model, correction=dataclasses.replace(result.model.correction, penalty=w)
+            )
+            fitted[f"ensemble-w{w:g}"] = (identify.model_task(task, model), model)
+        extra["ensemble_spread"] = {
+            name: identify.ensemble.mean_spread(task, result.model, d)
+            for name, d in (("fit", train), ("held_out", held_out))
+        }
     errors = {
         label: {h: e["rmse"] for h, e in identify.prediction_errors(t, p, held_out).items()}
         for label, (t, p) in fitted.items()
     }
-    extra = {"params_values": grey.values, "params_standard_errors": grey.standard_errors}
     return fitted, errors, {"fit_seconds": seconds, **extra}
 
 
@@ -87,17 +110,19 @@ def real_return(task, controller) -> dict:
     return {"mean": ev.mean, "std": ev.std}
 
 
-def run(seed: int, restarts: int) -> dict:
+def run(seed: int, restarts: int, kinds: tuple, ensemble: tuple) -> dict:
     task = diffcontrol.make("pendulum")
-    fitted, errors, extra = fit_all(task, seed)
+    fitted, errors, extra = fit_all(task, seed, kinds, *ensemble)
     config = task.default_config().replace(seed=seed)
     plans = {label: (t, config) for label, (t, _) in fitted.items()}
     plans["true"] = (task, config.replace(params=tuple(REAL[1].items())))
-    grey = fitted["params"][1]
-    grey_values = (("g", float(grey.g)), ("friction", float(grey.friction)))
-    plans["params"] = (task, config.replace(params=grey_values))
+    if "params" in fitted:
+        grey = fitted["params"][1]
+        grey_values = (("g", float(grey.g)), ("friction", float(grey.friction)))
+        plans["params"] = (task, config.replace(params=grey_values))
+    labels = [k for k in KINDS if k in plans][:-1] + sorted(set(plans) - set(KINDS)) + ["true"]
     returns, train_seconds, tries = {}, {}, {}
-    for label in KINDS:
+    for label in labels:
         t, cfg = plans[label]
         t0 = time.perf_counter()
         runs = []
@@ -109,11 +134,13 @@ def run(seed: int, restarts: int) -> dict:
         returns[label] = {**real_return(task, controller), "on_model": model_return}
         tries[label] = {"model_returns": [r[0] for r in runs], "chosen": best_j}
         print(
-            f"  seed {seed} {label:8} real-system return {returns[label]['mean']:8.1f}", flush=True
+            f"  seed {seed} {label:8} real-system return {returns[label]['mean']:8.1f} "
+            f"({train_seconds[label]:.0f} s)",
+            flush=True,
         )
     r = {k: v["mean"] for k, v in returns.items()}
     gap = r["true"] - r["nominal"]
-    closed = {k: (r[k] - r["nominal"]) / gap for k in ("params", "hybrid", "neural")}
+    closed = {k: (r[k] - r["nominal"]) / gap for k in labels if k not in ("nominal", "true")}
     return {
         "seed": seed,
         "real_return": returns,
@@ -136,21 +163,33 @@ def main() -> None:
         help="train K controller seeds through each model and keep the one with the best "
         "return on that model (as a user without the real system would); default 1",
     )
+    parser.add_argument("--kinds", default=",".join(KINDS[1:-1]), help="of params,hybrid,neural")
+    parser.add_argument("--members", type=int, default=1, help="K > 1 adds a K-member ensemble")
+    parser.add_argument("--penalties", default="1", help="the ensemble's penalty weights, W,W")
+    parser.add_argument("--bootstrap", action="store_true", help="members fit resamples")
+    parser.add_argument("--first-seed", type=int, default=0)
     args = parser.parse_args()
-    rows = [run(s, args.restarts) for s in range(args.seeds)]
+    kinds = tuple(k for k in args.kinds.split(",") if k)
+    penalties = tuple(float(w) for w in args.penalties.split(","))
+    ensemble = (args.members, penalties, args.bootstrap)
+    seeds = range(args.first_seed, args.first_seed + args.seeds)
+    rows = [run(s, args.restarts, kinds, ensemble) for s in seeds]
+    cols = list(rows[0]["real_return"])
+    gaps = [k for k in cols if k not in ("nominal", "true")]
     print("\nreturn on the real system (100 episodes), controller trained through each model")
-    print("seed  " + "".join(f"{k:>10}" for k in KINDS) + "   gap closed: params / hybrid / neural")
+    print("seed  " + "".join(f"{k:>14}" for k in cols) + "   gap closed: " + " / ".join(gaps))
     for r in rows:
-        rets = "".join(f"{r['real_return'][k]['mean']:10.1f}" for k in KINDS)
-        gc = " / ".join(
-            f"{100 * r['gap_closed'][k]:5.1f} %" for k in ("params", "hybrid", "neural")
-        )
+        rets = "".join(f"{r['real_return'][k]['mean']:14.1f}" for k in cols)
+        gc = " / ".join(f"{100 * r['gap_closed'][k]:5.1f} %" for k in gaps)
         print(f"{r['seed']:4}  {rets}   {gc}")
     print("\nheld-out RMS prediction error (1 / 10 / 50 steps ahead)")
     for r in rows:
         for label, e in r["held_out_rmse"].items():
             print(f"seed {r['seed']} {label:8} {e[1]:.2e} / {e[10]:.2e} / {e[50]:.2e}")
     name = "fit_gap_pendulum" + (f"-best{args.restarts}" if args.restarts > 1 else "")
+    name += f"-ensemble{args.members}" if args.members > 1 else ""
+    name += "-bootstrap" if args.bootstrap else ""
+    name += f"-seeds{args.first_seed}-{seeds[-1]}" if args.first_seed else ""
     out = HERE / "results" / f"{name}.json"
     doc = {
         "machine": machine(),
@@ -161,6 +200,14 @@ def main() -> None:
         "evaluation": f"{EVAL_EPISODES} episodes on the real system, reset seeds 0-{EVAL_EPISODES - 1}",
         "restarts": f"{args.restarts} training seed(s) (S + 1000 j) per model, the best on the "
         "model's own simulator kept",
+        "columns": cols,
+        "ensemble": {
+            "members": args.members,
+            "penalties": list(penalties),
+            "bootstrap": args.bootstrap,
+        }
+        if args.members > 1
+        else None,  # fmt: skip
         "runs": rows,
     }
     out.write_text(json.dumps(doc, indent=1) + "\n")

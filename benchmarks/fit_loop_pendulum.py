@@ -13,7 +13,9 @@ episodes (reset seeds 0-99, as in ``fit_gap_pendulum.py``).
 
     taskset -c 0 python benchmarks/fit_loop_pendulum.py [--seeds 3] [--kinds hybrid,neural]
 
-Prints a table and writes benchmarks/results/fit_loop_pendulum.json.
+Prints a table and writes benchmarks/results/fit_loop_pendulum.json. ``--members K`` fits
+ensembles of K networks (``--uncertainty-penalty W`` their penalty, ``--explore-noise F`` the
+noise of the controller's recording; written to ``fit_loop_pendulum-ensembleK.json``).
 """
 
 from __future__ import annotations
@@ -34,10 +36,10 @@ ARGS = ["--env", "diffcontrol/PendulumFriction-v0", "--env-arg", "g=12", "--env-
 ARGS += ["friction=0.1", "--rounds", "2", "--episodes", "5", "--eval-episodes", "100"]
 
 
-def run(kind: str, seed: int) -> dict:
+def run(kind: str, seed: int, extra: list[str]) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "loop"
-        argv = ["loop", "pendulum", *ARGS, "--model", kind, "--seed", str(seed)]
+        argv = ["loop", "pendulum", *ARGS, "--model", kind, "--seed", str(seed), *extra]
         code = cli([*argv, "--out", str(out), "--quiet"])
         if code:
             raise SystemExit(f"diffcontrol loop failed with status {code}")
@@ -49,15 +51,27 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=3)
     parser.add_argument("--kinds", default="hybrid,neural")
+    parser.add_argument("--first-seed", type=int, default=0)
+    parser.add_argument("--members", type=int, default=1)
+    parser.add_argument("--uncertainty-penalty", type=float, default=None)
+    parser.add_argument("--explore-noise", type=float, default=None)
     args = parser.parse_args()
-    rows = [run(k, s) for k in args.kinds.split(",") for s in range(args.seeds)]
+    extra = ["--members", str(args.members)] if args.members > 1 else []
+    for flag in ("uncertainty_penalty", "explore_noise"):
+        if getattr(args, flag) is not None:
+            extra += ["--" + flag.replace("_", "-"), str(getattr(args, flag))]
+    seeds = range(args.first_seed, args.first_seed + args.seeds)
+    rows = [run(k, s, extra) for k in args.kinds.split(",") for s in seeds]
     print("\nreturn on the real system (100 episodes) after each round")
     print("model    seed   round 1 (5 random episodes)   round 2 (+5 of its controller)")
     for r in rows:
         rets = [f"{x['real_return']:10.1f}" for x in r["rounds"]]
         print(f"{r['kind']:8} {r['seed']:4}   {rets[0]:>27}   {rets[1]:>30}")
-    out = HERE / "results" / "fit_loop_pendulum.json"
-    doc = {"machine": machine(), "command": "diffcontrol loop pendulum " + " ".join(ARGS)}
+    name = "fit_loop_pendulum" + (f"-ensemble{args.members}" if args.members > 1 else "")
+    name += f"-seeds{seeds[0]}-{seeds[-1]}" if args.first_seed else ""
+    out = HERE / "results" / f"{name}.json"
+    command = "diffcontrol loop pendulum " + " ".join([*ARGS, *extra])
+    doc = {"machine": machine(), "command": command}
     out.write_text(json.dumps({**doc, "runs": rows}, indent=1) + "\n")
     print(f"wrote {out}")
 

@@ -100,6 +100,23 @@ class FitConfig(_Settings):
     )
     hidden: tuple[int, ...] = _opt("hidden layer widths of a network", (32, 32), "W,W")
     seed: int = _opt("the network's initial weights", 0, "S", low=0)
+    members: int = _opt(
+        "hybrid/neural: networks of an ensemble, fitted together from their own initial "
+        "weights; the model is their mean and their spread its uncertainty (5 is usual)",
+        1,
+        "K",
+        high=64,
+    )
+    bootstrap: bool = _opt(
+        "an ensemble's members each fit a resample (with replacement) of the data", False
+    )
+    uncertainty_penalty: float = _opt(
+        "an ensemble's weight of its members' spread (in units of the typical state change) "
+        "in every step's loss when training through it",
+        1.0,
+        "W",
+        form="nonneg",
+    )
     window: int = _opt("steps predicted from every recorded state", 10, "N")
     steps: int | None = _opt("Adam steps", None, "N", low=0)
     lm_steps: int = _opt("Levenberg-Marquardt steps of a grey box", 20, "N", low=0)
@@ -151,6 +168,19 @@ class LoopConfig(_Settings):
         "(repeatable), e.g. g=8, so that it is not handed the truth",
         {},
         "NAME=VALUE",
+    )
+    members: int = _opt(
+        "hybrid/neural: networks of an ensemble (their mean is the model, their spread its "
+        "uncertainty; 5 is usual)",
+        1,
+        "K",
+        high=64,
+    )
+    uncertainty_penalty: float = _opt(
+        "an ensemble's weight of its members' spread in every step's training loss",
+        1.0,
+        "W",
+        form="nonneg",
     )
     explore_noise: float = _opt(
         "noise on the controller's actions while it records, a fraction of the action's half "

@@ -7,7 +7,8 @@
   ``record_data`` is a task's own recording (its ``record_data`` hook).
 - **Models**: ``params`` (grey box: the task's physical parameters), ``hybrid`` (the physics
   plus a ``Correction`` network) and ``neural`` (a network alone), of a discrete step
-  (``HybridModel``, ``NeuralModel``, ``model_task``) or of a vector field (the task's own
+  (``HybridModel``, ``NeuralModel``, ``model_task``; ``members=K`` makes the network an
+  ``Ensemble`` of K, whose spread is the model's uncertainty) or of a vector field (the task's own
   model, ``identify.ode``).
 - **Fitting**: ``fit(task, data, model, **settings) -> FitResult``, by the task's route
   (``task.model_route()``: its step, its vector field, or the task's own); the prediction
@@ -25,6 +26,7 @@ from ._fit import FitDir, fit, fit_dir, save_fit
 from ._loop import loop
 from ._shooting import HORIZONS, MODEL_TYPES, NETWORK_MODELS, FitResult
 from .data import TrajectoryData, concat, read_trajectories
+from .ensemble import Ensemble, mean_spread
 from .fitted import (
     FITTED_FILE,
     FITTED_FORMAT,
@@ -49,6 +51,7 @@ __all__ = [
     "MODEL_TYPES",
     "NETWORK_MODELS",
     "Correction",
+    "Ensemble",
     "FitDir",
     "FitResult",
     "HybridModel",
@@ -67,6 +70,7 @@ __all__ = [
     "fitted_model",
     "fitted_physics",
     "loop",
+    "mean_spread",
     "model_task",
     "predict",
     "prediction_errors",

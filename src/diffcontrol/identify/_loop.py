@@ -11,7 +11,8 @@ The bookkeeping is in the open (``loop.json``, one row per round): the real envi
 used so far (every recorded transition, exploration and the controllers' episodes; the
 evaluation episodes are not counted, as for RL in ``diffcontrol compare``), the model's error
 on the round's new data *before* it is fitted to it (how wrong the model was where the
-controller went), and the controller's return on the real system.
+controller went; for an ensemble also its members' mean spread there: how unsure it was), and
+the controller's return on the real system.
 """
 
 from __future__ import annotations
@@ -120,11 +121,16 @@ def loop(
         "updates": updates,
         "seed": seed,
     }
+    ensemble = {"members": c.members, "uncertainty_penalty": c.uncertainty_penalty}
+    if c.members > 1 and model == "params":
+        raise ConfigError(f"--members {c.members}: a grey box has no network; drop --members")
     # new settings only where set, so a loop written before them still resumes
     settings.update({k: v for k, v in [("start", start), ("explore_noise", explore_noise),
                                        ("eval_seed", eval_seed), ("steps_per_round", steps),
                                        ("fit_steps", c.fit_steps)]
                      if v})  # fmt: skip
+    if c.members > 1:
+        settings.update(ensemble)
     state = _start(out, settings, resume)
     state["start"] = _start_doc(task, model, start)
     say = progress or (lambda line: None)
@@ -186,7 +192,7 @@ def loop(
             model_error(predictor_of(task, before, model, start), new) if episodes_of_env else None
         )
         if not (here / "fit" / "fitted.json").exists():
-            fit_config = FitConfig(names=names, holdout=0.0, steps=c.fit_steps)
+            fit_config = FitConfig(names=names, holdout=0.0, steps=c.fit_steps, **ensemble)
             fitted = fit_dir(
                 task, out / "data.csv", model, here / "fit", fit_config,
                 progress=progress, **_start_settings(task, model, start),
@@ -242,6 +248,8 @@ def loop(
         ret = row["real_return"]
         fitted_txt = ", ".join(f"{n} = {v:.4g}" for n, v in row["fitted_parameters"].items())
         err = f"; model error on the new data {error['rmse_1']:.3g} (1 step)" if error else ""
+        if error and error.get("spread") is not None:
+            err += f", the members' spread there {error['spread']:.3g}"
         report(
             f"round {k}: {row['episodes']} episodes ({row['real_steps']} real steps)"
             + (f", {fitted_txt}" if fitted_txt else f", fit loss {row['fit_loss']:.3g}")

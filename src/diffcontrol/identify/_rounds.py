@@ -86,14 +86,18 @@ def predictor_of(task: Any, fit_doc: dict | None, model: str, start: dict[str, f
 
 def model_error(predictor: Any, data: Any, horizons: tuple[int, ...] = (1, 10)) -> dict | None:
     """RMS error of ``predictor`` on ``data`` (``steps.prediction_errors``: open loop from every
-    recorded state with the recorded actions), ``{"rmse_H": value}`` per horizon; None without
-    a predictor."""
+    recorded state with the recorded actions), ``{"rmse_H": value}`` per horizon, and for an
+    ensemble its members' mean spread on the data (``"spread"``: how unsure it was there);
+    None without a predictor."""
+    from .ensemble import mean_spread
     from .steps import prediction_errors
 
     if predictor is None:
         return None
     errors = prediction_errors(*predictor, data, horizons)
-    return {f"rmse_{h}": _finite(errors[h]["rmse"]) for h in horizons}
+    found = {f"rmse_{h}": _finite(errors[h]["rmse"]) for h in horizons}
+    spread = mean_spread(predictor[0], predictor[1], data)
+    return found if spread is None else {**found, "spread": _finite(spread)}
 
 
 def _finite(x: float) -> float | None:

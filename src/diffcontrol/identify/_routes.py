@@ -97,13 +97,16 @@ class StepRoute(TrajectoryRoute):
         if model_type == "params":
             from .steps import fit_parameters
 
+            _one_network(s, "a grey box (--model params) has no network")
+
             keys = ("window", "steps", "learning_rate", "lm_steps", "init")
             return fit_parameters(
                 task, data, s.get("names"), **{k: s[k] for k in keys if s.get(k) is not None}
             )
         from .hybrid import fit_model
 
-        keys = ("params", "window", "steps", "learning_rate", "hidden", "seed")
+        keys = ("params", "window", "steps", "learning_rate", "hidden", "seed", "members")
+        keys += ("bootstrap", "uncertainty_penalty")
         return fit_model(task, data, model_type, **{k: s[k] for k in keys if s.get(k) is not None})
 
     def predictor(self, task: Any, result: FitResult | None) -> tuple[Any, Any]:
@@ -131,17 +134,22 @@ class StepRoute(TrajectoryRoute):
             model_doc = {"parameters": parameters_doc(result)}
             model_doc["all_parameters"] = params_dict(result.params)
         else:
+            from .ensemble import Ensemble, ensemble_to_dict
             from .network import correction_to_dict
 
+            c = result.model.correction
+            net = ensemble_to_dict(c) if isinstance(c, Ensemble) else correction_to_dict(c)
             model_doc = {
                 "all_parameters": params_dict(result.model.params),
                 "network": {
                     "what": "hybrid: next state = the task's step with all_parameters + network("
                     "observation, action); neural: next state = state + network(observation, "
-                    "action)",
+                    "action); an ensemble's members each give a network, the model uses their "
+                    "mean, and training through it adds uncertainty_penalty times their spread "
+                    "to every step's loss",
                     "inputs": "observation then action",
                     "parameters": result.num_parameters,
-                    **correction_to_dict(result.model.correction),
+                    **net,
                 },
             }
         fit_settings = dict(
@@ -154,6 +162,19 @@ class StepRoute(TrajectoryRoute):
             fit_settings["lm_steps"] = settings.get("lm_steps", 20)
         else:
             fit_settings.update(hidden=list(settings["hidden"]), seed=settings["seed"])
+            members = settings.get("members", 1)
+            if members > 1:
+                from .ensemble import mean_spread
+
+                spread = {"fit": mean_spread(task, result.model, train)}
+                if held_out is not None:
+                    spread["held_out"] = mean_spread(task, result.model, held_out)
+                fit_settings.update(
+                    members=members,
+                    bootstrap=bool(settings.get("bootstrap")),
+                    uncertainty_penalty=settings.get("uncertainty_penalty"),
+                    mean_spread=spread,
+                )
         body = {
             **model_doc,
             "fit": fit_settings,
@@ -181,6 +202,12 @@ class StepRoute(TrajectoryRoute):
             lines.append(
                 f"{result.model_type} model: {result.num_parameters} weights, {result.message}"
             )
+        if "mean_spread" in fit_settings:
+            where = " / ".join(f"{v:.3g} ({k.replace('_', '-')})" for k, v in spread.items())
+            lines.append(
+                f"ensemble of {fit_settings['members']}: mean spread of the members {where}, "
+                "in units of the typical state change"
+            )
         if errors is not None:
             for h in HORIZONS:
                 nom, fit = errors["nominal"][h]["rmse"], errors["fitted"][h]["rmse"]
@@ -205,6 +232,8 @@ class ODERoute(TrajectoryRoute):
 
     def fit(self, task: Any, data: Any, model_type: str, **s: Any) -> FitResult:
         from .ode import fit_vector_field
+
+        _one_network(s, f"{task.name}'s vector-field models have no ensembles yet")
 
         keys = ("window", "steps", "learning_rate", "lm_steps", "hidden", "seed", "weight_decay")
         keys += ("substeps",)
@@ -270,6 +299,19 @@ class ODERoute(TrajectoryRoute):
                     f"fitted {fit:.3g}"
                 )
         return body, lines
+
+
+def _one_network(settings: dict, why: str) -> None:
+    """Refuse ``members`` other than 1 where a route fits no ensemble.
+
+    Raises:
+        ConfigError: naming the value and why.
+    """
+    from ..errors import ConfigError
+
+    members = settings.get("members", 1)
+    if members not in (None, 1):
+        raise ConfigError(f"--members {members}: {why}; drop --members, or fit hybrid/neural")
 
 
 STEPS = StepRoute()

@@ -21,6 +21,7 @@ import equinox as eqx
 from ..errors import ConfigError, ModelFileError
 from ..io import scalar_arguments
 from ._shooting import MODEL_TYPES, NETWORK_MODELS
+from .ensemble import ensemble_from_dict
 from .hybrid import HybridModel, NeuralModel
 from .network import correction_from_dict
 
@@ -90,11 +91,19 @@ def fitted_physics(task: Any, doc: dict[str, Any]) -> Any:
 
 def fitted_model(task: Any, doc: dict[str, Any]) -> HybridModel | NeuralModel | Any:
     """The model of a fitted file: the physical parameters (``params``), or a ``HybridModel``
-    / ``NeuralModel`` (use ``model_task(task, model)`` to train or predict with it)."""
+    / ``NeuralModel`` whose correction is one network or an ``Ensemble`` (use
+    ``model_task(task, model)`` to train or predict with it).
+
+    Raises:
+        ModelFileError: a malformed network or ensemble (one line naming it)."""
     physics = fitted_physics(task, doc)
     if doc["model"] == "params":
         return physics
-    correction = correction_from_dict(doc["network"], doc.get("_path", "the fitted model"))
+    where = doc.get("_path", "the fitted model")
+    if "members" in doc["network"]:  # an ensemble
+        correction = ensemble_from_dict(doc["network"], where)
+    else:
+        correction = correction_from_dict(doc["network"], where)
     cls = HybridModel if doc["model"] == "hybrid" else NeuralModel
     return cls(physics, correction)
 

@@ -20,6 +20,7 @@ from jaxtyping import Array
 from ..errors import ConfigError, InsufficientDataError
 from ..tasks._base import Task
 from ._shooting import NETWORK_MODELS, FitResult, adam_fit, check_settings
+from .ensemble import Ensemble, bootstrap_counts, check_members, make_ensemble
 from .network import Correction
 from .steps import _windows, check_data, predict, task_actions
 
@@ -66,7 +67,10 @@ def model_task(task: Any, model: HybridModel | NeuralModel) -> Any:
     termination and the losses are the task's own, computed with ``model.params``). So
     ``diffcontrol.train(model_task(task, model), config)`` trains a controller through the
     fitted model, and ``fitting.prediction_errors(model_task(task, model), model, data)``
-    measures it.
+    measures it. A model whose correction is an ``Ensemble`` steps with the members' mean, and
+    every step's training loss gains ``penalty * spread`` (``Ensemble.spread`` at the step's
+    observation and action; the reward, and so the returns reported on the model, stay the
+    task's).
     """
     if not isinstance(task, Task):
         raise ValueError(f"model_task needs a discrete-time control task, got {task.name!r}")
@@ -87,7 +91,15 @@ def model_task(task: Any, model: HybridModel | NeuralModel) -> Any:
 
         def step_loss(self, name):
             inner = cls.step_loss(self, name)
-            return lambda params, *rest: inner(params.params, *rest)
+            if not isinstance(model.correction, Ensemble) or model.correction.penalty == 0:
+                return lambda params, *rest: inner(params.params, *rest)
+
+            def penalised(params, state, action, *rest):  # the members' doubt, where it goes
+                doubt = params.correction.spread(jnp.concatenate([task.observe(state), action]))
+                loss = inner(params.params, state, action, *rest)
+                return loss + params.correction.penalty * doubt
+
+            return penalised
 
         def state_grid(self, params):  # the physical part's (a planner's terminal value)
             return cls.state_grid(self, params.params)
@@ -114,6 +126,9 @@ def fit_model(
     learning_rate: float = 3e-3,
     hidden: Sequence[int] = (32, 32),
     seed: int = 0,
+    members: int = 1,
+    bootstrap: bool = False,
+    uncertainty_penalty: float = 1.0,
 ) -> FitResult:
     """Fit a hybrid or black-box model of ``task``'s system to recorded ``data``.
 
@@ -137,6 +152,13 @@ def fit_model(
         learning_rate: Adam's initial step size (cosine-decayed).
         hidden: the network's hidden layer widths.
         seed: the seed of the network's initial weights.
+        members: the number of networks: more than 1 fits an ``Ensemble`` (each member from
+            its own key, all in one compiled program; each member's loss is its own windows'
+            error, and the model predicts with their mean).
+        bootstrap: each member of an ensemble fits its own resample of the windows (with
+            replacement), not all of them.
+        uncertainty_penalty: an ensemble's weight of its spread in the training loss through
+            it (``model_task``).
 
     Raises:
         ConfigError: an unknown model type or a bad setting, or a task that cannot be fitted.
@@ -149,6 +171,7 @@ def fit_model(
             f"unknown model kind {model_type!r}; choose one of {list(NETWORK_MODELS)}"
         )
     check_settings(window, steps, learning_rate)
+    check_members(members, uncertainty_penalty)
     if not hidden or any(not isinstance(h, int) or h < 1 for h in hidden):
         raise ConfigError(f"hidden must be positive layer widths, got {list(hidden)!r}")
     check_data(task, data)
@@ -161,11 +184,12 @@ def fit_model(
         )
     with jax.enable_x64(True):
         return _fit_model(
-            task, data, model_type, params, window, steps, learning_rate, hidden, seed
-        )
+            task, data, model_type, params, window, steps, learning_rate, hidden, seed,
+            (members, bool(bootstrap), float(uncertainty_penalty)),
+        )  # fmt: skip
 
 
-def _fit_model(task, data, model_type, params, window, steps, learning_rate, hidden, seed):
+def _fit_model(task, data, model_type, params, window, steps, learning_rate, hidden, seed, ens):
     batch = _windows(task, data, window)
     if batch is None:
         longest = max(len(e.actions) for e in data.episodes())
@@ -185,37 +209,48 @@ def _fit_model(task, data, model_type, params, window, steps, learning_rate, hid
     else:
         target = next_states - states
     inputs = np.concatenate([obs, actions], axis=1)
-    correction = Correction(
-        jax.random.PRNGKey(seed),
-        inputs.shape[1],
-        states.shape[1],
-        tuple(hidden),
+    scalings = dict(
         in_offset=inputs.mean(axis=0),
         in_scale=1.0 / np.maximum(inputs.std(axis=0), 1e-6),
         out_scale=_spread(target),
         zero_output=model_type == "hybrid",
     )
+    members, bootstrap, penalty = ens
+    key, sizes = jax.random.PRNGKey(seed), (inputs.shape[1], states.shape[1], tuple(hidden))
+    if members == 1:
+        correction = Correction(key, *sizes, **scalings)
+    else:
+        correction = make_ensemble(key, members, *sizes, penalty=penalty, **scalings)
     model_cls = HybridModel if model_type == "hybrid" else NeuralModel
     model = f64(model_cls(physics, correction))
     fitted_task = model_task(task, model)
     trainable, static = eqx.partition(model, eqx.is_inexact_array)
     # only the network's weights train: the physics and the fixed scalings do not
     frozen = jax.tree.map(lambda _: False, trainable)
+    net = lambda m: m.correction.net if members == 1 else m.correction.members.net  # noqa: E731
     train_spec = eqx.tree_at(
-        lambda m: [l for layer in m.correction.net.layers for l in (layer.weight, layer.bias)],
+        lambda m: [l for layer in net(m).layers for l in (layer.weight, layer.bias)],
         frozen,
         replace_fn=lambda _: True,
     )
     weights, rest = eqx.partition(trainable, train_spec)
 
-    def residuals(w, batch):
-        m = eqx.combine(w, rest, static)
+    def errors(m, batch):  # the mean squared error of every window [N]
         states, actions, targets = batch
         pred = jax.vmap(predict, in_axes=(None, None, 0, 0))(fitted_task, m, states, actions)
-        return pred - targets
+        return jnp.mean((pred - targets) ** 2, axis=(1, 2))
+
+    counts = jnp.asarray(bootstrap_counts(batch[0].shape[0], members, seed, bootstrap))
 
     def loss(w, batch):
-        return jnp.mean(residuals(w, batch) ** 2)
+        m = eqx.combine(w, rest, static)
+        if members == 1:
+            return jnp.mean(errors(m, batch))
+
+        def member_loss(member, count):  # each member alone, on its own (re)sample
+            return jnp.sum(count * errors(model_cls(m.params, member), batch)) / jnp.sum(count)
+
+        return jnp.mean(eqx.filter_vmap(member_loss)(m.correction.members, counts))
 
     schedule = optax.cosine_decay_schedule(learning_rate, max(steps, 1), alpha=0.05)
     optimiser = optax.adam(schedule)
@@ -224,7 +259,10 @@ def _fit_model(task, data, model_type, params, window, steps, learning_rate, hid
         loss, weights, optimiser, steps, batch, "weights"
     )
     if not diverged:
-        message = f"mean squared window error {best_loss:.3g} (nominal physics: {nominal_loss:.3g})"
+        each = " (each member's, averaged)" if members > 1 else ""
+        message = (
+            f"mean squared window error{each} {best_loss:.3g} (nominal physics: {nominal_loss:.3g})"
+        )
     fitted = jax.tree.map(_to_f32, eqx.combine(best_w, rest, static))
     return FitResult(
         model=fitted,

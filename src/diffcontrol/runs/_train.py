@@ -301,10 +301,17 @@ def fitted_training(
             "refit it, or train with a grey-box (--model params) fit"
         )
     fitted = task.fitted_task(doc)
+    nets = doc["network"].get("members") or [doc["network"]]  # an ensemble's, or the one
     weights = sum(
-        np.asarray(l["weight"]).size + len(l["bias"]) for l in doc["network"].get("layers", [])
+        np.asarray(l["weight"]).size + len(l["bias"]) for n in nets for l in n.get("layers", [])
     )
+    of = f"{len(nets)} networks, " if len(nets) > 1 else ""
     info["note"] = (
-        f"training through the {doc['model']} model in {fit_dir} ({weights} network weights)"
+        f"training through the {doc['model']} model in {fit_dir} ({of}{weights} network weights)"
     )
+    if len(nets) > 1:
+        info["note"] += (
+            f": their mean, plus {fitted.default_params().correction.penalty:g} x their spread "
+            "in every step's loss"
+        )
     return fitted, (), real, info
