@@ -31,6 +31,16 @@ def default_cache_dir() -> Path:
     return Path(base) / "diffcontrol" / "jax"
 
 
+def checks_as_nan() -> None:
+    """``EQX_ON_ERROR=nan`` unless it is set: Equinox's runtime checks (Diffrax's, inside every
+    ODE solve) become NaN instead of host callbacks, so that the persistent cache can store the
+    programs of a continuous-time run (before, it compiled everything again each time). A
+    failed check is then a non-finite value, which the training driver reports. Equinox reads
+    the variable once, when first imported: the command line calls this before any import of
+    JAX; a process that imported Equinox earlier keeps its own setting."""
+    os.environ.setdefault("EQX_ON_ERROR", "nan")
+
+
 def enable_compile_cache(cache_dir: str | Path | None = None) -> Path | None:
     """Turn on JAX's persistent compilation cache in ``cache_dir`` (default above).
 

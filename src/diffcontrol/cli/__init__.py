@@ -1,6 +1,5 @@
-"""The ``diffcontrol`` command line: each command parses its options, makes one library call
-and prints what it returns. ``_train`` (train, plan, sweep), ``_runs`` (list, evaluate,
-animate, aim), ``_compare``, ``_identify`` (record, fit, loop); ``_args`` the option specs."""
+"""The ``diffcontrol`` command line: each command parses its options, makes one library call and
+prints what it returns (``_train``, ``_runs``, ``_compare``, ``_identify``; ``_args``: options)."""
 
 from __future__ import annotations
 
@@ -13,6 +12,7 @@ import sys
 import threading
 from collections.abc import Iterator
 
+from .._jax_setup import checks_as_nan
 from ..errors import DiffcontrolError, Interrupted
 from . import _compare, _identify, _runs, _train
 from ._args import EXIT_USAGE, Parser
@@ -40,12 +40,7 @@ COMMANDS = {n[4:]: f for m in _MODULES for n, f in vars(m).items() if n.startswi
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``diffcontrol`` command; returns the exit status."""
-    # Equinox's runtime checks (Diffrax's, inside every ODE solve) are host callbacks unless
-    # EQX_ON_ERROR says otherwise, and JAX stores no program with one in the persistent cache:
-    # a continuous-time run compiled everything again each time. As NaN instead, a failed
-    # check is a non-finite value, which the driver reports. Read once, when Equinox is first
-    # imported (so not for a process that imported it before calling main).
-    os.environ.setdefault("EQX_ON_ERROR", "nan")
+    checks_as_nan()  # before Equinox is imported: its programs can then be cached
     argv = sys.argv[1:] if argv is None else list(argv)
     args = build_parser().parse_args(argv)
     args.command_line = " ".join(["diffcontrol", *argv])  # to continue a long command
