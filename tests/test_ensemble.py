@@ -210,7 +210,8 @@ def test_the_loop_fits_ensembles_and_books_their_spread_on_the_new_data(tmp_path
     out = tmp_path / "loop"
     argv = ["loop", "pendulum", "--env", "diffcontrol/PendulumFriction-v0", "--env-arg", "g=12"]
     argv += ["--env-arg", "friction=0.1", "--rounds", "2", "--episodes", "1", "--updates", "4"]
-    argv += ["--eval-episodes", "2", "--out", str(out), "--quiet", "--model", "hybrid"]
+    argv += ["--eval-episodes", "2", "--fit-steps", "30", "--out", str(out), "--quiet"]
+    argv += ["--model", "hybrid"]
     assert _exit_code([*argv, "--members", "2", "--model", "params"]) == 2
     assert "grey box has no network" in capsys.readouterr().err
     assert not (out / "loop.json").exists()
