@@ -30,7 +30,8 @@ class ValueNetwork(eqx.Module):
 
     Attributes:
         layers: the linear layers, the last with one output.
-        offset, spread: the observation's normalisation (fixed, not trained).
+        offset: subtracted from the observation (fixed, not trained).
+        spread: divides the offset observation (fixed, not trained).
         scale: the output's unit (e.g. the typical cost-to-go), fixed.
         activation: the hidden layers' activation, one of ``ACTIVATIONS`` (smooth).
         task: the task whose ``observe`` makes the input.
@@ -62,7 +63,8 @@ class ValueNetwork(eqx.Module):
             hidden: the hidden layers' widths, each >= 1.
             scale: the output's unit, finite and > 0.
             activation: ``tanh``, ``softplus`` or ``elu``.
-            offset, spread: the observation's normalisation (default 0 and 1 per entry).
+            offset: subtracted from the observation (default 0 per entry; fixed, not trained).
+            spread: the offset observation is divided by it (default 1 per entry; > 0).
 
         Raises:
             ConfigError: a width < 1, a non-positive scale or spread, an unknown activation.
