@@ -229,3 +229,22 @@ def test_compare_real_cartpole_counts_the_loops_real_steps(tmp_path):
         == doc["real_steps_to_threshold"]
         == {"diffcontrol (grey box)": {0: None}}
     )
+
+
+@pytest.mark.slow
+def test_compare_real_fits_ensembles_for_the_network_models_only(tmp_path):
+    out = tmp_path / "real"
+    kw = dict(seeds=1, max_rounds=1, steps={"params": 150, "hybrid": 250}, updates=2)
+    doc = run_real_comparison(
+        "cartpole", out, models=["params", "hybrid"], members=2, final_episodes=1, **kw
+    )
+    assert doc["members"] == 2
+    loops = out / "loops"
+    hybrid = json.loads((loops / "hybrid-seed0" / "loop.json").read_text())["settings"]
+    assert (
+        hybrid["members"] == 2
+        and "members"
+        not in json.loads((loops / "params-seed0" / "loop.json").read_text())["settings"]
+    )  # a grey box has no network
+    fitted = json.loads((loops / "hybrid-seed0" / "round_1" / "fit" / "fitted.json").read_text())
+    assert len(fitted["network"]["members"]) == 2

@@ -237,6 +237,12 @@ class CompareConfig(_Settings):
         {},
         "NAME=VALUE",
     )
+    members: int = _opt(
+        "--real: networks of the hybrid's and the neural model's ensembles (1: one network)",
+        1,
+        "K",
+        high=64,
+    )
     explore_noise: float = _opt(
         "--real: action noise while a controller records, a fraction of the half range",
         0.1,

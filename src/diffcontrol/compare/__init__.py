@@ -39,7 +39,7 @@ from .run import (
 SETTINGS_FILE = "compare.json"
 # The fields of a CompareConfig that the comparison in real steps takes as they are.
 _REAL_SETTINGS = (
-    "seeds max_rounds explore_noise updates final_episodes eval_seed rl_results".split()
+    "seeds max_rounds members explore_noise updates final_episodes eval_seed rl_results".split()
 )
 
 

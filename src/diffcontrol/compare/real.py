@@ -53,6 +53,7 @@ def run_real_comparison(
     max_rounds: int = 3,
     steps: dict[str, int] | None = None,
     start: dict[str, float] | None = None,
+    members: int = 1,
     explore_noise: float = 0.1,
     updates: int | None = None,
     final_episodes: int = 100,
@@ -77,6 +78,8 @@ def run_real_comparison(
         start: the wrong physics the grey box and hybrid start from (default the task's
             ``real_start``: Pendulum g = 8, friction 0.1; CartPole gravity 12, length 0.8,
             force_mag 7).
+        members: networks of the hybrid's and the neural model's ensembles (``identify.loop``;
+            1, one network; the grey box has none).
         explore_noise: action noise while a controller records (``identify.loop``).
         updates: gradient updates of each round's training (default the task's, which stops
             early at its target return).
@@ -121,6 +124,7 @@ def run_real_comparison(
         "start": start,
         "explore_noise": explore_noise,
         "updates": updates,
+        **({"members": members} if members > 1 else {}),  # a run before it still resumes
         "final_episodes": final_episodes,
         "eval_seed": eval_seed,
         "threshold": target,
@@ -155,6 +159,7 @@ def run_real_comparison(
                     start=start if model != "neural" else {},
                     explore_noise=explore_noise,
                     updates=updates,
+                    members=members if model != "params" else 1,
                 )
                 state = loop(
                     task,
