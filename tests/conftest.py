@@ -12,12 +12,12 @@ os.environ.setdefault("DIFFCONTROL_CACHE_DIR", tempfile.mkdtemp(prefix="diffcont
 # more than it saves there (measured on tests/test_trebuchet_task.py and test_swingup.py,
 # 12 % less CPU time in all). It changes how fast the code runs, not what it computes (up to
 # the rounding of fused operations, which the tests' tolerances are for).
-# As the command line sets it (``cli.main``): Equinox's checks as NaN, not host callbacks,
-# so the ODE tasks' programs go into the session's cache too.
-os.environ.setdefault("EQX_ON_ERROR", "nan")
 if "xla_backend_optimization_level" not in os.environ.get("XLA_FLAGS", ""):
     flags = os.environ.get("XLA_FLAGS", "") + " --xla_backend_optimization_level=0"
     os.environ["XLA_FLAGS"] = flags.strip()
+# As the command line sets it (``cli.main``): Equinox's checks as NaN, not host callbacks,
+# so the ODE tasks' programs go into the session's cache too.
+os.environ.setdefault("EQX_ON_ERROR", "nan")
 
 import pytest  # noqa: E402
 
