@@ -172,6 +172,13 @@ def real_benchmark(task: str, rl_method: str, targets: dict[str, int | None], do
     parser.add_argument("--max-rounds", type=int, default=3)
     parser.add_argument("--out", default=f"runs/benchmark-real-{task}")
     parser.add_argument("--resume", action="store_true")
+    parser.add_argument(
+        "--controllers", default="train", help="train, plan or train,plan (compare --real's)"
+    )
+    parser.add_argument("--members", type=int, default=1, help="ensemble networks (hybrid/neural)")
+    parser.add_argument(
+        "--name", default="", help="suffix of the result files (real_TASK{NAME}.json), e.g. _plan"
+    )
     args = parser.parse_args()
     rl_file = here / "results" / "compare.json"
     t0 = time.perf_counter()
@@ -182,6 +189,8 @@ def real_benchmark(task: str, rl_method: str, targets: dict[str, int | None], do
         max_rounds=args.max_rounds,
         models=args.models.split(","),
         rl_results=rl_file,
+        controllers=tuple(args.controllers.split(",")),
+        members=args.members,
         resume=args.resume,
         progress=lambda line: print(line, flush=True),
     )
@@ -233,8 +242,8 @@ def real_benchmark(task: str, rl_method: str, targets: dict[str, int | None], do
             )
             print(f"{method:24} ({name}) target <= {target or '-':>5}: {cells}")
         print(f"{'':24} returns by round (20 ep): {points}; last (100 ep): {finals}")
-    out = here / "results" / f"real_{task}.json"
-    png = here / "results" / f"real_{task}.png"
+    out = here / "results" / f"real_{task}{args.name}.json"
+    png = here / "results" / f"real_{task}{args.name}.png"
     (here / "results").mkdir(exist_ok=True)
     shutil.copyfile(Path(args.out) / "comparison.png", png)
     result = {

@@ -137,7 +137,7 @@ def test_a_loop_becomes_a_compare_run_on_real_steps(tmp_path):
          "real_return_std": 80.0, "eval_episodes": 100, "model_error_on_new_data": {"rmse_1": 0.1},
          "work_seconds": {"record": 0.1, "fit": 1.0, "train": None}},
     ]  # fmt: skip
-    run = _as_run("params", 3, {"settings": {}, "rounds": rounds, "start": {}}, 9.0, 100)
+    run = _as_run("grey box", 3, {"settings": {}, "rounds": rounds, "start": {}}, 9.0, 100)
     assert run["method"] == "diffcontrol (grey box)" and run["seed"] == 3
     assert [p["env_steps"] for p in run["curve"]] == [200, 400]
     # as compare counts them: real steps in standard episodes (here of 100 steps); recorded ones
@@ -248,3 +248,64 @@ def test_compare_real_fits_ensembles_for_the_network_models_only(tmp_path):
     )  # a grey box has no network
     fitted = json.loads((loops / "hybrid-seed0" / "round_1" / "fit" / "fitted.json").read_text())
     assert len(fitted["network"]["members"]) == 2
+
+
+class _QuickPlanPendulum(Pendulum):
+    """Pendulum whose loop planner is tiny (H = 4, 2 iLQR iterations, no grid): cheap to build."""
+
+    def loop_planner(self):
+        from diffcontrol.settings import PlanConfig
+
+        return PlanConfig(horizon=4, iterations=2, bound_starts=False)
+
+
+def test_a_recording_resets_a_policy_that_has_a_reset_before_every_episode():
+    class Counting:
+        resets = 0
+
+        def reset(self):
+            self.resets += 1
+
+        def __call__(self, obs):
+            return np.zeros(1, np.float32)
+
+    counting = Counting()
+    noisy = NoisyPolicy(counting, spaces.Box(-2.0, 2.0, (1,), np.float32), 0.1, seed=0)
+    identify.record("Pendulum-v1", 3, policy=noisy, max_steps=5)
+    assert counting.resets == 3  # through the noise wrapper
+
+
+def test_compare_real_refuses_an_unknown_controller(tmp_path):
+    with pytest.raises(ConfigError, match="--controllers mpc: choose among train,plan"):
+        run_real_comparison("pendulum", tmp_path / "r", controllers=("mpc",))
+
+
+@pytest.mark.slow
+def test_compare_real_runs_a_planner_through_the_fitted_model_as_its_own_row(tmp_path):
+    out = tmp_path / "real"
+    doc = run_real_comparison(
+        _QuickPlanPendulum(), out, seeds=1, models=["params"], controllers=("train", "plan"),
+        max_rounds=2, steps={"params": 100}, updates=2, final_episodes=2,
+    )  # fmt: skip
+    assert doc["controllers"] == ["train", "plan"]
+    methods = {r["method"] for r in doc["runs"]}
+    assert methods == {"diffcontrol (grey box)", "diffcontrol (grey box, planner)"}
+    where = out / "loops" / "params-plan-seed0"
+    loop = json.loads((where / "loop.json").read_text())
+    assert loop["settings"]["controller"] == "plan"
+    assert (
+        "controller"
+        not in json.loads((out / "loops" / "params-seed0" / "loop.json").read_text())["settings"]
+    )  # the default is not written: a loop from before it still resumes
+    for k in (1, 2):
+        doc_k = json.loads((where / f"round_{k}" / "run" / "model.json").read_text())
+        assert diffcontrol.io.is_planner(doc_k)  # a planner, not an MLP, acted
+        assert doc_k["controller"]["model"]["kind"] == "fitted"  # through the round's fit
+        assert doc_k["controller"]["settings"]["horizon"] == 4  # the task's loop planner
+    recorded = identify.read_trajectories(where / "round_1" / "recorded.csv")
+    assert recorded.metadata["source"].startswith("round 1 controller")  # the planner recorded
+    rounds = sorted(loop["rounds"], key=lambda r: r["round"])
+    assert [r["real_steps"] for r in rounds] == [100, 200]
+    assert all(len(r["real_returns"]) == 2 for r in rounds)  # judged on the real system
+    assert abs(rounds[-1]["fitted_parameters"]["g"] - 10.0) < 0.05  # from g = 8
+    assert rounds[0]["work_seconds"]["train"] > 0  # the planner's build time

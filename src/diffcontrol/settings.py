@@ -20,6 +20,9 @@ from .errors import ConfigError
 
 MODELS = ("params", "hybrid", "neural")
 """The models ``identify.fit`` learns: grey box, hybrid (physics plus a network), neural."""
+CONTROLLERS = ("train", "plan")
+"""What acts on the real system in a loop: an MLP trained through the fitted model, or a
+planner through it (``Task.loop_planner``)."""
 
 
 class _Settings:
@@ -189,6 +192,12 @@ class LoopConfig(_Settings):
         "F",
         form="fraction",
     )
+    controller: str = _opt(
+        "what acts each round: 'train' an MLP through the fitted model, or 'plan' through it "
+        "(MPC with the task's loop planner; needs JAX to act; docs/planning.md)",
+        "train",
+        choices=CONTROLLERS,
+    )
 
 
 @dataclass(frozen=True)
@@ -248,6 +257,12 @@ class CompareConfig(_Settings):
         0.1,
         "F",
         form="fraction",
+    )
+    controllers: tuple[str, ...] = _opt(
+        "--real: what acts each round, rows of their own: train, plan (a planner through the "
+        "fitted model), or train,plan",
+        ("train",),
+        "C,C",
     )
     rl_results: str | None = _opt(
         "--real: a comparison (comparison.json, or benchmarks/results/compare.json) whose RL "

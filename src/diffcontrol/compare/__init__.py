@@ -39,7 +39,8 @@ from .run import (
 SETTINGS_FILE = "compare.json"
 # The fields of a CompareConfig that the comparison in real steps takes as they are.
 _REAL_SETTINGS = (
-    "seeds max_rounds members explore_noise updates final_episodes eval_seed rl_results".split()
+    "seeds max_rounds members explore_noise updates final_episodes eval_seed rl_results "
+    "controllers".split()
 )
 
 
@@ -71,8 +72,8 @@ def run_comparison(
             baselines (``None``: PyTorch's default); and those of ``real``.
         real: count the real system's steps instead (``run_real_comparison`` with the
             config's ``seeds``, ``models``, ``max_rounds``, ``start`` (empty: the task's),
-            ``explore_noise``, ``updates``, ``final_episodes``, ``eval_seed`` and
-            ``rl_results``; default ``out_dir`` ``runs/compare-real-TASK``).
+            ``explore_noise``, ``updates``, ``final_episodes``, ``eval_seed``,
+            ``controllers`` and ``rl_results``; default ``out_dir`` ``runs/compare-real-TASK``).
         resume: keep the finished runs already in ``out_dir`` and run only the others.
         progress: called with one line per evaluation point and per finished run.
         compile_cache: use JAX's persistent compilation cache (unless

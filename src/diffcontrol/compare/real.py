@@ -16,11 +16,13 @@ threshold (Pendulum -150, CartPole 500), or after ``max_rounds``.
 
 Methods: ``params`` (the grey box, whose physics starts from the stated wrong ``start``: the
 task's ``real_start``), ``hybrid`` (the same wrong physics plus a network) and ``neural`` (a
-network alone). The RL rows are those already recorded by ``diffcontrol compare`` (e.g.
+network alone), each with an MLP trained through the fitted model acting on the real system
+(``controllers`` ``train``, the default) or a planner through it (``plan``: the task's
+``loop_planner``, rows ``diffcontrol (grey box, planner)`` and so on). The RL rows are those already recorded by ``diffcontrol compare`` (e.g.
 ``benchmarks/results/compare.json``, same evaluation seeds), read, not re-run.
 
 Writes to ``out``: ``loops/<model>-seed<S>/`` (each loop's directory; resumable),
-``runs/<method>-seed<S>.json`` (each finished run, as ``compare`` writes them),
+``runs/<method>-seed<S>.json`` (``<model>-plan`` for a planner's; each finished run, as ``compare`` writes them),
 ``comparison.json``, ``comparison.md`` and ``comparison.png`` (return against real steps and
 against wall-clock seconds, the RL curves beside).
 """
@@ -36,6 +38,7 @@ import numpy as np
 
 from .. import io
 from ..errors import ConfigError, RunDirectoryError
+from ..settings import CONTROLLERS
 from ..tasks import Task, make, names, resolve
 from .report import plot, summarize, table
 from .run import THRESHOLDS, first_reached
@@ -54,6 +57,7 @@ def run_real_comparison(
     steps: dict[str, int] | None = None,
     start: dict[str, float] | None = None,
     members: int = 1,
+    controllers: tuple[str, ...] = ("train",),
     explore_noise: float = 0.1,
     updates: int | None = None,
     final_episodes: int = 100,
@@ -80,6 +84,9 @@ def run_real_comparison(
             force_mag 7).
         members: networks of the hybrid's and the neural model's ensembles (``identify.loop``;
             1, one network; the grey box has none).
+        controllers: what acts on the real system each round, each a row of its own:
+            ``train`` (an MLP trained through the fitted model) and/or ``plan`` (a planner
+            through it, ``task.loop_planner()``).
         explore_noise: action noise while a controller records (``identify.loop``).
         updates: gradient updates of each round's training (default the task's, which stops
             early at its target return).
@@ -108,6 +115,11 @@ def run_real_comparison(
     bad = [m for m in models if m not in LABELS]
     if bad:
         raise ConfigError(f"unknown model(s) {bad} for --real; choose among {list(LABELS)}")
+    controllers = list(dict.fromkeys(controllers))
+    if not controllers or any(c not in CONTROLLERS for c in controllers):
+        raise ConfigError(
+            f"--controllers {','.join(controllers)}: choose among {','.join(CONTROLLERS)}"
+        )
     steps = {m: task.real_steps_per_round(m) for m in models} | (steps or {})
     start = dict(task.real_start if start is None else start)
     target = max(thresholds)  # returns: the highest is the hardest
@@ -124,7 +136,9 @@ def run_real_comparison(
         "start": start,
         "explore_noise": explore_noise,
         "updates": updates,
-        **({"members": members} if members > 1 else {}),  # a run before it still resumes
+        # new settings only where not the default, so a comparison before them still resumes
+        **({"members": members} if members > 1 else {}),
+        **({"controllers": controllers} if controllers != ["train"] else {}),
         "final_episodes": final_episodes,
         "eval_seed": eval_seed,
         "threshold": target,
@@ -140,13 +154,16 @@ def run_real_comparison(
             said.add(line)
             say(line)
 
+    methods = [(m, c) for m in models for c in controllers]
     for seed in range(seeds):  # every model on seed 0 first: a cut-short run covers them all
-        for model in models:
-            path = out / "runs" / f"{model}-seed{seed}.json"
+        for model, controller in methods:
+            name = model if controller == "train" else f"{model}-{controller}"
+            path = out / "runs" / f"{name}-seed{seed}.json"
             if path.exists():
                 results.append(io.read_json(path, "run"))
                 continue
-            where = out / "loops" / f"{model}-seed{seed}"
+            where = out / "loops" / f"{name}-seed{seed}"
+            label = _label(model, controller)
             t0 = time.perf_counter()
             for rounds in range(1, max_rounds + 1):
                 config = LoopConfig(
@@ -160,6 +177,7 @@ def run_real_comparison(
                     explore_noise=explore_noise,
                     updates=updates,
                     members=members if model != "params" else 1,
+                    controller=controller,
                 )
                 state = loop(
                     task,
@@ -167,12 +185,12 @@ def run_real_comparison(
                     config,
                     resume=True,
                     progress=None,
-                    report=lambda line, m=model, s=seed: tell(f"{LABELS[m]} seed {s}: {line}"),
+                    report=lambda line, m=label, s=seed: tell(f"{m} seed {s}: {line}"),
                 )
                 last = max(state["rounds"], key=lambda r: r["round"])
                 if last["real_return"] is not None and last["real_return"] >= target:
                     break
-            run = _as_run(model, seed, state, time.perf_counter() - t0, task.episode_length)
+            run = _as_run(label, seed, state, time.perf_counter() - t0, task.episode_length)
             path.parent.mkdir(parents=True, exist_ok=True)
             io.write_json(path, run)
             results.append(run)
@@ -189,8 +207,13 @@ def _can_learn(task: Task) -> bool:
     )
 
 
+def _label(model: str, controller: str) -> str:
+    """A row's name without ``diffcontrol``: ``grey box``, ``grey box, planner``, ..."""
+    return LABELS[model] + (", planner" if controller == "plan" else "")
+
+
 def _as_run(
-    model: str, seed: int, state: dict, wall: float, episode_length: int, point_episodes: int = 20
+    label: str, seed: int, state: dict, wall: float, episode_length: int, point_episodes: int = 20
 ) -> dict:
     """A loop as a run of ``diffcontrol compare`` (``runs/<method>-seed<S>.json``): one curve
     point per round at the real steps used so far and the loop's seconds so far (recording,
@@ -220,7 +243,7 @@ def _as_run(
         )
     last = curve[-1]
     return {
-        "method": f"diffcontrol ({LABELS[model]})",
+        "method": f"diffcontrol ({label})",
         "algo": "real-system loop",
         "source": "identify.loop on the real environment",
         "seed": seed,

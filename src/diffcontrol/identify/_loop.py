@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import ConfigError, RunDirectoryError
-from ..io import NumpyPolicy, now_iso, read_json, read_model, write_figure, write_json
+from ..io import now_iso, read_json, write_figure, write_json
 from ..settings import FitConfig, LoopConfig
 from ._fit import fit_dir
 from ._rounds import NoisyPolicy, model_error, parse_start, predictor_of, start_params
@@ -65,7 +65,10 @@ def loop(
             records (``NoisyPolicy``: a fraction of the action's half range; the chance of a
             random action for a discrete space); ``real_steps``, where set, is the real
             steps recorded per round in place of whole ``episodes``: episodes until the
-            budget is spent, the last one cut short (``record``'s ``total_steps``).
+            budget is spent, the last one cut short (``record``'s ``total_steps``);
+            ``controller="plan"`` acts with a planner through each round's fitted model
+            (``runs.plan_run`` with ``task.loop_planner()``) instead of training an MLP
+            through it.
 
     Raises:
         ConfigError: a task that records no Gymnasium episodes, an environment whose spaces
@@ -74,7 +77,7 @@ def loop(
             other files.
     """
     from ..envs import env_id as own_id
-    from ..runs import fitted_training, save_run
+    from ..runs import fitted_training, load_policy, plan_run, save_run
     from ..tasks import Task
     from ..training import resolve_config, train
 
@@ -127,7 +130,8 @@ def loop(
     # new settings only where set, so a loop written before them still resumes
     settings.update({k: v for k, v in [("start", start), ("explore_noise", explore_noise),
                                        ("eval_seed", eval_seed), ("steps_per_round", steps),
-                                       ("fit_steps", c.fit_steps)]
+                                       ("fit_steps", c.fit_steps),
+                                       ("controller", c.controller != "train" and c.controller)]
                      if v})  # fmt: skip
     if c.members > 1:
         settings.update(ensemble)
@@ -137,6 +141,12 @@ def loop(
     # the reset seeds the controllers are judged on (save_run's own, 0..., by default): no
     # round records from them, so a model is never fitted to the starts it is judged on
     judged_on = range(eval_seed, eval_seed + eval_episodes)
+    policies: dict[Path, Any] = {}  # each round's controller, built once (a planner's grid)
+
+    def policy_of(run_dir: Path) -> Any:
+        if run_dir not in policies:
+            policies[run_dir] = load_policy(task, read_json(run_dir / "model.json", "model"))
+        return policies[run_dir]
 
     def record_round(k: int, controller: Path | None) -> None:
         """Record the episodes of round k (random for k = 0, else with round k's controller
@@ -145,7 +155,7 @@ def loop(
         if not part.exists():
             t0 = time.perf_counter()
             if episodes_of_env:
-                policy = None if controller is None else NumpyPolicy(read_model(controller))
+                policy = None if controller is None else policy_of(controller)
                 source = "random actions" if policy is None else f"round {k} controller"
                 if policy is not None and explore_noise:
                     policy = NoisyPolicy(
@@ -201,6 +211,13 @@ def loop(
                 say(line)
         if not (here / "run" / "model.json").exists():
             (here / "eval.json").unlink(missing_ok=True)  # it judged another controller
+        own_eval = eval_episodes if not eval_seed else 0  # seeds 0...: save_run's own
+        if not (here / "run" / "model.json").exists() and c.controller == "plan":
+            run, _ = plan_run(here / "run", task, task.loop_planner(), model=here / "fit",
+                              env_id=env_id, final_eval=own_eval, animation=False,
+                              progress=say)  # fmt: skip
+            policies[here / "run"] = run.policy
+        if not (here / "run" / "model.json").exists():
             trained, params, real, info = fitted_training(task, here / "fit", None)
             say(info.pop("note"))
             # A parameter that must be >= 0 (the Pendulum's friction) fitted a hair below 0
@@ -212,18 +229,19 @@ def loop(
             resumed = (here / "run" / "checkpoint.npz").exists()
             result = train(trained, config, out_dir=here / "run", resume=resumed, progress=say)
             result.metrics["model"] = info
-            own_eval = eval_episodes if not eval_seed else 0  # seeds 0...: save_run's own
             save_run(result, here / "run", final_eval=own_eval, animation=False, real=real)
         metrics = read_json(here / "run" / "metrics.json", "metrics")
         fitted_doc = read_json(here / "fit" / "fitted.json", "fitted model")
         judged = metrics.get("gym_eval", {})
         if eval_seed:
-            judged = _evaluate(task, here, eval_episodes, eval_seed, (env_id, env_kwargs))
+            judged = _evaluate(
+                task, here, eval_episodes, eval_seed, (env_id, env_kwargs), policy_of
+            )
         recorded = out / f"round_{k - 1}" / "recorded.json"
         spent = {
             "record": read_json(recorded, "timing")["seconds"] if recorded.exists() else None,
             "fit": fitted_doc["fit"].get("seconds"),
-            "train": metrics.get("train_seconds"),
+            "train": metrics.get("train_seconds", metrics.get("planner", {}).get("build_seconds")),
         }
         row = {
             "round": k,
@@ -288,16 +306,18 @@ def _start_settings(task: Any, model: str, start: dict[str, float]) -> dict:
     return {"params": start_params(task, start)}
 
 
-def _evaluate(task: Any, here: Path, episodes: int, seed: int, real: tuple) -> dict:
-    """The round's controller on the real system, reset seeds ``seed ...`` (kept in
-    ``here/eval.json`` so that a resumed loop does not run it twice)."""
+def _evaluate(
+    task: Any, here: Path, episodes: int, seed: int, real: tuple, policy_of: Callable
+) -> dict:
+    """The round's controller (``policy_of(here / "run")``) on the real system, reset seeds
+    ``seed ...`` (kept in ``here/eval.json`` so that a resumed loop does not run it twice)."""
     from ..evaluation import evaluate
 
     path = here / "eval.json"
     if path.exists():
         return read_json(path, "evaluation")
     t0 = time.perf_counter()
-    ev = evaluate(NumpyPolicy(read_model(here / "run")), task, episodes, seed, real=real)
+    ev = evaluate(policy_of(here / "run"), task, episodes, seed, real=real)
     doc = {**ev.to_json(), "seconds": time.perf_counter() - t0}
     write_json(path, doc)
     return doc

@@ -41,6 +41,11 @@ class NoisyPolicy:
         a = a + self.noise * (high - low) / 2 * self._rng.standard_normal(a.shape)
         return np.clip(a, low, high).astype(self.space.dtype)
 
+    def reset(self) -> None:
+        """A new episode: the wrapped policy's ``reset`` (a planner's warm start), if any."""
+        if callable(getattr(self.policy, "reset", None)):
+            self.policy.reset()
+
     def __repr__(self) -> str:
         return f"NoisyPolicy(noise={self.noise})"
 

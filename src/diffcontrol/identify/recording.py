@@ -154,7 +154,9 @@ def record(
             ``Box`` or ``Discrete`` action space.
         episodes: how many episodes (>= 1); with ``total_steps``, the most episodes, or None for as
             many as the budget takes (a CartPole episode of random pushes lasts ~20 steps).
-        policy: a callable from one observation to a Gymnasium action; None for random.
+        policy: a callable from one observation to a Gymnasium action; None for random. One
+            with a ``reset()`` (a planner, warm-started from its last plan) is reset before
+            every episode.
         seed: the first reset seed, and the seed of the random actions.
         env_kwargs: keyword arguments of ``gymnasium.make`` (e.g. ``{"g": 9.0}``).
         max_steps: the most steps an episode may take; the environment's own limit if None.
@@ -204,6 +206,8 @@ def record(
             break
         reset_seed = next(reset_seeds)
         obs, _ = _call(env.reset, env_id, i, 0, seed=reset_seed)
+        if callable(getattr(policy, "reset", None)):  # a planner starts each episode afresh
+            policy.reset()
         observations, actions, total, done = [obs], [], 0.0, False
         while not done:
             _check_finite(obs, env_id, i, len(actions))
