@@ -55,10 +55,12 @@ EPISODES, FIT_EPISODES, EVAL_EPISODES = 10, 8, 100
 KINDS = ("nominal", "params", "hybrid", "neural", "true")
 
 
-def record_real(seed: int, episodes: int = EPISODES):
-    """``episodes`` episodes of random torques on the real system (reset seeds 100 S ..),
-    with the sensor noise ``NOISE`` (seeded by S) added to the observations."""
-    data = diffcontrol.record(REAL[0], episodes, seed=100 * seed, env_kwargs=REAL[1])
+def record_real(seed: int, episodes: int = EPISODES, first: int | None = None):
+    """``episodes`` episodes of random torques on the real system (reset seeds ``first`` ..,
+    default 100 S ..), with the sensor noise ``NOISE`` (seeded by S) added to the
+    observations."""
+    first = 100 * seed if first is None else first
+    data = diffcontrol.record(REAL[0], episodes, seed=first, env_kwargs=REAL[1])
     rng = np.random.default_rng(seed)
     noisy = data.observations + rng.normal(size=data.observations.shape) * NOISE
     return dataclasses.replace(data, observations=noisy)

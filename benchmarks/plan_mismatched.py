@@ -1,15 +1,19 @@
-"""Benchmark: the planner through a hybrid model fitted from 10 real episodes, on a mismatched
-real pendulum, against the policy trained through the same model and the real optimum.
+"""Benchmark: the planner through a model fitted from 10 real episodes, on a mismatched real
+pendulum, against the policy trained through the same model and the real optimum.
 
 The real system is the gap benchmark's (``fit_gap_pendulum.py``): Gymnasium's ``Pendulum-v1``
 with g = 12 m/s^2 and joint friction 0.1 N m s/rad (``diffcontrol/PendulumFriction-v0``; the
 nominal model has g = 10 and no friction). For each seed S:
 
 1. 10 episodes of 200 steps with random torques in [-2, 2] N m are recorded from the real
-   system (reset seeds 100 S ..), with that benchmark's sensor noise (``record_real``): the
-   only real episodes used, all 10 fitted (none held out);
-2. the hybrid model (the nominal physics plus a 32-32 correction, ``identify.fit_model``, seed
-   S; what ``diffcontrol fit pendulum --model hybrid`` fits) is fitted to them;
+   system (reset seeds 2000 + 100 S .., none of them an evaluation start; ``--data-seeds
+   legacy``: 100 S .., as the first measurement, whose seed 0 started from evaluation seeds
+   0-9), with that benchmark's sensor noise (``record_real``): the only real episodes used,
+   all 10 fitted (none held out);
+2. each model of ``--models`` is fitted to them (``identify.fit_model``, seed S): ``hybrid``,
+   the nominal physics plus a 32-32 correction (what ``diffcontrol fit pendulum --model
+   hybrid`` fits); ``neural``, a 32-32 network alone, no physics (``--members K``: an
+   ensemble of K, their mean the model);
 3. the planner through that model, docs/planning.md's best Pendulum planner: box-iLQR (10
    iterations), H = 10, three starts per step, terminal cost ``-V_0`` of the grid optimum
    solved *through the fitted model* (``mpc.planner_from_config`` with ``PlanConfig(horizon=10,
@@ -21,9 +25,13 @@ nominal model has g = 10 and no friction). For each seed S:
 both judged in the real system on reset seeds 0-99 and 1000-1099, next to the real system's
 grid optimum (``optimal.solve`` with g = 12, friction 0.1, its greedy controller run in
 ``PendulumFriction-v0``) and, once, the same planner through the true physics (its terminal
-value solved on them too): what the model costs.
+value solved on them too: what the model costs) and through the nominal physics (g = 10, no
+friction: what a model fitted to data gains; the gap a fitted model closes is
+``(R_fitted - R_nominal) / (R_true - R_nominal)`` of the planners' returns).
 
     taskset -c 0 python benchmarks/plan_mismatched.py [--seeds 0 1 2 3 4] [--value-grid 201]
+    taskset -c 0 python benchmarks/plan_mismatched.py --models neural --members 5 \
+        --out benchmarks/results/plan_mismatched_neural.json
     python benchmarks/plan_mismatched.py --merge a.json b.json   # runs split over processes
 
 Prints a table and writes benchmarks/results/plan_mismatched.json (machine, date, every return).
@@ -90,34 +98,55 @@ def policy_rows(label: str, policy, task, optima: dict) -> dict:
     return out
 
 
-def run_seed(task, seed: int, grid: int, optima: dict, updates: int | None) -> dict:
-    data = record_real(seed)
-    t0 = time.perf_counter()
-    fit = identify.fit_model(task, data, "hybrid", seed=seed)
-    fit_seconds = time.perf_counter() - t0
-    print(f"seed {seed}: hybrid fitted in {fit_seconds:.0f} s ({fit.message})", flush=True)
-    model_task = identify.model_task(task, fit.model)
-    t0 = time.perf_counter()
-    planner = mpc.planner_from_config(
-        model_task, PlanConfig(horizon=10, value_grid=grid), params=fit.model
-    )
-    planner_row = planner_rows("planner, hybrid model", planner, optima, time.perf_counter() - t0)
-    show(seed, planner_row)
-    t0 = time.perf_counter()
-    config = task.default_config().replace(seed=seed)
-    config = config if updates is None else config.replace(updates=updates)
-    trained = diffcontrol.train(model_task, config)
-    policy = io.NumpyPolicy(io.controller_to_dict(trained.controller, task))
-    mlp_row = policy_rows("MLP trained through the hybrid model", policy, task, optima)
-    mlp_row["train_seconds"] = time.perf_counter() - t0
-    mlp_row["return_on_model"] = trained.metrics["final_eval_return"]
-    show(seed, mlp_row)
+def data_start(seed: int, legacy: bool) -> int:
+    """The first reset seed of seed S's real episodes: 2000 + 100 S (past both evaluation
+    sets), or the first measurement's 100 S (``legacy``)."""
+    return 100 * seed if legacy else 2000 + 100 * seed
+
+
+def labels(kind: str, members: int) -> tuple[str, str]:
+    model = f"{kind} model" + (f" (ensemble of {members})" if members > 1 else "")
+    return f"planner, {model}", f"MLP trained through the {model}"
+
+
+def run_seed(task, seed: int, args, optima: dict, updates: int | None) -> dict:
+    data = record_real(seed, first=data_start(seed, args.data_seeds == "legacy"))
+    rows, fits = [], {}
+    for kind in args.models:
+        members = args.members if kind == "neural" else 1
+        planner_label, mlp_label = labels(kind, members)
+        t0 = time.perf_counter()
+        fit = identify.fit_model(task, data, kind, seed=seed, members=members)
+        fit_seconds = time.perf_counter() - t0
+        print(f"seed {seed}: {kind} fitted in {fit_seconds:.0f} s ({fit.message})", flush=True)
+        fits[kind] = {"seconds": fit_seconds, "loss": fit.loss, "nominal_loss": fit.nominal_loss}
+        model_task = identify.model_task(task, fit.model)
+        t0 = time.perf_counter()
+        planner = mpc.planner_from_config(
+            model_task, PlanConfig(horizon=10, value_grid=args.value_grid), params=fit.model
+        )
+        planner_row = planner_rows(planner_label, planner, optima, time.perf_counter() - t0)
+        show(seed, planner_row)
+        rows.append(planner_row)
+        if args.no_mlp:
+            continue
+        t0 = time.perf_counter()
+        config = task.default_config().replace(seed=seed)
+        config = config if updates is None else config.replace(updates=updates)
+        trained = diffcontrol.train(model_task, config)
+        policy = io.NumpyPolicy(io.controller_to_dict(trained.controller, task))
+        mlp_row = policy_rows(mlp_label, policy, task, optima)
+        mlp_row["train_seconds"] = time.perf_counter() - t0
+        mlp_row["return_on_model"] = trained.metrics["final_eval_return"]
+        show(seed, mlp_row)
+        rows.append(mlp_row)
     return {
         "seed": seed,
         "real_episodes": data.num_episodes,
         "real_transitions": data.num_steps,
-        "fit": {"seconds": fit_seconds, "loss": fit.loss, "nominal_loss": fit.nominal_loss},
-        "rows": [planner_row, mlp_row],
+        "data_reset_seeds_from": data_start(seed, args.data_seeds == "legacy"),
+        "fit": fits,
+        "rows": rows,
     }
 
 
@@ -141,7 +170,10 @@ def report(doc: dict) -> None:
     for run in doc["runs"]:
         for row in run["rows"]:
             show(run["seed"], row)
-    for label in ("planner, hybrid model", "MLP trained through the hybrid model"):
+    names = sorted({r["controller"] for run in doc["runs"] for r in run["rows"]})
+    nominal = {r["controller"]: r for r in doc["reference"]}.get("planner, nominal physics")
+    true = doc["reference"][0]
+    for label in names:
         for key in SEED_SETS:
             means = [
                 r["seed_sets"][key]["mean_return"]
@@ -152,9 +184,20 @@ def report(doc: dict) -> None:
             if means:
                 gaps = [doc["optimum"][key]["mean_return"] - m for m in means]
                 worst = max(gaps) / abs(doc["optimum"][key]["mean_return"])
+                closed = ""
+                if nominal and label.startswith("planner"):
+                    r_nom = nominal["seed_sets"][key]["mean_return"]
+                    r_true = true["seed_sets"][key]["mean_return"]
+                    share = [(m - r_nom) / (r_true - r_nom) for m in means]
+                    closed = f"; gap to the nominal planner closed {_pcts(share)}"
                 print(
-                    f"{label}, seeds {key}: mean {np.mean(means):.2f}, worst gap {100 * worst:.2f} %"
+                    f"{label}, seeds {key}: mean {np.mean(means):.2f}, worst gap to the optimum "
+                    f"{100 * worst:.2f} %{closed}"
                 )
+
+
+def _pcts(shares: list[float]) -> str:
+    return " / ".join(f"{100 * x:.0f} %" for x in shares) + f" (mean {100 * np.mean(shares):.0f} %)"
 
 
 def main() -> None:
@@ -165,9 +208,17 @@ def main() -> None:
     parser.add_argument(
         "--quick", action="store_true", help="a smoke test: 3 episodes per seed set, 20 updates"
     )
+    parser.add_argument("--models", default="hybrid", help="hybrid, neural or hybrid,neural")
+    parser.add_argument("--members", type=int, default=1, help="the neural model's ensemble")
+    parser.add_argument(
+        "--data-seeds", choices=["clean", "legacy"], default="clean",
+        help="clean: reset seeds 2000 + 100 S ..; legacy: 100 S .. (seed 0 overlapped 0-99)",
+    )  # fmt: skip
+    parser.add_argument("--no-mlp", action="store_true", help="the planners only")
     parser.add_argument("--merge", type=Path, nargs="+", help="join these results and report")
     parser.add_argument("--out", type=Path, default=HERE / "results" / "plan_mismatched.json")
     args = parser.parse_args()
+    args.models = args.models.split(",")
     if args.merge:
         docs = [json.loads(p.read_text()) for p in args.merge]
         doc = {
@@ -201,16 +252,25 @@ def measure(args) -> dict:
         "planner, true physics", true_planner, optima, time.perf_counter() - t0
     )
     show("-", reference)
+    t0 = time.perf_counter()
+    nominal_planner = mpc.planner_from_config(task, config, params=task.default_params())
+    nominal = planner_rows(
+        "planner, nominal physics", nominal_planner, optima, time.perf_counter() - t0
+    )
+    show("-", nominal)
     updates = 20 if args.quick else None
-    runs = [run_seed(task, seed, args.value_grid, optima, updates) for seed in args.seeds]
+    runs = [run_seed(task, seed, args, optima, updates) for seed in args.seeds]
     return {
         "machine": {**machine(), "loadavg_before": load_before, "loadavg_after": os.getloadavg()},
         "real_system": {"env_id": REAL[0], "env_kwargs": REAL[1]},
-        "data": f"{EPISODES} episodes of random torques per seed (reset seeds 100 S ..), all "
-        f"fitted; sensor noise std {NOISE.tolist()}",
+        "data": f"{EPISODES} episodes of random torques per seed (reset seeds "
+        f"{'100 S' if args.data_seeds == 'legacy' else '2000 + 100 S'} ..), all fitted; sensor "
+        f"noise std {NOISE.tolist()}",
+        "models": args.models,
+        "members": args.members,
         "planner": {**config.to_json(), "terminal_value": "grid optimum through the model"},
         "optimum": {k: {**v.to_json(), "solve_seconds": solve_s} for k, v in optima.items()},
-        "reference": [reference],
+        "reference": [reference, nominal],
         "runs": runs,
         "command": "python benchmarks/plan_mismatched.py " + " ".join(sys.argv[1:]),
     }
