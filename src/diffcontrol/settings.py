@@ -274,7 +274,10 @@ class PlanConfig(_Settings):
 
     solver: str = _opt("the solver of every step's plan", "ilqr", choices=SOLVERS)
     horizon: int = _opt(
-        "H, the actions planned at every step (the swing-ups' own default: 40)", 20, "H", high=10_000
+        "H, the actions planned at every step (the swing-ups' own default: 40)",
+        20,
+        "H",
+        high=10_000,
     )
     iterations: int | None = _opt(
         "solver iterations per step (default 10 for ilqr, 30 for shooting; the swing-ups' 5)",
