@@ -390,9 +390,10 @@ def simulate_continuous(
     (``saves`` points, as in training).
 
     ``controller`` is an ``MLPController`` (state feedback inside the ODE), or a sampled-data
-    controller: anything with ``closed_loop(params, y0, ts) -> (states, actions, ok)`` that
-    solves its own closed loop (a planner, ``mpc.SampledPlannerPolicy``: each action held for
-    its period). The loss then sees the action held at each save.
+    controller: anything with ``closed_loop(task, params, y0, ts) -> (states, actions, ok)``
+    that solves its own closed loop with ``task``'s vector field (a planner,
+    ``mpc.SampledPlannerPolicy``: each action held for its period). The loss then sees the
+    action held at each save.
     """
     import equinox as eqx
     import jax
@@ -431,7 +432,7 @@ def simulate_continuous(
         loss_fn = task.trajectory_loss(config.loss or task.losses[0])
         if hasattr(controller, "closed_loop"):  # sampled data: one solve for both grids
             both = np.union1d(np.asarray(ts), np.asarray(ts_loss))
-            ys_all, us, ok = controller.closed_loop(p64, task.initial_state(p64), both)
+            ys_all, us, ok = controller.closed_loop(task, p64, task.initial_state(p64), both)
             at, at_loss = (np.searchsorted(both, np.asarray(t)) for t in (ts, ts_loss))
             ys, force, ys_loss, ok_loss = ys_all[at], us[at, 0], ys_all[at_loss], True
             # The trajectory's force is the action held at each save, not a state feedback.

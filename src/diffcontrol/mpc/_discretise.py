@@ -203,7 +203,7 @@ def ode_episode(
     under ``jax.enable_x64`` for a reference. ``params``: the system's parameters where they
     differ from the planner's model.
     """
-    ys, us, infos, _, _ = _ode_loop(planner, y0, steps, params, rtol, atol, None)
+    ys, us, infos, _, _ = _ode_loop(planner, y0, steps, params, rtol, atol, None, None)
     return jnp.concatenate([y0[None], ys]), us, infos
 
 
@@ -214,6 +214,7 @@ def ode_closed_loop(
     params: PyTree | None = None,
     rtol: float = 1e-8,
     atol: float = 1e-8,
+    system: ContinuousTask | None = None,
 ) -> tuple[Array, Array, Any, Array]:
     """``ode_episode`` over ``[0, ts[-1]]`` (``ceil(ts[-1] / dt)`` periods), saved at the
     times ``ts`` (increasing, from 0) rather than at the control instants: what a reference
@@ -224,23 +225,26 @@ def ode_closed_loop(
     step, ok)``: the action at ``t`` is the one held over the period that starts at or before
     it (at the last instant, the last period's); ``ok`` is whether every period's solve
     succeeded. Each period's solve also saves the instants of ``ts`` clipped into it, so the
-    states are those of the same adaptive solves as ``ode_episode``'s.
+    states are those of the same adaptive solves as ``ode_episode``'s. ``system``: the
+    continuous task whose vector field is the true system (with ``params``), where it is not
+    the one the planner's model discretises (a planner through a fitted model, judged on the
+    real system).
     """
     ts = np.asarray(ts)
     dt = planner.task.dt
     steps = max(1, math.ceil(float(ts[-1]) / dt - 1e-9))
     loop = eqx.filter_jit(_ode_loop)
-    _, us, infos, saved, ok = loop(planner, y0, steps, params, rtol, atol, jnp.asarray(ts))
+    _, us, infos, saved, ok = loop(planner, y0, steps, params, rtol, atol, jnp.asarray(ts), system)
     period = np.clip(np.floor(ts / dt + 1e-9).astype(int), 0, steps - 1)
     ys = saved[period, np.arange(ts.shape[0])]
     return ys, us[period], infos, jnp.all(ok)
 
 
-def _ode_loop(planner, y0, steps, params, rtol, atol, save_ts):
+def _ode_loop(planner, y0, steps, params, rtol, atol, save_ts, system):
     from ..rollout import solve_closed_loop
 
     disc = planner.task
-    cont, dt = disc.continuous, disc.dt
+    cont, dt = system or disc.continuous, disc.dt
     params = planner.problem.params if params is None else params
     dtype = y0.dtype
     planner = jax.tree.map(lambda a: a.astype(dtype) if eqx.is_inexact_array(a) else a, planner)

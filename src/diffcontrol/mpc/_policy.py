@@ -79,7 +79,7 @@ class SampledPlannerPolicy:
     shifted plan (``reset()`` starts an episode) and keeps every solve's report in
     ``reports`` (``summary()`` counts them).
 
-    ``closed_loop(params, y0, ts)`` runs it against the task's ODE itself
+    ``closed_loop(system, params, y0, ts)`` runs it against the task's ODE itself
     (``mpc.ode_closed_loop``: the planner in the dtype of ``y0``, a Dopri8 solve per period)
     and is what a continuous-time task's reference solve calls for a controller that has it
     (``evaluation.simulate_continuous``).
@@ -116,16 +116,17 @@ class SampledPlannerPolicy:
         u = np.asarray(u, np.float64)
         return float(u[0]) if u.shape == (1,) else u
 
-    def closed_loop(self, params: Any, y0: Any, ts: Any) -> tuple[Any, Any, Any]:
-        """``(states [N, d], actions [N, m], ok)`` of the closed loop on the task's ODE from
-        ``y0``, saved at the times ``ts`` (NumPy, increasing, from 0), in the dtype of ``y0``
-        (float64 under ``jax.enable_x64`` for a reference solve at 1e-9); every control
-        step's report is added to ``reports``."""
+    def closed_loop(self, system: Any, params: Any, y0: Any, ts: Any) -> tuple[Any, Any, Any]:
+        """``(states [N, d], actions [N, m], ok)`` of the closed loop on the ODE of
+        ``system`` (a continuous task: the true system, which may differ from the planner's
+        model) with ``params`` from ``y0``, saved at the times ``ts`` (NumPy, increasing,
+        from 0), in the dtype of ``y0`` (float64 under ``jax.enable_x64`` for a reference
+        solve at 1e-9); every control step's report is added to ``reports``."""
         from ..evaluation import REFERENCE_ATOL, REFERENCE_RTOL
         from ._discretise import ode_closed_loop
 
         ys, us, infos, ok = ode_closed_loop(
-            self.planner, y0, ts, params, rtol=REFERENCE_RTOL, atol=REFERENCE_ATOL
+            self.planner, y0, ts, params, REFERENCE_RTOL, REFERENCE_ATOL, system
         )
         infos = {k: np.asarray(v) for k, v in vars(infos).items()}
         n = len(next(iter(infos.values())))
