@@ -31,15 +31,16 @@ def ode_run(tmp_path_factory):
     return out
 
 
-def _in_memory_planner():
-    task = diffcontrol.make("cartpole-swingup")
-    disc = mpc.discretise(task, 0.05)
+def _benchmark_planner(params):
+    """The planner ``benchmarks/mpc_swingup.py`` builds by hand, with this module's budget."""
+    disc = mpc.discretise(diffcontrol.make("cartpole-swingup"), 0.05)
     return mpc.make_planner(
         disc,
         mpc.ILQR(iterations=1),
         horizon=4,
+        params=params,
         bounds=((-20.0,), (20.0,)),
-        terminal_cost=disc.terminal_cost("limited_hold", task.default_params()),
+        terminal_cost=disc.terminal_cost("limited_hold", params),
         bound_starts=True,
     )
 
@@ -66,19 +67,21 @@ def test_the_run_stores_the_discretised_planner_and_the_swingup_summary(ode_run)
     assert (ode_run / "swingup.png").stat().st_size > 0
 
 
-def test_load_rebuilds_the_same_planner_acting_as_a_sampled_data_controller(ode_run):
+def test_load_rebuilds_the_planner_as_a_sampled_data_controller(ode_run):
     policy = diffcontrol.load(ode_run)
     assert isinstance(policy, mpc.SampledPlannerPolicy) and policy.dt == 0.05
-    reference = mpc.SampledPlannerPolicy(_in_memory_planner())
-    task, params = policy.task, policy.task.default_params()
+    # the same planner as built by hand: discretised, bounded, the task's end cost (that it
+    # acts the same is checked by evaluate reproducing the stored closed loop, below)
+    params = policy.planner.problem.params
+    assert bool(eqx.tree_equal(policy.planner, _benchmark_planner(params)))
+    task = policy.task
     y = np.array([0.0, 0.0, 0.3, -0.5, 0.0, 0.0], np.float32)  # falling near the top
-    got, expected = [], []
-    for _ in range(6):  # the loop closed in float32 through the planner's own model
-        got.append(policy(y[:4]))  # the physical state, as a StatePolicy takes it
-        expected.append(reference(y))  # or the whole ODE state
+    got = []
+    for k in range(6):  # the loop closed in float32 through the planner's own model
+        got.append(policy(y[:4] if k % 2 else y))  # the physical state, or the ODE state
         y = np.asarray(mpc._discretise.rk4_hold(task, params, jnp.asarray(y),
                                                  jnp.array([got[-1]]), 0.05))  # fmt: skip
-    np.testing.assert_allclose(got, expected, atol=1e-4)
+    assert all(isinstance(u, float) and abs(u) <= 20.0 for u in got)
     assert np.ptp(got) > 1.0 and len(policy.reports) == 6  # it acts; every solve reported
     with pytest.raises(ValueError, match="expected a state of 4 values"):
         policy(np.zeros(3))

@@ -199,6 +199,9 @@ def plan_run(
 
     task = resolve(task) if isinstance(task, str) else task
     config = task.default_plan_config() if config is None else config
+    unknown = set(settings or {}) - {f.name for f in dataclasses.fields(PlanConfig)}
+    if unknown:
+        raise ConfigError(f"unknown planner settings {sorted(unknown)}; see PlanConfig's fields")
     config = config.replace(**{k: v for k, v in (settings or {}).items() if v is not None})
     config = config.for_task(task)
     say = progress or (lambda line: None)
