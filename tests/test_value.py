@@ -189,7 +189,7 @@ def test_a_planner_with_a_learned_value_round_trips_through_model_json(tmp_path)
     with pytest.raises(ConfigError, match="two terminal costs"):
         mpc.planner_from_config(task, PlanConfig(value_grid=11), value=value)
     with pytest.raises(ConfigError, match="not an mpc.ValueNetwork of task 'pendulum'"):
-        runs.plan_run(tmp_path / "q", task, config, final_eval=0, value="net")
+        runs.plan_run(tmp_path / "q", task, config, final_eval=0, value=3)
     doc["controller"]["value"]["layers"] = []
     (tmp_path / "p" / "model.json").write_text(json.dumps(doc))
     with pytest.raises(ModelFileError, match="malformed value network"):

@@ -87,7 +87,10 @@ def load(run_dir: str | _os.PathLike, task: Task | ContinuousTask | str | None =
     continuous-time task (``policy(state) -> action`` on the physical state). A planner
     (written by ``diffcontrol plan``) loads as an ``mpc.PlannerPolicy``, ``policy(obs)`` ->
     Gymnasium action like the others, but it imports JAX and runs one compiled solve per
-    call (its terminal value grid, if any, is solved again here from the stored settings).
+    call (its terminal value grid, if any, is solved again here from the stored settings);
+    a continuous-time task's planner as an ``mpc.SampledPlannerPolicy``, ``policy(state)`` ->
+    action like a ``StatePolicy``, but an action to hold for ``policy.dt`` seconds (one
+    solve per control period, JAX again).
 
     Args:
         run_dir: a directory written by ``diffcontrol train`` or ``result.save``.

@@ -341,6 +341,7 @@ class SwingUpResult:
     swings: int
     upright_time: float | None
     loss: float
+    solves: str | None = None  # a planner's count of unconverged and non-finite solves
 
     key = "swingup"  # its entry in metrics.json
 
@@ -352,9 +353,12 @@ class SwingUpResult:
         )
 
     def to_json(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
+        doc = dataclasses.asdict(self)
+        solves = doc.pop("solves")
+        return doc if solves is None else {**doc, "planner_solves": solves}
 
     def summary(self) -> str:
+        """One line (and, for a planner, a second with its solves)."""
         up = (
             f"upright (|θ| < 0.1 rad) from {self.upright_time:.2f} s"
             if self.upright_time is not None
@@ -366,6 +370,7 @@ class SwingUpResult:
             f"{self.final_x:+.2f} m; peak |F| {self.peak_force:.1f} N; {self.swings} swings; "
             f"{up}; loss {self.loss:.4f}"
             + (f"; dissipated {self.dissipated_energy:.2f} J" if self.dissipated_energy else "")
+            + ("" if self.solves is None else f"\nplanner: {self.solves}")
         )
 
 
@@ -377,13 +382,20 @@ def simulate_continuous(
     config: Any = None,
     rate_hz: float = 100.0,
 ) -> ContinuousRecording:
-    """Solve ``task``'s closed loop with ``controller`` (an ``MLPController``) for reporting.
+    """Solve ``task``'s closed loop with ``controller`` for reporting.
 
     A float64 reference solve (``dopri8`` at ``REFERENCE_RTOL``/``REFERENCE_ATOL``) saved at
     ``rate_hz`` over the horizon of ``config`` (an ``ODETrainConfig``; default: the task's),
     plus that config's loss (by name; the task's default if empty) on its own save grid
     (``saves`` points, as in training).
+
+    ``controller`` is an ``MLPController`` (state feedback inside the ODE), or a sampled-data
+    controller: anything with ``closed_loop(task, params, y0, ts) -> (states, actions, ok)``
+    that solves its own closed loop with ``task``'s vector field (a planner,
+    ``mpc.SampledPlannerPolicy``: each action held for its period). The loss then sees the
+    action held at each save.
     """
+    import equinox as eqx
     import jax
     import jax.numpy as jnp
 
@@ -398,7 +410,7 @@ def simulate_continuous(
         def wide(x):
             return jax.device_put(np.asarray(x, np.float64))
 
-        ctrl, p64 = jax.tree.map(wide, controller), jax.tree.map(wide, params)
+        p64 = jax.tree.map(wide, params)
 
         @jax.jit
         def run(ctrl, p, ts):
@@ -416,11 +428,22 @@ def simulate_continuous(
             return sol.ys, force, sol.ok
 
         ts = jnp.linspace(0.0, horizon, n)
-        ys, force, ok = run(ctrl, p64, ts)
         ts_loss = jnp.linspace(0.0, horizon, config.saves)
-        ys_loss, _, ok_loss = run(ctrl, p64, ts_loss)
         loss_fn = task.trajectory_loss(config.loss or task.losses[0])
-        loss = float(loss_fn(task.trajectory(p64, ctrl, ts_loss, ys_loss)))
+        if hasattr(controller, "closed_loop"):  # sampled data: one solve for both grids
+            both = np.union1d(np.asarray(ts), np.asarray(ts_loss))
+            ys_all, us, ok = controller.closed_loop(task, p64, task.initial_state(p64), both)
+            at, at_loss = (np.searchsorted(both, np.asarray(t)) for t in (ts, ts_loss))
+            ys, force, ys_loss, ok_loss = ys_all[at], us[at, 0], ys_all[at_loss], True
+            # The trajectory's force is the action held at each save, not a state feedback.
+            tr = task.trajectory(p64, lambda obs: jnp.zeros(1), ts_loss, ys_loss)
+            tr = eqx.tree_at(lambda tr: tr.force, tr, us[at_loss, 0])
+            loss = float(loss_fn(tr))
+        else:
+            ctrl = jax.tree.map(wide, controller)
+            ys, force, ok = run(ctrl, p64, ts)
+            ys_loss, _, ok_loss = run(ctrl, p64, ts_loss)
+            loss = float(loss_fn(task.trajectory(p64, ctrl, ts_loss, ys_loss)))
         if not (bool(ok) and bool(ok_loss)):
             raise ValueError("the reference solve failed: the closed loop explodes")
     return ContinuousRecording(task.name, np.asarray(ts), np.asarray(ys), np.asarray(force), loss)

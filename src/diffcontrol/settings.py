@@ -282,12 +282,23 @@ MAX_VALUE_GRID = 1001
 class PlanConfig(_Settings):
     """Settings of a planning controller (``mpc.planner_from_config``, ``diffcontrol plan``):
     what ``model.json`` stores of a planner, with the model it plans through. Pendulum's best
-    (docs/planning.md): ``PlanConfig(horizon=10, value_grid=401)``."""
+    (docs/planning.md): ``PlanConfig(horizon=10, value_grid=401)``. A task's defaults are its
+    ``default_plan_config()`` (the swing-ups': ``dt=0.05``, ``horizon=40``, ``iterations=5``;
+    the actuator-limited one's force within 5 N); a continuous-time task is planned through
+    ``mpc.discretise(task, dt, substeps)``."""
 
     solver: str = _opt("the solver of every step's plan", "ilqr", choices=SOLVERS)
-    horizon: int = _opt("H, the actions planned at every step", 20, "H", high=10_000)
+    horizon: int = _opt(
+        "H, the actions planned at every step (the swing-ups' own default: 40)",
+        20,
+        "H",
+        high=10_000,
+    )
     iterations: int | None = _opt(
-        "solver iterations per step (default 10 for ilqr, 30 for shooting)", None, "N", high=10_000
+        "solver iterations per step (default 10 for ilqr, 30 for shooting; the swing-ups' 5)",
+        None,
+        "N",
+        high=10_000,
     )
     learning_rate: float = _opt("shooting: Adam's learning rate", 0.3, "LR", form="positive")
     bound_starts: bool = _opt(
@@ -307,6 +318,22 @@ class PlanConfig(_Settings):
     value_levels: int = _opt("actions per action dimension of that grid", 41, "N", low=2, high=1001)
     terminal_weight: float = _opt("weight of the terminal cost", 1.0, "W", form="nonneg")
     loss: str | None = _opt("the task's step loss to plan with (default its first)", None, "NAME")
+    action_bound: float | None = _opt(
+        "plan actions within +-B (default: the task's bounds; the actuator-limited swing-up's "
+        "force: 5 N)",
+        None,
+        "B",
+        form="positive",
+    )
+    dt: float | None = _opt(
+        "continuous-time tasks: the control period (s); each action is held for it, and the "
+        "planner's model integrates the ODE over it by RK4 (default: the task's, 0.05 for the "
+        "swing-ups)",
+        None,
+        "S",
+        form="positive",
+    )
+    substeps: int = _opt("continuous-time tasks: RK4 steps per control period", 1, "N", high=1000)
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -318,6 +345,19 @@ class PlanConfig(_Settings):
                 raise ConfigError(f"{name} must be a finite number, got {value!r}")
         if not self.learning_rate > 0:
             raise ConfigError(f"learning_rate must be > 0, got {self.learning_rate!r}")
+        for name in ("action_bound", "dt"):
+            value = getattr(self, name)
+            if value is not None and (isinstance(value, bool) or not 0 < value < math.inf):
+                raise ConfigError(f"{name} must be a finite number > 0, got {value!r}")
+
+    def for_task(self, task: Any) -> PlanConfig:
+        """These settings with what they leave open (``dt``, ``action_bound``: ``None``)
+        taken from the task's own planning defaults (``task.default_plan_config()``): what
+        ``diffcontrol plan`` stores, so that a stored planner does not change with them."""
+        own = task.default_plan_config()
+        return self.replace(
+            **{n: getattr(own, n) for n in ("dt", "action_bound") if getattr(self, n) is None}
+        )
 
     @property
     def solver_iterations(self) -> int:

@@ -82,11 +82,9 @@ def add_parsers(sub: Any) -> None:
 def cmd_fit(args: argparse.Namespace) -> int:
     from .. import identify, tasks
 
-    config = a.config_of(FitConfig, args)
     more = {"force": args.force, "progress": a.say(args)}
-    done = identify.fit_dir(
-        tasks.resolve(args.task), args.data, args.model, args.out, config, **more
-    )
+    task, config = tasks.resolve(args.task), a.config_of(FitConfig, args)
+    done = identify.fit_dir(task, args.data, args.model, args.out, config, **more)
     print("\n".join(done.lines))
     return 0
 

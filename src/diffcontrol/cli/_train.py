@@ -15,6 +15,7 @@ from ._args import FLAG, REQUIRED, add
 
 _DISCRETE = {f.name for f in dataclasses.fields(TrainConfig)}
 _SETTINGS = (_DISCRETE | {f.name for f in dataclasses.fields(ODETrainConfig)}) - {"params"}
+_PLAN = {f.name for f in dataclasses.fields(PlanConfig)}
 
 
 def add_parsers(sub: Any) -> None:
@@ -66,10 +67,11 @@ def add_parsers(sub: Any) -> None:
     add(ode, *a.config_specs(ODETrainConfig, skip=_DISCRETE, defaults=False))
     add(group, ("--param", [a.param], None, "NAME=VALUE", "override a physical parameter of "
                 "the simulator (repeatable), e.g. --param g=9.81"))
-    p = sub.add_parser("plan", help="write a planning controller (MPC) as a run", description=(
+    p = sub.add_parser("plan", help="write a planning controller (MPC) as a run", description=
         "Write a planning controller for TASK in DIR like a trained run (model.json holds its "
-        "settings and model; it runs with JAX). See docs/planning.md."))
-    add(p, a.TASK, *shared, *a.config_specs(PlanConfig), a.QUIET)
+        "settings and model; runs with JAX); defaults are the task's. See docs/planning.md.")
+    add(p, a.TASK, *shared, *a.config_specs(PlanConfig), a.QUIET, ("--value", str, None, "FILE",
+        "a learned terminal value (mpc.learn_value's ValueResult.save) stored in model.json"))
     # fmt: on
     _add_sweep_parser(sub)
 
@@ -106,9 +108,9 @@ def cmd_train(args: argparse.Namespace) -> int:
 def cmd_plan(args: argparse.Namespace) -> int:
     from ..runs import plan_run
 
-    kw = a.pick(args, "model final_eval") | {"env_id": args.env, "animation": not args.no_animation}
-    config = a.config_of(PlanConfig, args)
-    run, files = plan_run(args.out, args.task, config, progress=a.say(args), **kw)
+    kw = a.pick(args, "model final_eval value") | {"env_id": args.env, "progress": a.say(args)}
+    kw |= {"settings": a.pick(args, _PLAN), "animation": not args.no_animation}
+    run, files = plan_run(args.out, args.task, **kw)
     print(f"{run.metrics.get('headline', 'planner')}; wrote {', '.join(files)} in {args.out}")
     return 0
 

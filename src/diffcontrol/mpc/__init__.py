@@ -9,7 +9,9 @@
 
 A continuous-time task (the swing-ups) is planned through its discrete-time view,
 ``mpc.discretise(task, dt)`` (the action held for ``dt``, RK4), and run against its true ODE by
-``mpc.ode_episode(planner, y0, steps)``.
+``mpc.ode_episode(planner, y0, steps)``; ``mpc.SampledPlannerPolicy(planner)`` is such a planner
+as a controller that holds each action for ``dt`` (what ``diffcontrol.load`` gives of a
+continuous-time task's planner).
 
 A planner from stored settings: ``mpc.planner_from_config(task, PlanConfig(horizon=10))``;
 ``diffcontrol plan`` (``runs.plan_run``) writes one as a run directory that ``diffcontrol.load``
@@ -20,12 +22,12 @@ differentiable in the state and the model's parameters, through the solver's ite
 """
 
 from ._config import planner_from_config
-from ._discretise import DiscretisedTask, discretise, ode_episode
+from ._discretise import DiscretisedTask, discretise, ode_closed_loop, ode_episode
 from ._distil import distil, labelled_episodes
 from ._ilqr import ILQR
 from ._learn import ValueResult, closed_loop_loss, learn_value, load_value
 from ._planner import Planner, make_planner
-from ._policy import PlannerPolicy
+from ._policy import PlannerPolicy, SampledPlannerPolicy
 from ._problem import Problem, SolveInfo
 from ._shooting import Shooting
 from ._value import ValueNetwork
@@ -36,6 +38,7 @@ __all__ = [
     "Planner",
     "PlannerPolicy",
     "Problem",
+    "SampledPlannerPolicy",
     "Shooting",
     "SolveInfo",
     "ValueNetwork",
@@ -47,6 +50,7 @@ __all__ = [
     "learn_value",
     "load_value",
     "make_planner",
+    "ode_closed_loop",
     "ode_episode",
     "planner_from_config",
 ]

@@ -12,6 +12,8 @@ from jaxtyping import PyTree
 
 from ..errors import ConfigError
 from ..settings import PlanConfig
+from ..tasks._base import ContinuousTask
+from ._discretise import DiscretisedTask, discretise
 from ._ilqr import ILQR
 from ._planner import Planner, make_planner
 from ._shooting import Shooting
@@ -27,6 +29,13 @@ def planner_from_config(
     """The ``Planner`` that ``config`` describes, planning through ``task.step`` with
     ``params`` (default ``task.default_params()``).
 
+    A continuous-time task (a ``ContinuousTask``) is planned through its discrete-time view
+    ``discretise(task, config.dt, config.substeps)`` (the action held for ``dt`` seconds,
+    RK4), with the task's end cost of the planning loss (``task.terminal_cost``) as the
+    terminal cost unless a value network replaces it; ``dt`` and ``action_bound`` left
+    ``None`` are the task's (``PlanConfig.for_task``). Run such a planner against the ODE
+    itself with ``ode_episode``, or wrap it as a ``SampledPlannerPolicy``.
+
     With ``config.value_grid`` the terminal cost is ``-V_0``, the value at time 0 of the task's
     grid optimum (``optimal.solve`` with that many points per state axis and
     ``config.value_levels`` actions, solved here with the same model and parameters; only
@@ -38,8 +47,33 @@ def planner_from_config(
 
     Raises:
         ConfigError: settings the task cannot take (a loss it does not have, a value grid for
-            a task without a state grid, no action bounds, both a value grid and a network).
+            a task without a state grid, no action bounds, both a value grid and a network,
+            ``dt`` or ``substeps`` for a discrete-time task, no ``dt`` for a continuous one).
     """
+    config = config.for_task(task)
+    if isinstance(task, ContinuousTask):
+        if config.dt is None:
+            raise ConfigError(
+                f"task {task.name!r} is continuous-time: its planner needs dt, the control "
+                "period in seconds (--dt 0.05, PlanConfig(dt=0.05))"
+            )
+        task = discretise(task, config.dt, config.substeps)
+    elif config.dt is not None or config.substeps != 1:
+        raise ConfigError(
+            f"dt={config.dt}, substeps={config.substeps}: task {task.name!r} is discrete-time "
+            "and steps at its own rate; leave --dt and --substeps out"
+        )
+    bounds = None
+    if config.action_bound is not None:
+        bounds = (
+            (-config.action_bound,) * task.action_size,
+            (config.action_bound,) * task.action_size,
+        )
+    elif task.action_low is None and task.action_head != "sign":
+        raise ConfigError(
+            f"task {task.name!r} has no action bounds; a planner needs them: pass "
+            "--action-bound B (PlanConfig(action_bound=B)), the actions then within +-B"
+        )
     if value is not None and config.value_grid is not None:
         raise ConfigError(
             f"value_grid={config.value_grid} and a value network are two terminal costs; "
@@ -64,6 +98,8 @@ def planner_from_config(
         def terminal_cost(state):
             return -first.value(0, state)
 
+    if terminal_cost is None and isinstance(task, DiscretisedTask):
+        terminal_cost = task.terminal_cost(config.loss or task.losses[0], params)
     return make_planner(
         task,
         solver,
@@ -73,4 +109,5 @@ def planner_from_config(
         terminal_cost=terminal_cost,
         terminal_weight=config.terminal_weight,
         bound_starts=config.bound_starts,
+        bounds=bounds,
     )

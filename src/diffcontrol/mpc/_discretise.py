@@ -21,12 +21,14 @@ step-size decisions, which would make the model piecewise). A ``diffeqsolve`` is
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Any
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Float, PyTree
 
 from ..errors import ConfigError
@@ -90,6 +92,18 @@ class DiscretisedTask(Task):
         horizon_s = getattr(task.default_config(), "horizon_s", None)
         self.episode_length = max(1, round(horizon_s / dt)) if horizon_s else 1
 
+    # Equal views of the same task are one task, so that planners rebuilt from the same
+    # settings (a run written, then loaded) share their compiled programs.
+    def __eq__(self, other: object) -> bool:
+        return type(other) is type(self) and (other.continuous, other.dt, other.substeps) == (
+            self.continuous,
+            self.dt,
+            self.substeps,
+        )
+
+    def __hash__(self) -> int:
+        return hash((type(self), self.continuous, self.dt, self.substeps))
+
     def default_params(self) -> PyTree:
         return self.continuous.default_params()
 
@@ -110,19 +124,36 @@ class DiscretisedTask(Task):
     def step_loss(self, name: str):
         if name not in self.losses:
             raise ConfigError(f"loss={name!r} is not one of task {self.name!r}'s {self.losses}")
-        rate = self.continuous.running_cost(name)
-        dt = self.dt
-
-        def loss(params, state, action, next_state, reward):
-            return dt * rate(params, state, action)
-
-        return loss
+        return PeriodCost(self.continuous.running_cost(name), self.dt)
 
     def terminal_cost(self, name: str, params: PyTree | None = None):
-        """``cost(state)`` at the end of a plan (the continuous task's ``terminal_cost``)."""
+        """``cost(state)`` at the end of a plan (the continuous task's ``terminal_cost`` with
+        ``params``, default the task's), or ``None`` where it has none."""
         params = self.default_params() if params is None else params
         end = self.continuous.terminal_cost(name)
-        return None if end is None else (lambda state: end(params, state))
+        return None if end is None else EndCost(end, params)
+
+
+@dataclasses.dataclass(frozen=True)
+class PeriodCost:
+    """A step loss: ``dt`` times the cost per second ``rate(params, state, action)`` (equal
+    for equal arguments, so that equal planners compile once)."""
+
+    rate: Any
+    dt: float
+
+    def __call__(self, params, state, action, next_state, reward):
+        return self.dt * self.rate(params, state, action)
+
+
+class EndCost(eqx.Module):
+    """``cost(state) = end(params, state)``, the parameters as the module's leaves."""
+
+    end: Any = eqx.field(static=True)
+    params: PyTree
+
+    def __call__(self, state: Array) -> Array:
+        return self.end(self.params, state)
 
 
 def discretise(task: ContinuousTask, dt: float, substeps: int = 1) -> DiscretisedTask:
@@ -172,23 +203,63 @@ def ode_episode(
     under ``jax.enable_x64`` for a reference. ``params``: the system's parameters where they
     differ from the planner's model.
     """
+    ys, us, infos, _, _ = _ode_loop(planner, y0, steps, params, rtol, atol, None, None)
+    return jnp.concatenate([y0[None], ys]), us, infos
+
+
+def ode_closed_loop(
+    planner: Any,
+    y0: Float[Array, " d"],
+    ts: Float[Array, " N"],
+    params: PyTree | None = None,
+    rtol: float = 1e-8,
+    atol: float = 1e-8,
+    system: ContinuousTask | None = None,
+) -> tuple[Array, Array, Any, Array]:
+    """``ode_episode`` over ``[0, ts[-1]]`` (``ceil(ts[-1] / dt)`` periods), saved at the
+    times ``ts`` (increasing, from 0) rather than at the control instants: what a reference
+    solve of a sampled-data controller reports and draws. ``ts`` is concrete (NumPy): the
+    loop is compiled here (``eqx.filter_jit``), once per planner and length.
+
+    Returns ``(states [N, d] at ts, actions [N, m] held at ts, reports stacked per control
+    step, ok)``: the action at ``t`` is the one held over the period that starts at or before
+    it (at the last instant, the last period's); ``ok`` is whether every period's solve
+    succeeded. Each period's solve also saves the instants of ``ts`` clipped into it, so the
+    states are those of the same adaptive solves as ``ode_episode``'s. ``system``: the
+    continuous task whose vector field is the true system (with ``params``), where it is not
+    the one the planner's model discretises (a planner through a fitted model, judged on the
+    real system).
+    """
+    ts = np.asarray(ts)
+    dt = planner.task.dt
+    steps = max(1, math.ceil(float(ts[-1]) / dt - 1e-9))
+    loop = eqx.filter_jit(_ode_loop)
+    _, us, infos, saved, ok = loop(planner, y0, steps, params, rtol, atol, jnp.asarray(ts), system)
+    period = np.clip(np.floor(ts / dt + 1e-9).astype(int), 0, steps - 1)
+    ys = saved[period, np.arange(ts.shape[0])]
+    return ys, us[period], infos, jnp.all(ok)
+
+
+def _ode_loop(planner, y0, steps, params, rtol, atol, save_ts, system):
     from ..rollout import solve_closed_loop
 
     disc = planner.task
-    cont, dt = disc.continuous, disc.dt
+    cont, dt = system or disc.continuous, disc.dt
     params = planner.problem.params if params is None else params
     dtype = y0.dtype
     planner = jax.tree.map(lambda a: a.astype(dtype) if eqx.is_inexact_array(a) else a, planner)
     sys_params = jax.tree.map(lambda p: jnp.asarray(p, dtype), params)
+    inner = jnp.zeros((0,), dtype) if save_ts is None else jnp.asarray(save_ts, dtype)
 
     def one(carry, k):
         y, warm = carry
         u, warm, info = planner.control(y, warm)
-        t0 = k * dt
+        t0, t1 = k * dt, (k + 1) * dt
+        ts = jnp.concatenate([jnp.stack([t0]), jnp.clip(inner, t0, t1), jnp.stack([t1])])
         sol = solve_closed_loop(
             cont.vector_field,
             y,
-            jnp.stack([t0, t0 + dt]).astype(dtype),
+            ts.astype(dtype),
             (sys_params, HeldAction(u)),
             solver="dopri8",
             rtol=rtol,
@@ -196,9 +267,9 @@ def ode_episode(
             max_steps=10_000,
         )
         nxt = sol.ys[-1]
-        return (nxt, warm), (nxt, u, info)
+        return (nxt, warm), (nxt, u, info, sol.ys[1:-1], sol.ok)
 
     warm = planner.initial_plan().astype(dtype)
     ks = jnp.arange(steps)
-    _, (ys, us, infos) = jax.lax.scan(one, (y0, warm), ks)
-    return jnp.concatenate([y0[None], ys]), us, infos
+    _, out = jax.lax.scan(one, (y0, warm), ks)
+    return out

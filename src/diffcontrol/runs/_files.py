@@ -49,6 +49,13 @@ class Run:
         return load_policy(self.task, self.model)
 
     @property
+    def feedback(self) -> Any:
+        """What closes a continuous-time task's loop: ``controller`` (inside the ODE), or for
+        a planner, which has none, ``policy`` (an ``mpc.SampledPlannerPolicy``, each action
+        held for its ``dt``: ``evaluation.simulate_continuous`` takes either)."""
+        return self.policy if self.controller is None else self.controller
+
+    @property
     def real_env(self) -> tuple[str, dict] | None:
         """``(env_id, env_kwargs)`` where the run is judged in another Gymnasium environment."""
         if self.real and "env_id" in self.real:

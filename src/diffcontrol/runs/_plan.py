@@ -6,7 +6,10 @@ A planner's ``model.json`` (see ``io.planner_document``) holds its settings and 
 plans through: the task's own simulator (``{"kind": "simulator"}``) or the whole
 ``fitted.json`` of ``diffcontrol fit`` (``{"kind": "fitted", "fitted": {...}}``, networks
 included), so the file is self-contained. Unlike an MLP's, it needs JAX at run time: every
-action is one compiled solve.
+action is one compiled solve. A continuous-time task's planner plans through
+``mpc.discretise(task, dt)`` and acts as a sampled-data controller (``mpc.SampledPlannerPolicy``:
+``policy(state)``, each action held for ``dt``), judged by the task's reference solve with the
+planner in the loop (``mpc.ode_closed_loop``).
 """
 
 from __future__ import annotations
@@ -16,10 +19,12 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from .. import io
 from ..errors import ConfigError, ModelFileError
 from ..settings import PlanConfig
-from ..tasks import AnyTask, Task, resolve
+from ..tasks import AnyTask, resolve
 from ._files import Run, mark_complete, release_claim, save_run
 
 
@@ -28,7 +33,7 @@ class PlanResult:
     """A planning controller ready to be saved by ``save_run``, as a ``TrainResult`` is."""
 
     task: AnyTask
-    controller: Any  # the mpc.Planner
+    controller: Any  # None: a planner is its ``policy`` (``Run.feedback``)
     config: Any  # the task's default training config (the run's own settings are ``plan``)
     params: Any
     metrics: dict
@@ -42,7 +47,11 @@ class PlanResult:
 
         meta = {"diffcontrol_version": __version__, "created": metrics["created"]}
         value = None if self.value is None else self.value.to_json()
-        return io.planner_document(self.task, self.plan.to_json(), self.model, meta, value)
+        problem = self.policy.planner.problem  # the planner's own bounds (the task may have none)
+        bounds = [np.asarray(b, float).tolist() for b in (problem.low, problem.high)]
+        doc = io.planner_document(self.task, self.plan.to_json(), self.model, meta, value)
+        doc["action"].update(low=bounds[0], high=bounds[1])
+        return doc
 
 
 def planning_model(task: AnyTask, model: dict, where: str = "model.json") -> tuple[AnyTask, Any]:
@@ -103,11 +112,39 @@ def planner_policy(task: AnyTask, doc: dict, progress: Callable[[str], None] | N
 def _policy(
     task: AnyTask, config: PlanConfig, model: dict, progress: Any, value: Any = None
 ) -> Any:
-    from ..mpc import PlannerPolicy, planner_from_config
+    """A ``PlannerPolicy``, or for a planner through a continuous task's discretisation a
+    ``SampledPlannerPolicy`` (``policy(state)``, held for ``dt``)."""
+    from ..mpc import DiscretisedTask, PlannerPolicy, SampledPlannerPolicy, planner_from_config
 
     model_task, params = planning_model(task, model)
     planner = planner_from_config(model_task, config, params, progress=progress, value=value)
+    if isinstance(planner.task, DiscretisedTask):
+        return SampledPlannerPolicy(planner)
     return PlannerPolicy(planner)
+
+
+def read_value(task: AnyTask, value: Any) -> Any:
+    """``value`` as an ``mpc.ValueNetwork`` of ``task``: a network as it is, or the JSON file
+    ``ValueResult.save`` wrote (``diffcontrol plan --value FILE``; read as JSON, no code).
+
+    Raises:
+        ConfigError: a network of another task, or something else; ModelFileError: a file
+            that is missing, not JSON, or not a value network of ``task`` of sound shapes.
+    """
+    from ..mpc import ValueNetwork
+
+    if isinstance(value, str | Path):
+        doc = io.read_json(value, "value network")
+        try:
+            return ValueNetwork.from_json(task, doc)
+        except ModelFileError as e:
+            raise ModelFileError(
+                f"value file {value}: {e}; pass one that mpc.learn_value learnt for task "
+                f"{task.name!r} (written by ValueResult.save)"
+            ) from None
+    if not isinstance(value, ValueNetwork) or value.task.name != task.name:
+        raise ConfigError(f"value={value!r} is not an mpc.ValueNetwork of task {task.name!r}")
+    return value
 
 
 def plan_run(
@@ -121,22 +158,33 @@ def plan_run(
     animation: bool = True,
     progress: Callable[[str], None] | None = None,
     value: Any = None,
+    settings: dict[str, Any] | None = None,
 ) -> tuple[Run, list[str]]:
     """Write a planning controller for ``task`` as a run directory: ``model.json`` (the
     settings and the model), ``metrics.json`` (the final evaluation, per-step solve reports
     counted) and the task's pictures; ``diffcontrol.load``, ``evaluate_dir`` and
     ``animate_dir`` take it like a trained run.
 
+    A continuous-time task's planner plans through ``mpc.discretise(task, dt, substeps)``
+    and is judged by the task's own evaluation (the swing-up's reference solve, with the
+    planner in the loop and each action held for ``dt``: end state, peak force, swings).
+
     Args:
         out_dir: a new or empty directory.
-        task: a discrete-time task with action bounds (or its name).
-        config: the planner's settings (default ``PlanConfig()``).
+        task: a task with action bounds, or a continuous-time one (or its name); a task
+            without bounds takes ``config.action_bound``.
+        config: the planner's settings (default the task's, ``task.default_plan_config()``);
+            what ``dt`` and ``action_bound`` leave open is the task's (``PlanConfig.for_task``),
+            and ``model.json`` stores them filled in.
         model: a directory (or ``fitted.json``) of ``diffcontrol fit`` to plan through instead
             of the task's simulator; its data's system is then where it is evaluated.
         env_id: with ``model``: the real system's Gymnasium id where the fit names one of yours.
         final_eval: evaluation episodes (``None``: the task's default; 0 skips).
-        value: a learned terminal value (``mpc.ValueNetwork``, from ``mpc.learn_value``) as
-            the terminal cost; its weights are stored in ``model.json``.
+        value: a learned terminal value (``mpc.ValueNetwork``, from ``mpc.learn_value``, or
+            the JSON file ``ValueResult.save`` wrote) as the terminal cost; its weights are
+            stored in ``model.json``.
+        settings: fields of ``config`` to change (``None`` values skipped): the command
+            line's options, over the task's defaults.
 
     Returns:
         The ``Run`` and the names of the files written.
@@ -149,19 +197,16 @@ def plan_run(
 
     from ..training import task_params
 
-    config = PlanConfig() if config is None else config
     task = resolve(task) if isinstance(task, str) else task
-    if not isinstance(task, Task):
-        raise ConfigError(
-            f"task {task.name!r} is continuous-time: diffcontrol plan takes discrete-time tasks; "
-            "plan it from Python through mpc.discretise(task, dt) (docs/planning.md)"
-        )
+    config = task.default_plan_config() if config is None else config
+    unknown = set(settings or {}) - {f.name for f in dataclasses.fields(PlanConfig)}
+    if unknown:
+        raise ConfigError(f"unknown planner settings {sorted(unknown)}; see PlanConfig's fields")
+    config = config.replace(**{k: v for k, v in (settings or {}).items() if v is not None})
+    config = config.for_task(task)
     say = progress or (lambda line: None)
     if value is not None:
-        from ..mpc import ValueNetwork
-
-        if not isinstance(value, ValueNetwork) or value.task.name != task.name:
-            raise ConfigError(f"value={value!r} is not an mpc.ValueNetwork of task {task.name!r}")
+        value = read_value(task, value)
     real, info = None, {"kind": "simulator"}
     if model is not None:
         from ..identify.fitted import read_fitted, real_system
@@ -183,9 +228,10 @@ def plan_run(
         if model is not None:  # as train --model records it: evaluate reads the real system
             metrics["model"] = {"dir": str(model), "kind": fitted["model"], "real_system": real}
         planner = policy.planner  # judged with its parameters where it plans through the task
-        params = planner.problem.params if planner.task is task else task_params(task)
+        own = planner.task is task or getattr(planner.task, "continuous", None) is task
+        params = planner.problem.params if own else task_params(task)
         config_ = task.default_config()  # the run's training settings: none, the defaults
-        result = PlanResult(task, planner, config_, params, metrics, config, info, policy, value)
+        result = PlanResult(task, None, config_, params, metrics, config, info, policy, value)
         run_, files = save_run(
             result, out, final_eval=final_eval, animation=animation, real=real, progress=say
         )

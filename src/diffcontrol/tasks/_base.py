@@ -48,6 +48,15 @@ class _TaskBase(abc.ABC):
         """Named sets of configuration overrides (``--recipe``), e.g. the 2019 original."""
         return {}
 
+    def default_plan_config(self) -> Any:
+        """The planner settings (``settings.PlanConfig``) that ``diffcontrol plan NAME`` uses
+        by default, options changing them; default ``PlanConfig()``. A continuous-time task
+        names its control period ``dt`` here, and a task without action bounds the planner's
+        ``action_bound``."""
+        from ..settings import PlanConfig
+
+        return PlanConfig()
+
     @property
     def gym_label(self) -> str:
         """How evaluation results name the environment: ``gym_id`` (plus any changes), or the

@@ -220,6 +220,15 @@ class CartPoleSwingUp(ContinuousTask):
         """``limited_hold_end``: the pole's energy gap and the loss's end terms."""
         return limited_hold_end if name == "limited_hold" else None
 
+    def default_plan_config(self):
+        """The planner measured on the actuator-limited swing-up (docs/planning.md): the
+        force held for 0.05 s, 40 of them planned (2 s), 5 box-iLQR iterations from the warm
+        start and both bounds. No force bound: this 1 s task's force is not limited (pass
+        ``action_bound``)."""
+        from ..settings import PlanConfig
+
+        return PlanConfig(horizon=40, iterations=5, dt=0.05)
+
     def default_config(self) -> ODETrainConfig:
         # The post's recipe (Tsit5 at reltol 1e-3 / abstol 1e-6, 50 saves, 3-8-1 tanh net with
         # Glorot init, Adam 0.05) with 1000 updates, as in the post's text (the repository ran
@@ -233,12 +242,13 @@ class CartPoleSwingUp(ContinuousTask):
 
     def reference_solve(self, run):
         """The float64 reference solve of the run's closed loop (``simulate_continuous``),
-        solved once per run."""
+        solved once per run: its controller inside the ODE, or a planner's sampled-data
+        loop (``run.feedback``)."""
         from ..evaluation import simulate_continuous
 
         if "reference_solve" not in run.memo:
             run.memo["reference_solve"] = simulate_continuous(
-                self, run.controller, run.params, config=run.config
+                self, run.feedback, run.params, config=run.config
             )
         return run.memo["reference_solve"]
 
@@ -368,6 +378,12 @@ class CartPoleSwingUpLimited(CartPoleSwingUp):
             lr_schedule="cosine",
             population=8,
         )
+
+    def default_plan_config(self):
+        """The swing-up's planner with the force within 5 N: upright at 10 s from all 17
+        starts of ``benchmarks/mpc_swingup.py`` (docs/planning.md), below the trained
+        controller's peak force of 5.7-6 N."""
+        return super().default_plan_config().replace(action_bound=5.0)
 
     def recipes(self) -> dict[str, dict[str, Any]]:
         # The post's loss, one controller, constant Adam(0.05), the last weights.
