@@ -382,12 +382,12 @@ class Task(_TaskBase):
         --controller plan`` and in ``compare --real``'s planner rows. Default: box-iLQR with
         H = 10 and the terminal cost ``-V_0`` of a 201-point grid optimum solved through the
         fitted model, where the task has a state grid (the Pendulum: within 0.7-1.8 % of a
-        mismatched system's optimum, docs/planning.md), else ``PlanConfig()`` (H = 20)."""
+        mismatched system's optimum, docs/planning.md), else ``default_plan_config()``."""
         from ..settings import PlanConfig
 
         if self.state_grid(self.default_params()):
             return PlanConfig(horizon=10, value_grid=201)
-        return PlanConfig()
+        return self.default_plan_config()
 
     # --- configuration and the outside world ------------------------------------------------
 
