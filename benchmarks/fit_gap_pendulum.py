@@ -3,7 +3,9 @@
 The "real" pendulum is Gymnasium's own ``Pendulum-v1`` with g = 12 m/s^2 (our nominal model
 has 10) and joint friction 0.1 N m s/rad (``diffcontrol/PendulumFriction-v0``; the nominal
 has none). For each seed S: 10 episodes of 200 steps with random torques in [-2, 2] N m are
-recorded from the real system (reset seeds 100 S ..) with Gaussian sensor noise (standard
+recorded from the real system (reset seeds 2000 + 100 S .., none of them a start the
+controllers are judged on; ``--data-seeds legacy``: 100 S .., the first measurements', whose
+seed 0 started from evaluation seeds 0-9) with Gaussian sensor noise (standard
 deviation 0.01 on cos(theta) and sin(theta), 0.05 rad/s on theta_dot, as in
 ``fit_pendulum.py``); 8 are fitted and 2 held out. From them
 three models are fitted: grey box (g and friction, ``identify.fit_parameters``), hybrid (the
@@ -55,21 +57,27 @@ EPISODES, FIT_EPISODES, EVAL_EPISODES = 10, 8, 100
 KINDS = ("nominal", "params", "hybrid", "neural", "true")
 
 
+DATA_SEEDS = {"clean": 2000, "legacy": 0}
+"""The first reset seed of seed 0's real episodes (seed S: that + 100 S)."""
+
+
 def record_real(seed: int, episodes: int = EPISODES, first: int | None = None):
     """``episodes`` episodes of random torques on the real system (reset seeds ``first`` ..,
-    default 100 S ..), with the sensor noise ``NOISE`` (seeded by S) added to the
+    default 2000 + 100 S ..), with the sensor noise ``NOISE`` (seeded by S) added to the
     observations."""
-    first = 100 * seed if first is None else first
+    first = DATA_SEEDS["clean"] + 100 * seed if first is None else first
     data = diffcontrol.record(REAL[0], episodes, seed=first, env_kwargs=REAL[1])
     rng = np.random.default_rng(seed)
     noisy = data.observations + rng.normal(size=data.observations.shape) * NOISE
     return dataclasses.replace(data, observations=noisy)
 
 
-def fit_all(task, seed: int, kinds: tuple, members: int, penalties: tuple, bootstrap: bool):
+def fit_all(
+    task, seed: int, kinds: tuple, members: int, penalties: tuple, bootstrap: bool, first: int
+):
     """The fitted models (label -> (task to train/predict with, its params)), their
     held-out prediction errors, the fit seconds and (for an ensemble) its mean spread."""
-    train, held_out = record_real(seed).split(FIT_EPISODES)
+    train, held_out = record_real(seed, first=first).split(FIT_EPISODES)
     nominal = task.default_params()
     fitted, seconds, extra = {"nominal": (task, nominal)}, {}, {}
     if "params" in kinds:
@@ -112,9 +120,10 @@ def real_return(task, controller) -> dict:
     return {"mean": ev.mean, "std": ev.std}
 
 
-def run(seed: int, restarts: int, kinds: tuple, ensemble: tuple) -> dict:
+def run(seed: int, restarts: int, kinds: tuple, ensemble: tuple, data_seeds: str) -> dict:
     task = diffcontrol.make("pendulum")
-    fitted, errors, extra = fit_all(task, seed, kinds, *ensemble)
+    first = DATA_SEEDS[data_seeds] + 100 * seed
+    fitted, errors, extra = fit_all(task, seed, kinds, *ensemble, first)
     config = task.default_config().replace(seed=seed)
     plans = {label: (t, config) for label, (t, _) in fitted.items()}
     plans["true"] = (task, config.replace(params=tuple(REAL[1].items())))
@@ -170,12 +179,17 @@ def main() -> None:
     parser.add_argument("--penalties", default="1", help="the ensemble's penalty weights, W,W")
     parser.add_argument("--bootstrap", action="store_true", help="members fit resamples")
     parser.add_argument("--first-seed", type=int, default=0)
+    parser.add_argument(
+        "--data-seeds", choices=list(DATA_SEEDS), default="clean",
+        help="clean: real episodes from reset seeds 2000 + 100 S ..; legacy: 100 S .. (the "
+        "first measurements': seed 0's overlapped the evaluation's 0-99)",
+    )  # fmt: skip
     args = parser.parse_args()
     kinds = tuple(k for k in args.kinds.split(",") if k)
     penalties = tuple(float(w) for w in args.penalties.split(","))
     ensemble = (args.members, penalties, args.bootstrap)
     seeds = range(args.first_seed, args.first_seed + args.seeds)
-    rows = [run(s, args.restarts, kinds, ensemble) for s in seeds]
+    rows = [run(s, args.restarts, kinds, ensemble, args.data_seeds) for s in seeds]
     cols = list(rows[0]["real_return"])
     gaps = [k for k in cols if k not in ("nominal", "true")]
     print("\nreturn on the real system (100 episodes), controller trained through each model")
@@ -192,12 +206,13 @@ def main() -> None:
     name += f"-ensemble{args.members}" if args.members > 1 else ""
     name += "-bootstrap" if args.bootstrap else ""
     name += f"-seeds{args.first_seed}-{seeds[-1]}" if args.first_seed else ""
+    name += "-legacy-data" if args.data_seeds == "legacy" else ""
     out = HERE / "results" / f"{name}.json"
     doc = {
         "machine": machine(),
         "real_system": {"env_id": REAL[0], "env_kwargs": REAL[1]},
         "data": f"{EPISODES} episodes of random torques per seed, {FIT_EPISODES} fitted, "
-        f"{EPISODES - FIT_EPISODES} held out",
+        f"{EPISODES - FIT_EPISODES} held out, reset seeds {DATA_SEEDS[args.data_seeds]} + 100 S ..",
         "noise_std": NOISE.tolist(),
         "evaluation": f"{EVAL_EPISODES} episodes on the real system, reset seeds 0-{EVAL_EPISODES - 1}",
         "restarts": f"{args.restarts} training seed(s) (S + 1000 j) per model, the best on the "
