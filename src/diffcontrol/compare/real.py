@@ -18,11 +18,13 @@ Methods: ``params`` (the grey box, whose physics starts from the stated wrong ``
 task's ``real_start``), ``hybrid`` (the same wrong physics plus a network) and ``neural`` (a
 network alone), each with an MLP trained through the fitted model acting on the real system
 (``controllers`` ``train``, the default) or a planner through it (``plan``: the task's
-``loop_planner``, rows ``diffcontrol (grey box, planner)`` and so on). The RL rows are those already recorded by ``diffcontrol compare`` (e.g.
-``benchmarks/results/compare.json``, same evaluation seeds), read, not re-run.
+``loop_planner``, rows ``diffcontrol (grey box, planner)`` and so on). The RL rows are those
+already recorded by ``diffcontrol compare`` (e.g. ``benchmarks/results/compare.json``, same
+evaluation seeds), read, not re-run.
 
 Writes to ``out``: ``loops/<model>-seed<S>/`` (each loop's directory; resumable),
-``runs/<method>-seed<S>.json`` (``<model>-plan`` for a planner's; each finished run, as ``compare`` writes them),
+``runs/<method>-seed<S>.json`` (each finished run, as ``compare`` writes them; ``<model>-plan``
+for a planner's),
 ``comparison.json``, ``comparison.md`` and ``comparison.png`` (return against real steps and
 against wall-clock seconds, the RL curves beside).
 """

@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import ConfigError, RunDirectoryError
-from ..io import now_iso, read_json, write_figure, write_json
+from ..io import now_iso, read_json, read_model, write_figure, write_json
 from ..settings import FitConfig, LoopConfig
 from ._fit import fit_dir
 from ._rounds import NoisyPolicy, model_error, parse_start, predictor_of, start_params
@@ -145,7 +145,7 @@ def loop(
 
     def policy_of(run_dir: Path) -> Any:
         if run_dir not in policies:
-            policies[run_dir] = load_policy(task, read_json(run_dir / "model.json", "model"))
+            policies[run_dir] = load_policy(task, read_model(run_dir))  # checked as load does
         return policies[run_dir]
 
     def record_round(k: int, controller: Path | None) -> None:
