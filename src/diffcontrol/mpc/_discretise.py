@@ -233,8 +233,9 @@ def ode_closed_loop(
     ts = np.asarray(ts)
     dt = planner.task.dt
     steps = max(1, math.ceil(float(ts[-1]) / dt - 1e-9))
-    loop = eqx.filter_jit(_ode_loop)
-    _, us, infos, saved, ok = loop(planner, y0, steps, params, rtol, atol, jnp.asarray(ts), system)
+    _, us, infos, saved, ok = _ode_loop_jit(
+        planner, y0, steps, params, rtol, atol, jnp.asarray(ts), system
+    )
     period = np.clip(np.floor(ts / dt + 1e-9).astype(int), 0, steps - 1)
     ys = saved[period, np.arange(ts.shape[0])]
     return ys, us[period], infos, jnp.all(ok)
@@ -273,3 +274,7 @@ def _ode_loop(planner, y0, steps, params, rtol, atol, save_ts, system):
     ks = jnp.arange(steps)
     _, out = jax.lax.scan(one, (y0, warm), ks)
     return out
+
+
+_ode_loop_jit = eqx.filter_jit(_ode_loop)
+"""``_ode_loop`` compiled once per planner and length, shared by every call."""
