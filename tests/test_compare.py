@@ -179,6 +179,7 @@ def test_compare_help(capsys):
     assert "leave out these evaluations" in " ".join(out.split())
 
 
+@pytest.mark.slow
 def test_compare_trebuchet_rl_in_the_diffcontrol_environment(tmp_path):
     pytest.importorskip("stable_baselines3")
     out = tmp_path / "t"
@@ -192,6 +193,7 @@ def test_compare_trebuchet_rl_in_the_diffcontrol_environment(tmp_path):
         assert all(r <= 0 for r in run["final"]["returns"])  # minus the miss in metres
 
 
+@pytest.mark.slow
 def test_compare_pendulum_has_the_planner_and_its_distilled_mlp(tmp_path, capsys, monkeypatch):
     from diffcontrol.compare import _planning
     from diffcontrol.compare.run import methods_for

@@ -68,6 +68,7 @@ def test_members_differ_and_the_model_is_their_mean():
     np.testing.assert_allclose(float(e.spread(x)), np.sqrt(np.mean(std**2)), rtol=1e-4)
 
 
+@pytest.mark.slow
 def test_the_penalty_is_zero_where_members_agree_and_positive_where_they_differ(task):
     one = _ensemble().member(0)
     agree = stack([one, one, one], penalty=10.0)

@@ -104,6 +104,7 @@ def test_parameters_the_data_cannot_separate_get_infinite_errors(task, clean):
     assert all(np.isfinite(v) for v in result.values.values())
 
 
+@pytest.mark.slow
 def test_divergence_is_reported_and_the_best_parameters_kept(task, clean):
     result = identify.fit_parameters(task, clean[0], learning_rate=1000.0, steps=5, lm_steps=0)
     assert result.diverged and "non-finite" in result.message

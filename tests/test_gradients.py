@@ -209,6 +209,7 @@ def test_pendulum_rollout_gradients_match_fd(task_name):
     assert np.ptp(actions) > 0.1  # and the controller matters: not a constant near zero
 
 
+@pytest.mark.slow
 def test_cartpole_rollout_gradients_match_fd():
     """A smooth function of the 30th state, with a continuous (``tanh``) push."""
     task = diffcontrol.tasks.make("cartpole")

@@ -293,6 +293,7 @@ def test_of_two_writers_racing_for_a_new_file_one_wins(tmp_path):
         assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
 
 
+@pytest.mark.slow
 def test_a_run_that_diverges_after_a_checkpoint_names_a_fix_that_works(
     capsys, tmp_path, monkeypatch
 ):
@@ -319,6 +320,7 @@ def test_a_run_that_diverges_after_a_checkpoint_names_a_fix_that_works(
     assert main([*argv[:3], str(new), *argv[4:], "--learning-rate", "0.001"]) == 0
 
 
+@pytest.mark.slow
 def test_a_users_real_system_is_imported_only_when_named_on_the_command_line(
     capsys, fitted_dir, tmp_path, monkeypatch
 ):
@@ -384,6 +386,7 @@ def test_an_environment_of_another_size_or_a_missing_module_or_place(
     _one_line(capsys, ["loop", "pendulum", "--out", "/proc/no/such", "--rounds", "1"], "/proc/no")
 
 
+@pytest.mark.slow
 def test_env_of_a_task_whose_evaluation_is_its_own(capsys, swingup_run):
     """--env runs Gymnasium episodes; a task that evaluates otherwise (a float64 reference
     solve) refuses it instead of ignoring it."""

@@ -108,6 +108,7 @@ def test_too_little_data_and_bad_settings_are_refused(task, data):
         identify.fit_model(task, short, "hybrid", hidden=(0,))
 
 
+@pytest.mark.slow
 def test_a_diverging_fit_keeps_the_best_weights_and_no_nan(task, data):
     fit = identify.fit_model(task, data[0], "neural", steps=30, learning_rate=1e6, hidden=(8,))
     leaves = jax.tree.leaves(fit.model)

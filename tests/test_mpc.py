@@ -117,6 +117,7 @@ def test_box_constrained_ilqr_matches_a_bounded_optimiser():
     np.testing.assert_allclose(np.asarray(plan)[:, 0], ref.x, atol=2e-3)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "solver", [mpc.ILQR(iterations=5), mpc.Shooting(optax.adam(0.3), iterations=20)]
 )
@@ -191,6 +192,7 @@ def test_a_task_without_bounds_is_refused():
     assert "\n" not in str(caught.value)
 
 
+@pytest.mark.slow
 def test_a_sign_head_task_plans_its_relaxed_push_within_given_bounds():
     # CartPole: Discrete(2) pushes; the plan is the push u in [-1, 1] (force u * force_mag),
     # Gymnasium gets its sign. From a tilted start the planner keeps the pole up.
@@ -206,6 +208,7 @@ def test_a_sign_head_task_plans_its_relaxed_push_within_given_bounds():
     assert (float(default.low[0]), float(default.high[0])) == (-1.0, 1.0)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "solver", [mpc.ILQR(iterations=3), mpc.Shooting(optax.sgd(0.02), iterations=30)]
 )
@@ -273,6 +276,7 @@ def test_implicit_gradient_of_the_plan_is_the_exact_lqr_gain(solver):
         np.testing.assert_allclose(np.asarray(jac(jnp.array([0.8, -0.3]))), exact, atol=1e-8)
 
 
+@pytest.mark.slow
 def test_implicit_gradient_holds_actions_at_their_bounds_and_matches_finite_differences():
     with jax.enable_x64(True):
         planner = mpc.make_planner(

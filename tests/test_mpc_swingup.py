@@ -97,6 +97,7 @@ def _planner(task, horizon, fmax):
     )
 
 
+@pytest.mark.slow
 def test_one_plan_pumps_energy_in():
     """One plan of 1 s (H = 20, up to 6 N) from just off the hanging rest: lower cost than no
     force, and its last state has much more of the pole's energy (the end cost's gap to the

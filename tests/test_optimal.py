@@ -125,6 +125,7 @@ def test_evaluate_reports_the_gap_to_the_optimum(pendulum_run, cartpole_run, cap
 REAL = ("diffcontrol/PendulumFriction-v0", {"g": 12.0, "friction": 0.1})
 
 
+@pytest.mark.slow
 def test_the_optimum_of_a_real_system_is_solved_on_its_physics():
     import gymnasium
 

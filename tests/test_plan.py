@@ -38,6 +38,7 @@ def _actions(policy, seed=3, steps=40):
     return np.stack(actions)
 
 
+@pytest.mark.slow
 def test_load_gives_the_same_actions_as_the_planner_in_memory(planner_run):
     task = diffcontrol.make("pendulum")
     table = optimal.solve(task, 15, 9)
@@ -141,6 +142,7 @@ def test_a_model_file_of_another_task_is_refused(planner_run, tmp_path):
         diffcontrol.load(tmp_path)
 
 
+@pytest.mark.slow
 def test_a_grey_box_fit_is_planned_through(tmp_path):
     _write_grey_box_fit(tmp_path, "pendulum", g=9.0)
     config = PlanConfig(horizon=5, iterations=2)

@@ -45,6 +45,7 @@ def _benchmark_planner(params):
     )
 
 
+@pytest.mark.slow
 def test_the_run_stores_the_discretised_planner_and_the_swingup_summary(ode_run):
     doc = json.loads((ode_run / "model.json").read_text())
     settings = doc["controller"]["settings"]
@@ -67,6 +68,7 @@ def test_the_run_stores_the_discretised_planner_and_the_swingup_summary(ode_run)
     assert (ode_run / "swingup.png").stat().st_size > 0
 
 
+@pytest.mark.slow
 def test_load_rebuilds_the_planner_as_a_sampled_data_controller(ode_run):
     policy = diffcontrol.load(ode_run)
     assert isinstance(policy, mpc.SampledPlannerPolicy) and policy.dt == 0.05
@@ -87,6 +89,7 @@ def test_load_rebuilds_the_planner_as_a_sampled_data_controller(ode_run):
         policy(np.zeros(3))
 
 
+@pytest.mark.slow
 def test_evaluate_and_animate_take_the_run(ode_run, capsys):
     stored = json.loads((ode_run / "metrics.json").read_text())["swingup"]
     assert main(["evaluate", str(ode_run), "--json"]) == 0

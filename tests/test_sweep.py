@@ -154,6 +154,7 @@ def _cli_tiny() -> list[str]:
             "--eval-episodes", "4", "--hidden", "8", "--final-eval", "2", "--quiet"]  # fmt: skip
 
 
+@pytest.mark.slow
 def test_sweep_directory_resume_and_load(tmp_path):
     out = tmp_path / "sweep"
     args = [

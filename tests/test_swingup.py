@@ -379,6 +379,7 @@ def test_resume_continues_exactly(tmp_path):
 # --- the command line ----------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_cli_writes_the_posts_outputs(swingup_run):
     for name in (
         "model.json",

@@ -184,6 +184,7 @@ def test_forward_and_reverse_mode_agree(spread):
     np.testing.assert_allclose(spread["fwd"], spread["rev"], rtol=RTOL_MODES, atol=1e-12)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "point",
     [
@@ -207,6 +208,7 @@ def test_gradients_are_finite_everywhere(x64, point):
 # --- vmap ---------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_vmap_matches_python_loop(x64):
     x = np.array(SPREAD)
     batched = _distances(*x.T)

@@ -29,7 +29,8 @@ def _weights(net):
     return eqx.filter(net, eqx.is_inexact_array)
 
 
-@pytest.mark.parametrize("gradient", [pytest.param("unroll", marks=pytest.mark.slow), "implicit"])
+@pytest.mark.slow
+@pytest.mark.parametrize("gradient", ["unroll", "implicit"])
 def test_closed_loop_gradient_in_the_value_weights_matches_finite_differences(gradient):
     # The loss of a short closed loop from two starts, differentiated in the value network's
     # weights through every step's plan, against a central difference along a random direction.
