@@ -89,3 +89,19 @@ def test_builtin_gymnasium_ids_match_the_tasks():
             steps,
             threshold,
         ), env_id
+
+
+def test_a_discrete_time_run_does_not_load_diffrax():
+    """Diffrax (with lineax and optimistix) is for ODE solves: a discrete-time training run,
+    its save and its Gymnasium evaluation never import it (a quarter of a second of start-up)."""
+    code = (
+        "import tempfile, pathlib\n"
+        "import diffcontrol\n"
+        "task = diffcontrol.make('cartpole')\n"
+        "cfg = task.default_config().replace(updates=2, eval_every=1, eval_episodes=1)\n"
+        "out = pathlib.Path(tempfile.mkdtemp()) / 'run'\n"
+        "diffcontrol.train(task, cfg).save(out, final_eval=1, animation=False)\n"
+        "assert (out / 'model.json').exists()\n"
+    )
+    imported = _imported_after(code)
+    assert "jax" in imported and "diffrax" not in imported, imported

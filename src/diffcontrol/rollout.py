@@ -11,7 +11,6 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -104,15 +103,17 @@ def batch_returns(
 # Continuous-time closed loops: one adaptive ODE solve, with the solver and the gradient method
 # as values.
 
-SOLVERS: dict[str, type] = {
-    "tsit5": diffrax.Tsit5,
-    "dopri5": diffrax.Dopri5,
-    "dopri8": diffrax.Dopri8,
-    "bosh3": diffrax.Bosh3,
-    "kvaerno5": diffrax.Kvaerno5,
+SOLVERS: dict[str, str] = {
+    "tsit5": "Tsit5",
+    "dopri5": "Dopri5",
+    "dopri8": "Dopri8",
+    "bosh3": "Bosh3",
+    "kvaerno5": "Kvaerno5",
 }
-"""Adaptive solvers by name: explicit Runge-Kutta pairs, and ``kvaerno5`` (implicit, for stiff
-closed loops such as sharp Coulomb friction)."""
+"""Adaptive solvers by name (their Diffrax classes): explicit Runge-Kutta pairs, and
+``kvaerno5`` (implicit, for stiff closed loops such as sharp Coulomb friction). Diffrax is
+imported by the first solve, not with this module: a discrete-time run never loads it
+(a quarter of a second of every command's start-up)."""
 
 # How a loss is differentiated through the solve (``GRADIENT_METHODS``):
 #
@@ -146,6 +147,8 @@ class ODESolution(eqx.Module):
 
 
 def _adjoint(gradient: str):
+    import diffrax
+
     if gradient == "checkpoint":
         return diffrax.RecursiveCheckpointAdjoint()
     if gradient == "backsolve":
@@ -188,9 +191,11 @@ def solve_closed_loop(
     """
     if solver not in SOLVERS:
         raise ValueError(f"unknown solver {solver!r}; choose one of {', '.join(SOLVERS)}")
+    import diffrax  # here, not at the top: see SOLVERS
+
     sol = diffrax.diffeqsolve(
         diffrax.ODETerm(vector_field),
-        SOLVERS[solver](),
+        getattr(diffrax, SOLVERS[solver])(),
         t0=save_ts[0],
         t1=save_ts[-1],
         dt0=None,
