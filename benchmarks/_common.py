@@ -179,7 +179,22 @@ def real_benchmark(task: str, rl_method: str, targets: dict[str, int | None], do
     parser.add_argument(
         "--name", default="", help="suffix of the result files (real_TASK{NAME}.json), e.g. _plan"
     )
+    parser.add_argument(
+        "--compile-cache",
+        metavar="DIR",
+        default=None,
+        help="JAX's persistent compilation cache in DIR, as `diffcontrol compare --real` has "
+        "it (default: off, every program compiled; an empty DIR: cold for seed 0 only)",
+    )
     args = parser.parse_args()
+    cache = None
+    if args.compile_cache:
+        from diffcontrol import _jax_setup  # imports no JAX or Equinox yet
+
+        _jax_setup.checks_as_nan()  # as the command line does, before Equinox is imported
+        cache = _jax_setup.enable_compile_cache(args.compile_cache)
+        if cache is None:
+            parser.error(f"--compile-cache {args.compile_cache}: cannot create the directory")
     rl_file = here / "results" / "compare.json"
     t0 = time.perf_counter()
     cmp = run_real_comparison(
@@ -242,6 +257,10 @@ def real_benchmark(task: str, rl_method: str, targets: dict[str, int | None], do
             )
             print(f"{method:24} ({name}) target <= {target or '-':>5}: {cells}")
         print(f"{'':24} returns by round (20 ep): {points}; last (100 ep): {finals}")
+        shown = ", ".join(f"seed {s}: {'-' if v is None else f'{v:.1f}'}" for s, v in secs.items())
+        print(f"{'':24} seconds to {goal:g} (20 ep): {shown}")
+    if cache is not None:
+        print(f"persistent compilation cache {cache}: {_jax_setup.cache_events()}")
     out = here / "results" / f"real_{task}{args.name}.json"
     png = here / "results" / f"real_{task}{args.name}.png"
     (here / "results").mkdir(exist_ok=True)
@@ -250,6 +269,9 @@ def real_benchmark(task: str, rl_method: str, targets: dict[str, int | None], do
         "command": f"python benchmarks/real_{task}.py " + " ".join(sys.argv[1:]),
         "machine": machine(),
         "benchmark_wall_seconds": wall,
+        "compile_cache": None
+        if cache is None
+        else {"dir": str(cache), **_jax_setup.cache_events()},
         f"{rl_method}_to_{goal:g}": rl_goal,
         "rows": rows,
         "comparison": {k: v for k, v in cmp.items() if k not in ("files",)},

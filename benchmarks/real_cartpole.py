@@ -20,6 +20,11 @@ Real steps per round (``CartPole.real_steps_per_round``): 250 for the grey box a
 evaluation episodes are not counted, as for RL.
 
     python benchmarks/real_cartpole.py [--seeds 5] [--models params,hybrid,neural] [--resume]
+        [--compile-cache DIR] [--name _SUFFIX]
+
+``--compile-cache DIR`` turns on JAX's persistent compilation cache in DIR, as
+``diffcontrol compare --real`` has it (off by default: every program is compiled, as in the
+figures measured before it); a new DIR is cold for seed 0 and warm for the later seeds.
 
 Prints the table and the real steps to 500 per seed, and writes
 benchmarks/results/real_cartpole.json and benchmarks/results/real_cartpole.png.
