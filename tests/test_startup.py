@@ -91,15 +91,15 @@ def test_builtin_gymnasium_ids_match_the_tasks():
         ), env_id
 
 
-def test_a_discrete_time_run_does_not_load_diffrax():
+def test_a_discrete_time_run_does_not_load_diffrax(tmp_path):
     """Diffrax (with lineax and optimistix) is for ODE solves: a discrete-time training run,
     its save and its Gymnasium evaluation never import it (a quarter of a second of start-up)."""
     code = (
-        "import tempfile, pathlib\n"
+        "import pathlib\n"
         "import diffcontrol\n"
         "task = diffcontrol.make('cartpole')\n"
         "cfg = task.default_config().replace(updates=2, eval_every=1, eval_episodes=1)\n"
-        "out = pathlib.Path(tempfile.mkdtemp()) / 'run'\n"
+        f"out = pathlib.Path({str(tmp_path / 'run')!r})\n"
         "diffcontrol.train(task, cfg).save(out, final_eval=1, animation=False)\n"
         "assert (out / 'model.json').exists()\n"
     )
