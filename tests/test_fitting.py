@@ -199,3 +199,54 @@ def test_cartpole_grey_box_from_a_wrong_start_recovers_gymnasiums_physics():
     assert tuple(fit.values) == task.fit_parameter_names
     truth = {"gravity": 9.8, "length": 0.5, "force_mag": 10.0}
     assert all(abs(fit.values[n] - v) < 1e-3 * v for n, v in truth.items()), fit.values
+
+
+@pytest.mark.slow
+def test_data_sets_of_one_step_budget_share_the_fits_compiled_programs():
+    """CartPole's episodes end early, so 250 recorded steps are 10 or 15 episodes, and the
+    10-step windows 160 or 115: padded to one size, the second fit and its prediction errors
+    compile nothing (the loop fits every seed's round to such a budget), nor does the hybrid's
+    fit, whose data scalings differ; and the padding counts for nothing in the result."""
+    import jax
+
+    task = diffcontrol.make("cartpole")
+    first, second = (diffcontrol.record("CartPole-v1", None, seed=s, total_steps=250) for s in (0, 4))
+    assert first.num_episodes != second.num_episodes
+    settings = dict(steps=20, lm_steps=2, init={"gravity": 12.0, "length": 0.8, "force_mag": 7.0})
+    identify.fit_parameters(task, first, **settings)
+    identify.prediction_errors(task, task.default_params(), first, (1, 10))
+    identify.fit_model(task, first, "hybrid", steps=5)
+    events = []  # the session's persistent cache (conftest): a miss is a program compiled
+    listener = lambda event, **kw: events.append(event)  # noqa: E731
+    jax.monitoring.register_event_listener(listener)
+    try:
+        fit = identify.fit_parameters(task, second, **settings)
+        errors = identify.prediction_errors(task, task.default_params(), second, (1, 10))
+        hybrid = identify.fit_model(task, second, "hybrid", steps=5)
+    finally:
+        jax.monitoring.unregister_event_listener(listener)
+    assert "/jax/compilation_cache/cache_hits" in events  # programs were looked up
+    assert "/jax/compilation_cache/cache_misses" not in events
+    # the padding rows count for nothing: the result is that of the recorded windows alone
+    windows = sum(max(len(e.actions) - 9, 0) for e in second.episodes())
+    assert fit.windows == hybrid.windows == windows and errors[10]["starts"] == windows
+    assert fit.loss == pytest.approx(_window_loss(task, fit.params, second), rel=1e-9)
+
+
+def _window_loss(task, params, data, window=10):
+    """The mean squared window error over the recorded windows alone, computed plainly."""
+    import jax
+
+    starts, actions, targets = [], [], []
+    for ep in data.episodes():
+        acts = identify.steps.task_actions(task, ep.actions)
+        for t in range(len(ep.actions) - window + 1):
+            starts.append(ep.observations[t])
+            actions.append(acts[t : t + window])
+            targets.append(ep.observations[t + 1 : t + window + 1])
+    with jax.enable_x64(True):
+        params = jax.tree.map(np.float64, params)
+        states = jax.vmap(task.state_from_observation)(np.stack(starts))
+        predict = jax.vmap(identify.steps.predict, in_axes=(None, None, 0, 0))
+        pred = np.asarray(predict(task, params, states, np.stack(actions)))
+    return float(np.mean((pred - np.stack(targets)) ** 2))

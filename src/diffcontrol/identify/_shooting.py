@@ -174,11 +174,18 @@ def adam_scan(loss: Any, z: Any, optimiser: Any, steps: int, batch: Any):
     return run(z, batch)
 
 
-def standard_errors(residual_fn, values: jax.Array) -> jax.Array:
-    """``sqrt(diag(sigma^2 (J^T J)^-1))`` at ``values``; ``inf`` where ``J^T J`` is singular."""
-    r = residual_fn(values)
-    jac = jax.jacfwd(residual_fn)(values)  # [R, p]
-    dof = max(r.size - values.size, 1)
+def standard_errors(residual_fn, values: jax.Array, *args: Any, size: int | None = None):
+    """``sqrt(diag(sigma^2 (J^T J)^-1))`` at ``values``; ``inf`` where ``J^T J`` is singular.
+
+    ``residual_fn(values, *args)`` gives the residuals; with ``args`` (a fit's data) they and
+    their Jacobian are computed by one compiled program that takes the data as an argument, so
+    that it is shared by every data set of the same shape. ``size``: the number of residuals
+    that count (default: all; fewer where the data is padded with zero residuals)."""
+    if args:
+        r, jac = _residuals_and_jacobian(residual_fn)(values, *args)
+    else:
+        r, jac = residual_fn(values), jax.jacfwd(residual_fn)(values)  # [R], [R, p]
+    dof = max((r.size if size is None else size) - values.size, 1)
     sigma2 = jnp.sum(r**2) / dof
     jtj = jac.T @ jac
     eig = jnp.linalg.eigvalsh(jtj)
@@ -186,6 +193,14 @@ def standard_errors(residual_fn, values: jax.Array) -> jax.Array:
         return jnp.full(values.shape, jnp.inf)
     cov = sigma2 * jnp.linalg.inv(jtj)
     return jnp.sqrt(jnp.clip(jnp.diag(cov), 0.0))
+
+
+def _residuals_and_jacobian(residual_fn):
+    @jax.jit
+    def run(values, *args):
+        return residual_fn(values, *args), jax.jacfwd(residual_fn)(values, *args)
+
+    return run
 
 
 def lm_refine(residuals: Any, loss: Any, best: Any, best_loss: float, batch: Any, steps: int):
@@ -203,7 +218,7 @@ def lm_refine(residuals: Any, loss: Any, best: Any, best_loss: float, batch: Any
         max_steps=steps,
         throw=False,
     )
-    lm_loss = float(loss(solution.value, batch))
+    lm_loss = float(jax.jit(loss)(solution.value, batch))
     if math.isfinite(lm_loss) and lm_loss < best_loss:
         return solution.value, lm_loss, lm_loss
     return best, best_loss, lm_loss

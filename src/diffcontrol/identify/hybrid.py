@@ -22,7 +22,7 @@ from ..tasks._base import Task
 from ._shooting import NETWORK_MODELS, FitResult, adam_fit, check_settings
 from .ensemble import Ensemble, bootstrap_counts, check_members, make_ensemble
 from .network import Correction
-from .steps import _windows, check_data, predict, task_actions
+from .steps import _windows, check_data, masked_mean, predict, task_actions
 
 MIN_TRANSITIONS = {"hybrid": 200, "neural": 1000}
 """The fewest recorded transitions a network model is fitted to (a Pendulum-v1 episode has
@@ -236,16 +236,22 @@ def _fit_model(task, data, model_type, params, window, steps, learning_rate, hid
     weights, rest = eqx.partition(trainable, train_spec)
 
     def errors(m, batch):  # the mean squared error of every window [N]
-        states, actions, targets = batch
-        pred = jax.vmap(predict, in_axes=(None, None, 0, 0))(fitted_task, m, states, actions)
-        return jnp.mean((pred - targets) ** 2, axis=(1, 2))
+        pred = jax.vmap(predict, in_axes=(None, None, 0, 0))(
+            fitted_task, m, batch.states, batch.actions
+        )
+        return jnp.mean((pred - batch.targets) ** 2, axis=(1, 2))
 
-    counts = jnp.asarray(bootstrap_counts(batch[0].shape[0], members, seed, bootstrap))
+    # each member's weight of every window (0 on the padding rows)
+    counts = bootstrap_counts(batch.count, members, seed, bootstrap)
+    counts = np.pad(counts, ((0, 0), (0, batch.mask.shape[0] - batch.count)))
 
-    def loss(w, batch):
+    # The frozen part of the model (the physics, the data's scalings) and the members' window
+    # weights are arguments, not constants: one compiled fit for every data set of a shape.
+    def loss(w, args):
+        (rest, counts), batch = args
         m = eqx.combine(w, rest, static)
         if members == 1:
-            return jnp.mean(errors(m, batch))
+            return masked_mean(errors(m, batch), batch.mask)
 
         def member_loss(member, count):  # each member alone, on its own (re)sample
             return jnp.sum(count * errors(model_cls(m.params, member), batch)) / jnp.sum(count)
@@ -256,7 +262,7 @@ def _fit_model(task, data, model_type, params, window, steps, learning_rate, hid
     optimiser = optax.adam(schedule)
     nominal_loss = _nominal_loss(task, physics, batch, predict)
     best_w, best_loss, history, diverged, message = adam_fit(
-        loss, weights, optimiser, steps, batch, "weights"
+        loss, weights, optimiser, steps, ((rest, jnp.asarray(counts)), batch), "weights"
     )
     if not diverged:
         each = " (each member's, averaged)" if members > 1 else ""
@@ -274,7 +280,7 @@ def _fit_model(task, data, model_type, params, window, steps, learning_rate, hid
         diverged=diverged,
         message=message,
         window=window,
-        windows=int(batch[0].shape[0]),
+        windows=batch.count,
         transitions=data.num_steps,
         num_parameters=correction.num_parameters,
     )
@@ -285,11 +291,10 @@ def _to_f32(x: Any) -> Any:
 
 
 def _nominal_loss(task, physics, batch, predict) -> float:
-    states, actions, targets = batch
     pred = jax.jit(jax.vmap(predict, in_axes=(None, None, 0, 0)), static_argnums=0)(
-        task, physics, states, actions
+        task, physics, batch.states, batch.actions
     )
-    return float(jnp.mean((pred - targets) ** 2))
+    return float(masked_mean((pred - batch.targets) ** 2, batch.mask))
 
 
 # ---------------------------------------------------------------------------------------------

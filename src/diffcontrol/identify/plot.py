@@ -66,7 +66,11 @@ def _segments(run: Predictor, obs: np.ndarray, actions: np.ndarray, every: int):
     a list of (first step, predicted observations [<= every + 1, k]) pieces."""
     out = []
     for t in range(0, len(actions), every):
-        pred = run(obs[t], actions[t : t + every])
+        acts = actions[t : t + every]
+        # padded to `every` steps (repeating the last action), so that every segment of every
+        # episode is one compiled program; the prediction is causal, the padding is cut off
+        padded = np.concatenate([acts, np.repeat(acts[-1:], every - len(acts), axis=0)])
+        pred = run(obs[t], padded)[: len(acts)]
         out.append((t, np.concatenate([obs[t : t + 1], pred])))
     return out
 

@@ -38,7 +38,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -110,10 +110,36 @@ def task_actions(task: Any, actions: np.ndarray) -> np.ndarray:
     return np.stack(vectors) if vectors else np.zeros((0, task.action_size))
 
 
-def _windows(task, data: TrajectoryData, window: int):
-    """Every start of every episode with ``window`` recorded steps after it: the start
-    states [N, n], actions [N, window, m] (the task's own action vectors) and recorded
-    observations [N, window, k]."""
+class Windows(NamedTuple):
+    """Every start of every episode with ``window`` recorded steps after it, padded to
+    ``padded_size(transitions)`` rows so that data sets of about the same size share one
+    compiled program: the start states [N, n], actions [N, window, m] (the task's own action
+    vectors), recorded observations [N, window, k], and ``mask`` [N] (1 for a recorded window,
+    0 for a padding row, which repeats the first window)."""
+
+    states: jax.Array
+    actions: jax.Array
+    targets: jax.Array
+    mask: jax.Array
+
+    @property
+    def count(self) -> int:
+        """The number of recorded (not padding) windows."""
+        return int(np.sum(np.asarray(self.mask)))
+
+
+def padded_size(n: int) -> int:
+    """``n`` rounded up to one of four sizes per octave (..., 128, 160, 192, 224, 256, 320,
+    ...; exact below 8): at most a quarter more rows, and one compiled fit for every data set
+    of a round's step budget (CartPole's 250 real steps are 9 to 15 episodes: 115 to 169
+    windows of 10 steps, all padded to 256)."""
+    step = max(1, 2 ** ((max(n, 1) - 1).bit_length() - 3))
+    return -(-n // step) * step
+
+
+def _windows(task, data: TrajectoryData, window: int) -> Windows | None:
+    """The data's ``Windows`` of ``window`` steps (None if no episode is that long), padded
+    to ``padded_size(data.num_steps)``."""
     starts, actions, targets = [], [], []
     for ep in data.episodes():
         n = len(ep.actions)
@@ -124,9 +150,21 @@ def _windows(task, data: TrajectoryData, window: int):
             targets.append(ep.observations[t + 1 : t + window + 1])
     if not starts:
         return None
-    obs0 = jnp.asarray(np.stack(starts))
-    states = jax.vmap(task.state_from_observation)(obs0)
-    return states, jnp.asarray(np.stack(actions)), jnp.asarray(np.stack(targets))
+    count = len(starts)
+    pad = [0] * (max(padded_size(data.num_steps), count) - count)
+    obs0, acts, outs = (np.stack([*x, *(x[i] for i in pad)]) for x in (starts, actions, targets))
+    mask = np.zeros(len(obs0))
+    mask[:count] = 1.0
+    states = jax.vmap(task.state_from_observation)(jnp.asarray(obs0))
+    return Windows(states, jnp.asarray(acts), jnp.asarray(outs), jnp.asarray(mask))
+
+
+def masked_mean(values: jax.Array, mask: jax.Array) -> jax.Array:
+    """The mean of ``values`` [N, ...] over the rows where ``mask`` [N] is 1 (a window's
+    padding rows count for nothing)."""
+    keep = mask.reshape(mask.shape + (1,) * (values.ndim - 1)) > 0
+    size = jnp.sum(mask) * (values.size // values.shape[0])
+    return jnp.sum(jnp.where(keep, values, 0.0)) / size
 
 
 def predict(task: Any, params: Any, state: jax.Array, actions: jax.Array) -> jax.Array:
@@ -218,31 +256,39 @@ def _fit(task, data, names, window, steps, learning_rate, lm_steps, init) -> Fit
     def to_z(values):
         return jnp.where(positive, jnp.log(jnp.where(positive, values, 1.0)), values)
 
-    def residuals(values, batch):
-        states, actions, targets = batch
+    def residuals(values, batch):  # [N, window, k]; zero on the padding rows
         params = set_params(nominal_params, names, values)
-        pred = jax.vmap(predict, in_axes=(None, None, 0, 0))(task, params, states, actions)
-        return (pred - targets).reshape(-1)
+        pred = jax.vmap(predict, in_axes=(None, None, 0, 0))(
+            task, params, batch.states, batch.actions
+        )
+        keep = batch.mask[:, None, None] > 0
+        return jnp.where(keep, pred - batch.targets, 0.0)
 
     def loss(z, batch):
-        return jnp.mean(residuals(to_values(z), batch) ** 2)
+        return masked_mean(residuals(to_values(z), batch) ** 2, batch.mask)
+
+    def flat_residuals(z, batch):
+        return residuals(to_values(z), batch).reshape(-1)
 
     optimiser = optax.adam(learning_rate)
     z = to_z(start)
-    nominal_loss = float(loss(to_z(jnp.array([nominal[n] for n in names])), batch))
+    nominal_loss = float(jax.jit(loss)(to_z(jnp.array([nominal[n] for n in names])), batch))
     best_z, best_loss, history, diverged, message = adam_fit(
         loss, z, optimiser, steps, batch, "parameters"
     )
     if lm_steps and not diverged:
         best_z, best_loss, lm_loss = lm_refine(
-            lambda z, b: residuals(to_values(z), b), loss, best_z, best_loss, batch, lm_steps
+            flat_residuals, loss, best_z, best_loss, batch, lm_steps
         )
         if not math.isfinite(lm_loss):
             message = "the Levenberg-Marquardt refinement diverged; kept the Adam fit"
         history.append(lm_loss if math.isfinite(lm_loss) else math.nan)
     values = to_values(best_z)
     # * sqrt(window): the overlapping windows count each recorded point `window` times
-    errors = standard_errors(lambda v: residuals(v, batch), values) * math.sqrt(window)
+    size = batch.count * window * batch.targets.shape[-1]  # the recorded residuals
+    errors = standard_errors(
+        lambda v, b: residuals(v, b).reshape(-1), values, batch, size=size
+    ) * math.sqrt(window)
     fitted = set_params(nominal_params, names, values)
     if not message:
         message = (
@@ -263,7 +309,7 @@ def _fit(task, data, names, window, steps, learning_rate, lm_steps, init) -> Fit
         diverged=diverged,
         message=message,
         window=window,
-        windows=int(batch[0].shape[0]),
+        windows=batch.count,
         transitions=data.num_steps,
     )
 
@@ -282,7 +328,8 @@ def prediction_errors(
     out = {}
     with jax.enable_x64(True):
         params = jax.tree.map(lambda x: jnp.asarray(x, jnp.float64), params)
-        run = jax.jit(jax.vmap(lambda s, a: predict(task, params, s, a)[-1]))
+        # the parameters are an argument: one program for every model of the same shape
+        run = jax.jit(jax.vmap(lambda p, s, a: predict(task, p, s, a)[-1], (None, 0, 0)))
         columns = [parse_column(c)[1] for c in data.observation_columns]
         for h in horizons:
             batch = _windows(task, data, h)
@@ -290,7 +337,9 @@ def prediction_errors(
                 nan = {c: math.nan for c in columns}
                 out[h] = {"rmse": math.nan, "rmse_by_column": nan, "starts": 0}
                 continue
-            err = np.asarray(run(batch[0], batch[1]) - batch[2][:, -1])
+            n = batch.count
+            err = np.asarray(run(params, batch.states, batch.actions))[:n]
+            err = err - np.asarray(batch.targets)[:n, -1]
             out[h] = {
                 "rmse": float(np.sqrt(np.mean(err**2))),
                 "rmse_by_column": dict(zip(columns, np.sqrt(np.mean(err**2, axis=0)).tolist())),
