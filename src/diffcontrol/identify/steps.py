@@ -112,10 +112,10 @@ def task_actions(task: Any, actions: np.ndarray) -> np.ndarray:
 
 class Windows(NamedTuple):
     """Every start of every episode with ``window`` recorded steps after it, padded to
-    ``padded_size(transitions)`` rows so that data sets of about the same size share one
-    compiled program: the start states [N, n], actions [N, window, m] (the task's own action
-    vectors), recorded observations [N, window, k], and ``mask`` [N] (1 for a recorded window,
-    0 for a padding row, which repeats the first window)."""
+    ``padded_size`` rows so that data sets of about the same size share one compiled program:
+    the start states [N, n], actions [N, window, m] (the task's own action vectors), recorded
+    observations [N, window, k], and ``mask`` [N] (1 for a recorded window, 0 for a padding row,
+    which repeats the first window)."""
 
     states: jax.Array
     actions: jax.Array
@@ -128,18 +128,23 @@ class Windows(NamedTuple):
         return int(np.sum(np.asarray(self.mask)))
 
 
+PAD_ROWS = 256
+"""The windows of a fit are padded to a multiple of this many rows (or of a quarter of the
+octave their number lies in, where that is larger)."""
+
+
 def padded_size(n: int) -> int:
-    """``n`` rounded up to one of four sizes per octave (..., 128, 160, 192, 224, 256, 320,
-    ...; exact below 8): at most a quarter more rows, and one compiled fit for every data set
-    of a round's step budget (CartPole's 250 real steps are 9 to 15 episodes: 115 to 169
-    windows of 10 steps, all padded to 256)."""
-    step = max(1, 2 ** ((max(n, 1) - 1).bit_length() - 3))
+    """``n`` rounded up to a multiple of ``PAD_ROWS`` (256), or above 2,048 of a quarter of its
+    octave (2,560, 3,072, ..., 5,120, 6,144, ...): at most 255 rows or a quarter more of work,
+    and one compiled fit for the data sets of a round's step budget (CartPole's 250 real steps
+    are 9 to 15 episodes: 115 to 169 windows of 10 steps, all padded to 256; a neural model's
+    1,000 steps 550 to 650 windows, padded to 768)."""
+    step = max(PAD_ROWS, 2 ** ((max(n, 1) - 1).bit_length() - 3))
     return -(-n // step) * step
 
 
 def _windows(task, data: TrajectoryData, window: int) -> Windows | None:
-    """The data's ``Windows`` of ``window`` steps (None if no episode is that long), padded
-    to ``padded_size(data.num_steps)``."""
+    """The data's ``Windows`` of ``window`` steps (None if no episode is that long)."""
     starts, actions, targets = [], [], []
     for ep in data.episodes():
         n = len(ep.actions)
@@ -151,7 +156,7 @@ def _windows(task, data: TrajectoryData, window: int) -> Windows | None:
     if not starts:
         return None
     count = len(starts)
-    pad = [0] * (max(padded_size(data.num_steps), count) - count)
+    pad = [0] * (padded_size(count) - count)
     obs0, acts, outs = (np.stack([*x, *(x[i] for i in pad)]) for x in (starts, actions, targets))
     mask = np.zeros(len(obs0))
     mask[:count] = 1.0
