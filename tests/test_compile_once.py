@@ -33,6 +33,7 @@ def test_second_call_of_a_jitted_trainer_step_does_not_recompile():
     assert int(ts2.update) == 2 * config.eval_every and np.all(np.isfinite(stats.loss))
 
 
+@pytest.mark.slow  # two runs from a cold in-memory cache: about 2.5 s
 @pytest.mark.filterwarnings("ignore::diffcontrol.errors.TrainingWarning")  # 6 updates
 def test_a_discrete_run_compiles_three_programs_whatever_its_seed():
     """The start (keys, controller, simulations), the evaluation and the chunk; none for the

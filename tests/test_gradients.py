@@ -234,6 +234,7 @@ def test_cartpole_rollout_gradients_match_fd():
 # --- (c) the windowed-BPTT loss (float64) ------------------------------------------------------
 
 
+@pytest.mark.slow  # finite differences through 2 windows: 2-3 s each
 @pytest.mark.parametrize(
     "task_name, overrides",
     [

@@ -57,6 +57,7 @@ def test_load_gives_the_same_actions_as_the_planner_in_memory(planner_run):
     assert np.ptp(expected) > 0.5  # it acts: not a constant the two could share by accident
 
 
+@pytest.mark.slow  # evaluate and animate a planner through the CLI: about 2 s
 def test_the_run_is_a_run_like_a_trained_one(planner_run, capsys):
     doc = json.loads((planner_run / "model.json").read_text())
     assert doc["controller"] == {

@@ -154,6 +154,7 @@ def _value_file(tmp_path, task_name="pendulum", key=7):
     return path, value
 
 
+@pytest.mark.slow  # a grid value solved and planned through: about 2.2 s
 def test_value_file_round_trips_through_the_command_line(tmp_path):
     path, value = _value_file(tmp_path)
     out = tmp_path / "p"

@@ -91,6 +91,7 @@ def test_builtin_gymnasium_ids_match_the_tasks():
         ), env_id
 
 
+@pytest.mark.slow  # a CartPole run in a fresh interpreter: about 5 s
 def test_a_discrete_time_run_does_not_load_diffrax(tmp_path):
     """Diffrax (with lineax and optimistix) is for ODE solves: a discrete-time training run,
     its save and its Gymnasium evaluation never import it (a quarter of a second of start-up)."""

@@ -227,6 +227,7 @@ def test_shoot_broadcasts_and_simulate_vmaps():
 # --- physics ------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow  # three phases' solves in float64: about 2.3 s
 def test_phases_and_start(x64):
     th = _simulate(*BLOG_POINT)
     phases = np.asarray(th.phases)
@@ -401,6 +402,7 @@ def test_step_budgets_must_be_positive_ints(field):
         tb.TrebuchetParams(**{field: 0})
 
 
+@pytest.mark.slow  # a saved throw's solve in float64: about 2 s
 def test_trajectory_rows_are_steps(x64):
     """Row ``i`` is the state after ``i`` steps: full steps of ``dt``, except the three steps
     that end at lift-off, release and landing, where the phase changes (here lift-off is the
