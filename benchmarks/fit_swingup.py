@@ -77,7 +77,9 @@ def main() -> None:
         help="the models fitted (the hybrid always: the controllers train through it)",
     )
     args = parser.parse_args()
-    kinds = [k for k in ("params", "hybrid", "neural") if k in args.fits.split(",") or k == "hybrid"]
+    kinds = [
+        k for k in ("params", "hybrid", "neural") if k in args.fits.split(",") or k == "hybrid"
+    ]
     if args.population < 0:
         parser.error(f"--population {args.population}: pass 0 (the default) or more")
     if not 1 <= args.episodes <= FIT_EPISODES:

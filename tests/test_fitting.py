@@ -210,7 +210,9 @@ def test_data_sets_of_one_step_budget_share_the_fits_compiled_programs():
     import jax
 
     task = diffcontrol.make("cartpole")
-    first, second = (diffcontrol.record("CartPole-v1", None, seed=s, total_steps=250) for s in (0, 4))
+    first, second = (
+        diffcontrol.record("CartPole-v1", None, seed=s, total_steps=250) for s in (0, 4)
+    )
     assert first.num_episodes != second.num_episodes
     settings = dict(steps=20, lm_steps=2, init={"gravity": 12.0, "length": 0.8, "force_mag": 7.0})
     identify.fit_parameters(task, first, **settings)
