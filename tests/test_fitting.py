@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 import json
 
+import jax
 import numpy as np
 import pytest
 
@@ -207,8 +208,6 @@ def test_data_sets_of_one_step_budget_share_the_fits_compiled_programs():
     10-step windows 160 or 115: padded to one size, the second fit and its prediction errors
     compile nothing (the loop fits every seed's round to such a budget), nor does the hybrid's
     fit, whose data scalings differ; and the padding counts for nothing in the result."""
-    import jax
-
     task = diffcontrol.make("cartpole")
     first, second = (
         diffcontrol.record("CartPole-v1", None, seed=s, total_steps=250) for s in (0, 4)
@@ -237,8 +236,6 @@ def test_data_sets_of_one_step_budget_share_the_fits_compiled_programs():
 
 def _window_loss(task, params, data, window=10):
     """The mean squared window error over the recorded windows alone, computed plainly."""
-    import jax
-
     starts, actions, targets = [], [], []
     for ep in data.episodes():
         acts = identify.steps.task_actions(task, ep.actions)

@@ -156,10 +156,9 @@ def _windows(task, data: TrajectoryData, window: int) -> Windows | None:
     if not starts:
         return None
     count = len(starts)
-    pad = [0] * (padded_size(count) - count)
-    obs0, acts, outs = (np.stack([*x, *(x[i] for i in pad)]) for x in (starts, actions, targets))
-    mask = np.zeros(len(obs0))
-    mask[:count] = 1.0
+    extra = padded_size(count) - count  # padding rows: copies of the first window
+    obs0, acts, outs = (np.stack([*x, *[x[0]] * extra]) for x in (starts, actions, targets))
+    mask = np.concatenate([np.ones(count), np.zeros(extra)])
     states = jax.vmap(task.state_from_observation)(jnp.asarray(obs0))
     return Windows(states, jnp.asarray(acts), jnp.asarray(outs), jnp.asarray(mask))
 
