@@ -107,25 +107,84 @@ def evaluate(
     if episodes <= 0:
         raise ValueError(f"episodes must be positive, got {episodes}")
     env, label = eval_environment(task, real)
-    returns, lengths = [], []
     try:
         _check_fits(policy, env, label)
-        reset = getattr(policy, "reset", None)
-        for i in range(episodes):
-            if callable(reset):
-                reset()
-            obs, _ = env.reset(seed=seed + i)
-            total, n, done = 0.0, 0, False
-            while not done:
-                obs, reward, terminated, truncated, _ = env.step(policy(obs))
-                total += float(reward)
-                n += 1
-                done = terminated or truncated
-            returns.append(total)
-            lengths.append(n)
+        if getattr(policy, "batched", False) and not callable(getattr(policy, "reset", None)):
+            returns, lengths = _lockstep(policy, task, real, env, episodes, seed)
+        else:
+            returns, lengths = _one_by_one(policy, env, episodes, seed)
     finally:
         env.close()
-    return EvalResult(label, seed, np.asarray(returns), np.asarray(lengths))
+    return EvalResult(label, seed, returns, lengths)
+
+
+def _one_by_one(policy: Any, env: Any, episodes: int, seed: int) -> tuple[np.ndarray, ...]:
+    """The episodes one after another in ``env``: one policy call per step."""
+    returns, lengths = [], []
+    reset = getattr(policy, "reset", None)
+    for i in range(episodes):
+        if callable(reset):
+            reset()
+        obs, _ = env.reset(seed=seed + i)
+        total, n, done = 0.0, 0, False
+        while not done:
+            obs, reward, terminated, truncated, _ = env.step(policy(obs))
+            total += float(reward)
+            n += 1
+            done = terminated or truncated
+        returns.append(total)
+        lengths.append(n)
+    return np.asarray(returns), np.asarray(lengths)
+
+
+LOCKSTEP_WIDTH = 128
+"""How many episodes ``evaluate`` runs side by side for a batched policy."""
+
+
+def _lockstep(
+    policy: Any, task: Task, real: Any, env: Any, episodes: int, seed: int
+) -> tuple[np.ndarray, ...]:
+    """The episodes side by side in up to ``LOCKSTEP_WIDTH`` environments, one batched policy
+    call per step for all of them (the NumPy MLP's cost is per call, not per row).
+
+    Episode ``i`` is still reset with ``seed + i`` and runs alone in its environment, so the
+    returns are the sequential ones (``tests/test_evaluation.py`` checks them equal). A slot
+    whose episode ends takes the next seed. Gymnasium's ``SyncVectorEnv`` is not used: it steps
+    every environment on every call and resets finished ones itself, where episodes of
+    CartPole end at different steps and each must start from its own seed here.
+    """
+    envs = [env] + [
+        eval_environment(task, real)[0] for _ in range(min(LOCKSTEP_WIDTH, episodes) - 1)
+    ]
+    returns, lengths = np.zeros(episodes), np.zeros(episodes, np.int64)
+    episode_of: dict[int, int] = {}  # slot -> the episode it runs
+    obs: list[Any] = [None] * len(envs)
+    started = 0
+    try:
+        for slot in range(len(envs)):
+            obs[slot], _ = envs[slot].reset(seed=seed + started)
+            episode_of[slot] = started
+            started += 1
+        while episode_of:
+            slots = list(episode_of)
+            actions = policy(np.stack([obs[s] for s in slots]))
+            for slot, action in zip(slots, actions):
+                i = episode_of[slot]
+                obs[slot], reward, terminated, truncated, _ = envs[slot].step(action)
+                returns[i] += float(reward)
+                lengths[i] += 1
+                if not (terminated or truncated):
+                    continue
+                if started < episodes:
+                    obs[slot], _ = envs[slot].reset(seed=seed + started)
+                    episode_of[slot] = started
+                    started += 1
+                else:
+                    del episode_of[slot]
+    finally:
+        for other in envs[1:]:
+            other.close()
+    return returns, lengths
 
 
 def _check_fits(policy: Any, env: Any, label: str) -> None:

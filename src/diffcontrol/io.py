@@ -477,10 +477,14 @@ class NumpyPolicy:
 
     ``policy(obs)`` takes one Gymnasium observation and returns a valid Gymnasium action, so
     it drops into a plain ``gymnasium.make(...)`` loop: for a ``Discrete`` space (the
-    ``argmax`` head) the index as a Python ``int``, or an int array for a batch of
-    observations. ``policy.action(obs)`` returns the controller's action vector (the push
+    ``argmax`` and CartPole's ``sign`` heads) the index as a Python ``int``, or an int array
+    for a batch of observations (a batch of continuous actions is an array of rows). ``policy.action(obs)`` returns the controller's action vector (the push
     multiplier ``+-1`` for CartPole, the one-hot choice for the ``argmax`` head).
     """
+
+    batched = True
+    """``policy(obs)`` takes a batch of observations too (``evaluation.evaluate`` runs its
+    episodes side by side then)."""
 
     def __init__(self, doc: dict):
         _check_model(doc, Path("<model>"))
@@ -538,6 +542,8 @@ class NumpyPolicy:
     def __call__(self, obs: np.ndarray) -> Any:
         a = self.action(obs)
         if self._gym == "discrete_sign":
+            if a.ndim > 1:  # a batch: one index per row
+                return (a[..., 0] >= 0).astype(np.int64)
             return int(a.reshape(-1)[0] >= 0)
         if self._gym == "discrete":
             index = np.argmax(a, axis=-1)
@@ -558,6 +564,8 @@ class AimingPolicy(NumpyPolicy):
     equal-length arrays give arrays. ``policy.action(obs)`` is the raw ``NumpyPolicy`` form
     on observations ``(target_m, wind_mps)``.
     """
+
+    batched = False  # called with targets and winds, not observations
 
     def __call__(self, target_m: Any, wind_mps: Any = 0.0) -> tuple[Any, Any]:  # type: ignore[override]
         target, wind = np.broadcast_arrays(
@@ -605,6 +613,7 @@ class StatePolicy(NumpyPolicy):
                 "NumpyPolicy (diffcontrol.load does this)"
             )
         self.state_names = tuple(obs["state"])
+        self.batched = False  # takes states, not observations: evaluated one by one
         self._features = [_feature_index(f, list(self.state_names)) for f in obs["features"]]
 
     def features(self, state: np.ndarray) -> np.ndarray:
