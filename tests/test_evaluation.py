@@ -65,3 +65,22 @@ def test_a_policy_with_reset_runs_episode_by_episode():
     policy.reset = lambda: resets.append(1)
     result = evaluation.evaluate(policy, diffcontrol.make("cartpole"), episodes=3, seed=0)
     assert len(resets) == 3 and max(policy.rows) == 1 and result.returns.size == 3
+
+
+def test_a_users_own_environment_is_made_once(monkeypatch):
+    """A ``module:Class`` environment (``real``) may stand for a system that cannot be opened
+    many times: the episodes run one by one in one environment."""
+    made = []
+    real_make = evaluation.eval_environment
+
+    def counting(task, real):
+        made.append(real)
+        return real_make(task, None)  # Gymnasium's CartPole stands in for the user's
+
+    monkeypatch.setattr(evaluation, "eval_environment", counting)
+    policy = _random_policy("cartpole", seed=3)
+    task = diffcontrol.make("cartpole")
+    evaluation.evaluate(policy, task, episodes=4, seed=0, real=("my_module:MyCartPole-v0", {}))
+    assert len(made) == 1 and max(policy.rows) == 1
+    evaluation.evaluate(policy, task, episodes=4, seed=0, real=("CartPole-v1", {}))
+    assert len(made) == 1 + 4 and max(policy.rows) == 4  # a registered id: side by side

@@ -97,7 +97,9 @@ def evaluate(
     Episode ``i`` is reset with ``seed + i``; each runs until Gymnasium terminates or
     truncates it. This is the standard protocol, so the mean return compares with any
     other method evaluated on the same seeds. A policy with a ``reset()`` method (a planner,
-    whose warm start is the last plan) is reset before every episode.
+    whose warm start is the last plan) is reset before every episode. A NumPy MLP
+    (``batched``) runs up to ``LOCKSTEP_WIDTH`` episodes side by side, each in an environment
+    of its own, with the same returns; a user's ``module:Class`` environment is made once.
 
     Args:
         real: ``(env_id, env_kwargs)`` of another environment to run instead, e.g. the "real"
@@ -109,7 +111,7 @@ def evaluate(
     env, label = eval_environment(task, real)
     try:
         _check_fits(policy, env, label)
-        if getattr(policy, "batched", False) and not callable(getattr(policy, "reset", None)):
+        if _side_by_side(policy, real):
             returns, lengths = _lockstep(policy, task, real, env, episodes, seed)
         else:
             returns, lengths = _one_by_one(policy, env, episodes, seed)
@@ -135,6 +137,17 @@ def _one_by_one(policy: Any, env: Any, episodes: int, seed: int) -> tuple[np.nda
         returns.append(total)
         lengths.append(n)
     return np.asarray(returns), np.asarray(lengths)
+
+
+def _side_by_side(policy: Any, real: tuple[str, dict | None] | None) -> bool:
+    """Whether ``evaluate`` runs the episodes side by side: a policy that takes a batch
+    (``batched``) and has no state between steps (no ``reset``: a planner's warm start), in an
+    environment that Gymnasium or diffcontrol registers. A user's own environment, named by
+    ``module:Class`` (``real``), is made once and run one episode at a time: it may stand for a
+    system that cannot be opened many times."""
+    stateless = not callable(getattr(policy, "reset", None))
+    registered = real is None or ":" not in real[0]
+    return bool(getattr(policy, "batched", False)) and stateless and registered
 
 
 LOCKSTEP_WIDTH = 128
