@@ -8,14 +8,17 @@ with g = 12 and friction 0.1; noise-free observations). For each model kind and 
         --eval-episodes 100
 
 so round 1 fits 5 episodes of random torques and round 2 adds 5 episodes of round 1's
-controller (10 in all). Each round's controller is evaluated on the real system over 100
-episodes (reset seeds 0-99, as in ``fit_gap_pendulum.py``).
+controller (10 in all; ``--rounds R --episodes N`` for other splits). Each round's controller
+is evaluated on the real system over 100 episodes (reset seeds 0-99, as in
+``fit_gap_pendulum.py``).
 
     taskset -c 0 python benchmarks/fit_loop_pendulum.py [--seeds 3] [--kinds hybrid,neural]
 
 Prints a table and writes benchmarks/results/fit_loop_pendulum.json. ``--members K`` fits
 ensembles of K networks (``--uncertainty-penalty W`` their penalty, ``--explore-noise F`` the
 noise of the controller's recording; written to ``fit_loop_pendulum-ensembleK.json``).
+``--controller plan`` lets the planner through each round's model act instead of a trained MLP
+(``loop --controller plan``; ``-plan`` is added to the file's name).
 """
 
 from __future__ import annotations
@@ -33,7 +36,7 @@ from _common import machine  # noqa: E402
 from diffcontrol.cli import main as cli  # noqa: E402
 
 ARGS = ["--env", "diffcontrol/PendulumFriction-v0", "--env-arg", "g=12", "--env-arg"]
-ARGS += ["friction=0.1", "--rounds", "2", "--episodes", "5", "--eval-episodes", "100"]
+ARGS += ["friction=0.1", "--eval-episodes", "100"]
 
 
 def run(kind: str, seed: int, extra: list[str]) -> dict:
@@ -55,19 +58,30 @@ def main() -> None:
     parser.add_argument("--members", type=int, default=1)
     parser.add_argument("--uncertainty-penalty", type=float, default=None)
     parser.add_argument("--explore-noise", type=float, default=None)
+    parser.add_argument("--controller", choices=("train", "plan"), default="train")
+    parser.add_argument("--rounds", type=int, default=2)
+    parser.add_argument("--episodes", type=int, default=5, help="real episodes per round")
     args = parser.parse_args()
-    extra = ["--members", str(args.members)] if args.members > 1 else []
+    extra = ["--rounds", str(args.rounds), "--episodes", str(args.episodes)]
+    extra += ["--members", str(args.members)] if args.members > 1 else []
+    extra += ["--controller", "plan"] if args.controller == "plan" else []
     for flag in ("uncertainty_penalty", "explore_noise"):
         if getattr(args, flag) is not None:
             extra += ["--" + flag.replace("_", "-"), str(getattr(args, flag))]
     seeds = range(args.first_seed, args.first_seed + args.seeds)
     rows = [run(k, s, extra) for k in args.kinds.split(",") for s in seeds]
     print("\nreturn on the real system (100 episodes) after each round")
-    print("model    seed   round 1 (5 random episodes)   round 2 (+5 of its controller)")
+    print(f"round 1: {args.episodes} random episodes; each later round adds {args.episodes} of the")
+    print("last round's controller")
+    print("model    seed " + "".join(f"   round {k + 1:<3}" for k in range(args.rounds)))
     for r in rows:
-        rets = [f"{x['real_return']:10.1f}" for x in r["rounds"]]
-        print(f"{r['kind']:8} {r['seed']:4}   {rets[0]:>27}   {rets[1]:>30}")
+        rets = "".join(f"{x['real_return']:12.1f}" for x in r["rounds"])
+        print(f"{r['kind']:8} {r['seed']:4} {rets}")
     name = "fit_loop_pendulum" + (f"-ensemble{args.members}" if args.members > 1 else "")
+    name += "-plan" if args.controller == "plan" else ""
+    name += f"-{args.rounds}x{args.episodes}" if (args.rounds, args.episodes) != (2, 5) else ""
+    noise = args.explore_noise
+    name += f"-noise{noise:g}" if noise is not None and noise != 0.1 else ""  # 0.1: the usual
     name += f"-seeds{seeds[0]}-{seeds[-1]}" if args.first_seed else ""
     out = HERE / "results" / f"{name}.json"
     command = "diffcontrol loop pendulum " + " ".join([*ARGS, *extra])
