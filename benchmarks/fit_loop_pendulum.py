@@ -61,8 +61,10 @@ def main() -> None:
     parser.add_argument("--controller", choices=("train", "plan"), default="train")
     parser.add_argument("--rounds", type=int, default=2)
     parser.add_argument("--episodes", type=int, default=5, help="real episodes per round")
+    parser.add_argument("--fit-steps", type=int, default=None, help="Adam steps of each fit")
     args = parser.parse_args()
     extra = ["--rounds", str(args.rounds), "--episodes", str(args.episodes)]
+    extra += ["--fit-steps", str(args.fit_steps)] if args.fit_steps else []
     extra += ["--members", str(args.members)] if args.members > 1 else []
     extra += ["--controller", "plan"] if args.controller == "plan" else []
     for flag in ("uncertainty_penalty", "explore_noise"):
@@ -80,6 +82,7 @@ def main() -> None:
     name = "fit_loop_pendulum" + (f"-ensemble{args.members}" if args.members > 1 else "")
     name += "-plan" if args.controller == "plan" else ""
     name += f"-{args.rounds}x{args.episodes}" if (args.rounds, args.episodes) != (2, 5) else ""
+    name += f"-fit{args.fit_steps}" if args.fit_steps else ""
     noise = args.explore_noise
     name += f"-noise{noise:g}" if noise is not None and noise != 0.1 else ""  # 0.1: the usual
     name += f"-seeds{seeds[0]}-{seeds[-1]}" if args.first_seed else ""
