@@ -91,6 +91,47 @@ def test_builtin_gymnasium_ids_match_the_tasks():
         ), env_id
 
 
+def test_list_without_jax_names_every_builtin_task():
+    code = (
+        "import contextlib, io\n"
+        "from diffcontrol.cli import main\n"
+        "with contextlib.redirect_stdout(io.StringIO()) as out:\n"
+        "    assert main(['list']) == 0\n"
+        "names = [line.split()[0] for line in out.getvalue().splitlines()]\n"
+        "assert names[:3] == ['pendulum', 'pendulum-unclipped', 'cartpole'], names\n"
+    )
+    assert _imported_after(code) == set()
+
+
+def test_the_list_table_is_the_tasks_own():
+    """``list`` reads a JAX-free table: it must say what the tasks themselves say."""
+    from diffcontrol import _task_list, tasks
+
+    own = [tasks.make(n) for n in tasks.names()]
+    builtin = [t for t in own if type(t).__module__.startswith("diffcontrol.tasks.")]
+    table = [(t.name, t.summary, tuple(t.losses), tuple(t.recipes())) for t in builtin]
+    assert list(_task_list.BUILTIN) == table
+
+
+def test_list_in_a_process_with_the_tasks_imported_shows_registered_ones_too(capsys):
+    from diffcontrol import tasks
+    from diffcontrol.cli import main
+
+    class Renamed(type(tasks.make("pendulum"))):
+        name = "pendulum-listed"
+        summary = "a task registered in this process"
+
+    tasks.register(Renamed())
+    try:
+        assert main(["list"]) == 0
+        assert (
+            "pendulum-listed            a task registered in this process"
+            in capsys.readouterr().out
+        )
+    finally:
+        tasks._REGISTRY.pop("pendulum-listed")
+
+
 @pytest.mark.slow  # a CartPole run in a fresh interpreter: about 5 s
 def test_a_discrete_time_run_does_not_load_diffrax(tmp_path):
     """Diffrax (with lineax and optimistix) is for ODE solves: a discrete-time training run,

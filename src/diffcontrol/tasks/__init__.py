@@ -14,6 +14,7 @@ import os
 import sys
 
 from .. import _gym_ids
+from .._task_list import ENTRY_POINT_GROUP
 from ..errors import UnknownTaskError
 from ._base import ContinuousTask, StepLoss, Task, TrajectoryLoss
 from .acrobot import Acrobot
@@ -60,11 +61,6 @@ def make(name: str) -> AnyTask:
             f"unknown task {name!r}; choose one of: {', '.join(sorted(_REGISTRY))} "
             "(`diffcontrol list` describes them)"
         ) from None
-
-
-ENTRY_POINT_GROUP = "diffcontrol.tasks"
-"""Packages make their tasks known by name with an entry point in this group, e.g. in
-``pyproject.toml``: ``[project.entry-points."diffcontrol.tasks"] acrobot = "my_pkg:Acrobot"``."""
 
 
 def resolve(spec: str) -> AnyTask:
