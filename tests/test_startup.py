@@ -121,15 +121,20 @@ def test_list_in_a_process_with_the_tasks_imported_shows_registered_ones_too(cap
         name = "pendulum-listed"
         summary = "a task registered in this process"
 
-    tasks.register(Renamed())
+    import gymnasium
+
+    from diffcontrol import envs
+
+    task = tasks.register(Renamed())
     try:
         assert main(["list"]) == 0
         assert (
             "pendulum-listed            a task registered in this process"
             in capsys.readouterr().out
         )
-    finally:
+    finally:  # leave both registries as they were
         tasks._REGISTRY.pop("pendulum-listed")
+        gymnasium.registry.pop(envs.env_id(task), None)
 
 
 @pytest.mark.slow  # a CartPole run in a fresh interpreter: about 5 s
