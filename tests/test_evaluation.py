@@ -25,6 +25,8 @@ class OneByOne:
 class Counting(io.NumpyPolicy):
     """A NumPy policy that counts its calls and the observations in each."""
 
+    batched = True  # declared again: a subclass is not batched unless it says so
+
     def __init__(self, doc):
         super().__init__(doc)
         self.rows: list[int] = []
@@ -67,20 +69,62 @@ def test_a_policy_with_reset_runs_episode_by_episode():
     assert len(resets) == 3 and max(policy.rows) == 1 and result.returns.size == 3
 
 
-def test_a_users_own_environment_is_made_once(monkeypatch):
-    """A ``module:Class`` environment (``real``) may stand for a system that cannot be opened
-    many times: the episodes run one by one in one environment."""
-    made = []
+_MADE: list[object] = []
+
+
+def _user_cartpole(**kwargs):
+    """A user's own environment (an entry point outside Gymnasium and diffcontrol)."""
+    from gymnasium.envs.classic_control import CartPoleEnv
+
+    _MADE.append(1)
+    return CartPoleEnv(**kwargs)
+
+
+def test_a_users_own_environment_is_made_once():
+    """An environment that neither Gymnasium nor diffcontrol provides may stand for a system
+    that cannot be opened many times: the episodes run one by one in one environment."""
+    import gymnasium
+
+    env_id = "DiffcontrolTestUser/CartPole-v0"
+    gymnasium.register(env_id, entry_point=_user_cartpole, max_episode_steps=500)
+    try:
+        policy = _random_policy("cartpole", seed=3)
+        task = diffcontrol.make("cartpole")
+        _MADE.clear()
+        ours = evaluation.evaluate(policy, task, episodes=4, seed=0, real=(env_id, {}))
+        assert len(_MADE) == 1 and max(policy.rows) == 1
+        theirs = evaluation.evaluate(policy, task, episodes=4, seed=0, real=("CartPole-v1", {}))
+        assert max(policy.rows) == 4  # Gymnasium's own: side by side, the same returns
+        np.testing.assert_array_equal(ours.returns, theirs.returns)
+    finally:
+        gymnasium.registry.pop(env_id, None)
+
+
+def test_a_subclass_that_does_not_declare_batched_gets_one_observation_at_a_time():
+    class OneAtATime(io.NumpyPolicy):
+        def __call__(self, obs):
+            assert np.ndim(obs) == 1, "given a batch"
+            return super().__call__(obs)
+
+    policy = _random_policy("cartpole", seed=4)
+    result = evaluation.evaluate(OneAtATime(policy.doc), diffcontrol.make("cartpole"), 3, 0)
+    assert result.returns.size == 3
+
+
+def test_copies_made_before_a_failure_are_closed(monkeypatch):
+    made, closed = [], []
     real_make = evaluation.eval_environment
 
-    def counting(task, real):
-        made.append(real)
-        return real_make(task, None)  # Gymnasium's CartPole stands in for the user's
+    def failing(task, real):
+        if len(made) == 4:
+            raise RuntimeError("the fifth environment cannot be made")
+        env, label = real_make(task, real)
+        made.append(env)
+        original = env.close
+        env.close = lambda: (closed.append(env), original())
+        return env, label
 
-    monkeypatch.setattr(evaluation, "eval_environment", counting)
-    policy = _random_policy("cartpole", seed=3)
-    task = diffcontrol.make("cartpole")
-    evaluation.evaluate(policy, task, episodes=4, seed=0, real=("my_module:MyCartPole-v0", {}))
-    assert len(made) == 1 and max(policy.rows) == 1
-    evaluation.evaluate(policy, task, episodes=4, seed=0, real=("CartPole-v1", {}))
-    assert len(made) == 1 + 4 and max(policy.rows) == 4  # a registered id: side by side
+    monkeypatch.setattr(evaluation, "eval_environment", failing)
+    with pytest.raises(RuntimeError, match="fifth"):
+        evaluation.evaluate(_random_policy("cartpole", seed=5), diffcontrol.make("cartpole"), 8, 0)
+    assert len(made) == 4 and len(closed) == 4  # the first by evaluate, the copies by _lockstep

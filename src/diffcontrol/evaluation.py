@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 from collections.abc import Callable
 from typing import Any
@@ -98,8 +99,9 @@ def evaluate(
     truncates it. This is the standard protocol, so the mean return compares with any
     other method evaluated on the same seeds. A policy with a ``reset()`` method (a planner,
     whose warm start is the last plan) is reset before every episode. A NumPy MLP
-    (``batched``) runs up to ``LOCKSTEP_WIDTH`` episodes side by side, each in an environment
-    of its own, with the same returns; a user's ``module:Class`` environment is made once.
+    (``batched``) runs up to ``LOCKSTEP_WIDTH`` episodes side by side in Gymnasium's and
+    diffcontrol's Gymnasium-backed environments, each episode in an environment of its own,
+    with the same returns; any other environment is made once (``_side_by_side``).
 
     Args:
         real: ``(env_id, env_kwargs)`` of another environment to run instead, e.g. the "real"
@@ -111,7 +113,7 @@ def evaluate(
     env, label = eval_environment(task, real)
     try:
         _check_fits(policy, env, label)
-        if _side_by_side(policy, real):
+        if _side_by_side(policy, env):
             returns, lengths = _lockstep(policy, task, real, env, episodes, seed)
         else:
             returns, lengths = _one_by_one(policy, env, episodes, seed)
@@ -139,15 +141,24 @@ def _one_by_one(policy: Any, env: Any, episodes: int, seed: int) -> tuple[np.nda
     return np.asarray(returns), np.asarray(lengths)
 
 
-def _side_by_side(policy: Any, real: tuple[str, dict | None] | None) -> bool:
-    """Whether ``evaluate`` runs the episodes side by side: a policy that takes a batch
-    (``batched``) and has no state between steps (no ``reset``: a planner's warm start), in an
-    environment that Gymnasium or diffcontrol registers. A user's own environment, named by
-    ``module:Class`` (``real``), is made once and run one episode at a time: it may stand for a
-    system that cannot be opened many times."""
+def _side_by_side(policy: Any, env: Any) -> bool:
+    """Whether ``evaluate`` runs the episodes side by side in copies of ``env``.
+
+    The policy must declare ``batched = True`` on its own class (a subclass that does not
+    declare it is called one observation at a time) and have no state between steps (no
+    ``reset``: a planner's warm start). The environment must be one of Gymnasium's or
+    diffcontrol's Gymnasium-backed ones (its entry point in ``gymnasium`` or ``diffcontrol``),
+    and not one of diffcontrol's JAX-backed task environments (``diffcontrol.envs``, which
+    compile programs as they are made). A user's own environment is made once and run one
+    episode at a time: it may stand for a system that cannot be opened many times.
+    """
+    declared = vars(type(policy)).get("batched", False) is True
     stateless = not callable(getattr(policy, "reset", None))
-    registered = real is None or ":" not in real[0]
-    return bool(getattr(policy, "batched", False)) and stateless and registered
+    entry = getattr(getattr(env, "spec", None), "entry_point", None)
+    where = entry if isinstance(entry, str) else getattr(entry, "__module__", "") or ""
+    ours = where.startswith(("gymnasium.", "diffcontrol."))
+    jax_backed = type(getattr(env, "unwrapped", env)).__module__ == "diffcontrol.envs"
+    return declared and stateless and ours and not jax_backed
 
 
 LOCKSTEP_WIDTH = 128
@@ -166,14 +177,14 @@ def _lockstep(
     every environment on every call and resets finished ones itself, where episodes of
     CartPole end at different steps and each must start from its own seed here.
     """
-    envs = [env] + [
-        eval_environment(task, real)[0] for _ in range(min(LOCKSTEP_WIDTH, episodes) - 1)
-    ]
+    envs = [env]
     returns, lengths = np.zeros(episodes), np.zeros(episodes, np.int64)
     episode_of: dict[int, int] = {}  # slot -> the episode it runs
-    obs: list[Any] = [None] * len(envs)
     started = 0
     try:
+        while len(envs) < min(LOCKSTEP_WIDTH, episodes):
+            envs.append(eval_environment(task, real)[0])
+        obs: list[Any] = [None] * len(envs)
         for slot in range(len(envs)):
             obs[slot], _ = envs[slot].reset(seed=seed + started)
             episode_of[slot] = started
@@ -194,9 +205,10 @@ def _lockstep(
                     started += 1
                 else:
                     del episode_of[slot]
-    finally:
+    finally:  # the copies (``env`` is its caller's); one that fails to close stops none
         for other in envs[1:]:
-            other.close()
+            with contextlib.suppress(Exception):
+                other.close()
     return returns, lengths
 
 

@@ -484,7 +484,8 @@ class NumpyPolicy:
 
     batched = True
     """``policy(obs)`` takes a batch of observations too (``evaluation.evaluate`` runs its
-    episodes side by side then)."""
+    episodes side by side then). Declared per class: a subclass is called one observation at
+    a time unless it declares ``batched = True`` itself."""
 
     def __init__(self, doc: dict):
         _check_model(doc, Path("<model>"))
@@ -565,8 +566,6 @@ class AimingPolicy(NumpyPolicy):
     on observations ``(target_m, wind_mps)``.
     """
 
-    batched = False  # called with targets and winds, not observations
-
     def __call__(self, target_m: Any, wind_mps: Any = 0.0) -> tuple[Any, Any]:  # type: ignore[override]
         target, wind = np.broadcast_arrays(
             np.asarray(target_m, np.float64), np.asarray(wind_mps, np.float64)
@@ -613,7 +612,6 @@ class StatePolicy(NumpyPolicy):
                 "NumpyPolicy (diffcontrol.load does this)"
             )
         self.state_names = tuple(obs["state"])
-        self.batched = False  # takes states, not observations: evaluated one by one
         self._features = [_feature_index(f, list(self.state_names)) for f in obs["features"]]
 
     def features(self, state: np.ndarray) -> np.ndarray:
