@@ -7,6 +7,9 @@ own ``name``, ``summary``, ``losses`` and ``recipes()``.
 
 from __future__ import annotations
 
+import importlib.metadata
+import sys
+
 ENTRY_POINT_GROUP = "diffcontrol.tasks"
 """Packages make their tasks known by name with an entry point in this group, e.g. in
 ``pyproject.toml``: ``[project.entry-points."diffcontrol.tasks"] acrobot = "my_pkg:Acrobot"``."""
@@ -68,3 +71,29 @@ BUILTIN: tuple[tuple[str, str, tuple[str, ...], tuple[str, ...]], ...] = (
         (),
     ),
 )
+
+
+def listing() -> list[str]:
+    """The lines of ``diffcontrol list``: one per task with its summary, losses and recipes.
+
+    The built-in tasks come from ``BUILTIN`` without importing JAX, or from the registry where
+    ``diffcontrol.tasks`` is already imported (so tasks registered in this process are listed
+    too); then the installed entry points of ``ENTRY_POINT_GROUP``, by name only (nothing is
+    imported to list them).
+    """
+    rows = list(BUILTIN)
+    tasks = sys.modules.get("diffcontrol.tasks")
+    if tasks is not None:
+        live = [tasks.make(name) for name in tasks.names()]
+        rows = [(t.name, t.summary, tuple(t.losses), tuple(t.recipes())) for t in live]
+    lines = [
+        f"{name:<26} {summary}  [losses: {'/'.join(losses)}; recipes: {', '.join(recipes) or '-'}]"
+        for name, summary, losses, recipes in rows
+    ]
+    listed = {row[0] for row in rows}
+    for ep in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP):
+        if ep.name not in listed:
+            lines.append(
+                f"{ep.name:<26} an installed task ({ep.value}), loaded when a command names it"
+            )
+    return lines

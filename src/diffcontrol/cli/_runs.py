@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from typing import Any
 
 from . import _args as a
@@ -71,28 +70,9 @@ def add_parsers(sub: Any) -> None:
 
 
 def cmd_list(args: argparse.Namespace) -> int:
-    """The tasks: from ``_task_list`` without importing JAX, or from the registry where the
-    tasks are already imported (tasks registered in this process are listed too); then the
-    installed entry points, by name only (nothing is imported to list them)."""
-    import importlib.metadata
+    from .._task_list import listing
 
-    from .._task_list import BUILTIN, ENTRY_POINT_GROUP
-
-    rows = list(BUILTIN)
-    if "diffcontrol.tasks" in sys.modules:
-        tasks = sys.modules["diffcontrol.tasks"]
-        rows = [
-            (n, t.summary, tuple(t.losses), tuple(t.recipes()))
-            for n, t in ((n, tasks.make(n)) for n in tasks.names())
-        ]
-    for name, summary, losses, recipes in rows:
-        print(
-            f"{name:<26} {summary}  [losses: {'/'.join(losses)}; recipes: {', '.join(recipes) or '-'}]"
-        )
-    listed = {row[0] for row in rows}
-    for ep in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP):
-        if ep.name not in listed:
-            print(f"{ep.name:<26} an installed task ({ep.value}), loaded when a command names it")
+    print("\n".join(listing()))
     return 0
 
 
