@@ -478,8 +478,9 @@ class NumpyPolicy:
     ``policy(obs)`` takes one Gymnasium observation and returns a valid Gymnasium action, so
     it drops into a plain ``gymnasium.make(...)`` loop: for a ``Discrete`` space (the
     ``argmax`` and CartPole's ``sign`` heads) the index as a Python ``int``, or an int array
-    for a batch of observations (a batch of continuous actions is an array of rows). ``policy.action(obs)`` returns the controller's action vector (the push
-    multiplier ``+-1`` for CartPole, the one-hot choice for the ``argmax`` head).
+    for a batch of observations (a batch of continuous actions is an array of rows).
+    ``policy.action(obs)`` returns the controller's action vector (the push multiplier ``+-1``
+    for CartPole, the one-hot choice for the ``argmax`` head).
     """
 
     batched = True
