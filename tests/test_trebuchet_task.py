@@ -52,6 +52,27 @@ def test_reachable_range_brackets_what_the_heads_can_throw():
     assert np.all(grid.min(axis=(1, 2)) >= shortest - 0.5)
 
 
+def test_evaluation_throws_share_one_compiled_program(monkeypatch):
+    """``shoot_in_chunks`` keeps the broadcast shape, pads without leaking, and every batch
+    size and the reachability search trace (so compile) one program."""
+    traces = []
+
+    def counted(*args):
+        traces.append(jax.tree.map(np.shape, args))
+        return tb.shoot(*args)
+
+    monkeypatch.setattr(aim, "_SHOOT", jax.jit(counted))
+    rng = np.random.default_rng(3)
+    wind, angle = rng.normal(0, 5, (7, 1)), rng.uniform(20, 60, 150)
+    distance = aim.shoot_in_chunks(wind, angle, 250.0)  # 1,050 throws: a padded second call
+    assert distance.shape == (7, 150) and distance.dtype == np.float64
+    np.testing.assert_allclose(distance, np.asarray(shoot(wind, angle, 250.0)), atol=0.01)
+    assert aim.shoot_in_chunks(wind[0, 0], angle[0], 250.0).shape == ()
+    shortest, longest = aim.reachable_range(np.array([-3.0, 0.0, 4.0]))
+    assert shortest.shape == longest.shape == (3,) and np.all(np.diff(longest) > 0)
+    assert len(traces) == 1, traces
+
+
 @pytest.mark.slow
 def test_direct_aiming_hits_reachable_targets():
     target = np.array([25.0, 50.0, 80.0, 95.0])

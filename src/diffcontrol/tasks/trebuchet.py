@@ -230,7 +230,7 @@ class TrebuchetAiming(Task):
         t0 = time.perf_counter()
         angle, weight = run.policy(target_m, wind_mps)
         net_seconds = time.perf_counter() - t0
-        distance = float(jax.jit(tb.shoot)(wind_mps, angle, weight))
+        distance = float(shoot_in_chunks(wind_mps, angle, weight))
         result = {
             "target_m": target_m,
             "wind_mps": wind_mps,
@@ -289,40 +289,41 @@ class TrebuchetAiming(Task):
 # Reachability and direct aiming: the simulator alone, no network.
 
 
-def _golden_max(f, lo, hi, iters):
-    """Maximise the unimodal ``f`` on ``[lo, hi]`` (elementwise) by golden-section search."""
-    inv = (math.sqrt(5.0) - 1.0) / 2.0
+SHOOT_CHUNK = 1000
+"""Throws per call of ``shoot_in_chunks``'s one compiled program: ``evaluate_aiming``'s 1,000
+targets are one call, and the reachability searches and ``diffcontrol aim`` run through the same
+program, so an evaluation compiles the throw once (about 2.5 s) rather than once per caller."""
 
-    def body(_, bounds):
-        lo, hi = bounds
-        a, b = hi - inv * (hi - lo), lo + inv * (hi - lo)
-        left = f(a) >= f(b)
-        return jnp.where(left, lo, a), jnp.where(left, b, hi)
-
-    lo, hi = jax.lax.fori_loop(0, iters, body, (lo, hi))
-    mid = (lo + hi) / 2
-    return mid, f(mid)
+_SHOOT = jax.jit(tb.shoot)
+_PADDING = (0.0, 45.0, 200.0)
+"""The wind, angle and weight of the padding throws: an ordinary throw, quick to land."""
 
 
-def _longest_throw(wind, p):
-    """The best angle and the longest distance at the heaviest weight (and the coarse grid)."""
-    a_lo, a_hi = ANGLE_RANGE_DEG
-    w_hi = WEIGHT_RANGE_LB[1]
-    grid = jnp.linspace(a_lo, a_hi, 17)
-    coarse = tb.shoot(wind[..., None], grid, w_hi, p)
-    i = jnp.argmax(coarse, axis=-1)
-    step = grid[1] - grid[0]
-    lo = jnp.clip(grid[i] - step, a_lo, a_hi)
-    hi = jnp.clip(grid[i] + step, a_lo, a_hi)
-    angle, longest = _golden_max(lambda a: tb.shoot(wind, a, w_hi, p), lo, hi, 14)
-    better = longest >= jnp.max(coarse, axis=-1)
-    angle = jnp.where(better, angle, grid[i])
-    return angle, jnp.maximum(longest, jnp.max(coarse, axis=-1)), coarse
+def shoot_in_chunks(wind_mps, angle_deg, weight_lb, params: tb.TrebuchetParams | None = None):
+    """``systems.trebuchet.shoot`` elementwise over NumPy inputs (broadcast against each
+    other), in calls of ``SHOOT_CHUNK`` throws (the last padded) to one compiled program.
+
+    Returns a float64 NumPy array of the inputs' broadcast shape. ``params=None`` (the nominal
+    trebuchet) and a ``TrebuchetParams`` compile one program each.
+    """
+    inputs = np.broadcast_arrays(
+        *(np.asarray(v, np.float64) for v in (wind_mps, angle_deg, weight_lb))
+    )
+    shape, n = inputs[0].shape, inputs[0].size
+    size = -(-max(n, 1) // SHOOT_CHUNK) * SHOOT_CHUNK
+    flat = [
+        np.concatenate([v.reshape(-1), np.full(size - n, pad)]) for v, pad in zip(inputs, _PADDING)
+    ]
+    parts = [
+        np.asarray(_SHOOT(*(v[i : i + SHOOT_CHUNK] for v in flat), params), np.float64)
+        for i in range(0, size, SHOOT_CHUNK)
+    ]
+    return np.concatenate(parts)[:n].reshape(shape)
 
 
-RANGE_CHUNK = 256
-"""Winds per compiled call of ``reachable_range``: every batch size (one wind included) is
-padded to whole chunks, so one program serves every caller (compiling it takes seconds)."""
+GOLDEN_ITERATIONS = 14
+"""Golden-section steps of the longest throw's angle: the coarse grid's bracket (two grid
+steps, 10 degrees) shrinks to about 0.01 degree."""
 
 
 def reachable_range(wind_mps, params: tb.TrebuchetParams | None = None):
@@ -334,31 +335,28 @@ def reachable_range(wind_mps, params: tb.TrebuchetParams | None = None):
     lightest and heaviest weights over the coarse angle grid: approximate (to a few metres),
     and below 20 m unless the tail wind exceeds about 17 m/s, so it rarely decides whether
     a target of the task is reachable.
-    Elementwise over a batch of winds (NumPy arrays of the winds' shape).
+    Elementwise over a batch of winds (NumPy arrays of the winds' shape). Every throw goes
+    through ``shoot_in_chunks``: the search runs in NumPy, a batch of throws per step.
     """
     wind = np.asarray(wind_mps, np.float64)
-    flat = wind.reshape(-1)
-    padded = np.zeros(-(-max(flat.size, 1) // RANGE_CHUNK) * RANGE_CHUNK)
-    padded[: flat.size] = flat
-    params = params or tb.TrebuchetParams()  # one pytree structure, one program
-    parts = [
-        _reachable_range(padded[i : i + RANGE_CHUNK], params)
-        for i in range(0, padded.size, RANGE_CHUNK)
-    ]
-    shortest, longest = (np.concatenate([np.asarray(r[j]) for r in parts]) for j in (0, 1))
-    return shortest[: flat.size].reshape(wind.shape), longest[: flat.size].reshape(wind.shape)
-
-
-@jax.jit
-def _reachable_range(wind_mps, p: tb.TrebuchetParams):
-    """``reachable_range`` of one chunk of winds, compiled."""
-    wind = jnp.asarray(wind_mps, jnp.result_type(float))
-    w_lo, w_hi = WEIGHT_RANGE_LB
-    _, longest, coarse = _longest_throw(wind, p)
-    grid = jnp.linspace(*ANGLE_RANGE_DEG, coarse.shape[-1])
-    light = tb.shoot(wind[..., None], grid, w_lo, p)
-    shortest = jnp.minimum(jnp.min(coarse, axis=-1), jnp.min(light, axis=-1))
-    return shortest, longest
+    flat = wind.reshape(-1)[:, None]
+    (a_lo, a_hi), (w_lo, w_hi) = ANGLE_RANGE_DEG, WEIGHT_RANGE_LB
+    grid = np.linspace(a_lo, a_hi, 17)
+    coarse = shoot_in_chunks(flat, grid, w_hi, params)
+    light = shoot_in_chunks(flat, grid, w_lo, params)
+    best = np.max(coarse, axis=-1)
+    i = np.argmax(coarse, axis=-1)
+    step = grid[1] - grid[0]
+    lo, hi = np.clip(grid[i] - step, a_lo, a_hi), np.clip(grid[i] + step, a_lo, a_hi)
+    inv = (math.sqrt(5.0) - 1.0) / 2.0
+    for _ in range(GOLDEN_ITERATIONS):  # both probes of a step in one call
+        a, b = hi - inv * (hi - lo), lo + inv * (hi - lo)
+        f = shoot_in_chunks(flat, np.stack([a, b], axis=-1), w_hi, params)
+        left = f[:, 0] >= f[:, 1]
+        lo, hi = np.where(left, lo, a), np.where(left, b, hi)
+    longest = np.maximum(shoot_in_chunks(flat[:, 0], (lo + hi) / 2, w_hi, params), best)
+    shortest = np.minimum(np.min(coarse, axis=-1), np.min(light, axis=-1))
+    return shortest.reshape(wind.shape), longest.reshape(wind.shape)
 
 
 def check_target(target_m, wind_mps) -> None:
