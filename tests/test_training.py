@@ -214,3 +214,18 @@ def test_persistent_compile_cache_hits_on_a_second_run(tmp_path, task):
     assert caches[0]["misses"] >= 2 and caches[0]["hits"] == 0
     assert caches[0]["misses"] == caches[0]["requests"]
     assert caches[1]["misses"] == 0 and caches[1]["hits"] == caches[1]["requests"]
+
+
+def test_the_next_seed_in_a_process_reuses_the_compiled_programs():
+    """A second run of the same program shape (another seed) compiles only its start; a
+    setting that changes the training program (the window) compiles its chunk again, but not
+    the evaluation, which the window does not change."""
+    task = diffcontrol.make("cartpole")
+    cfg = resolve_config(task, updates=4, batch=2, window=3, eval_every=2, eval_episodes=2)
+    first = train(task, cfg)
+    second = train(task, cfg.replace(seed=1))
+    other = train(task, cfg.replace(seed=1, window=4))
+    assert second.metrics["timings"]["compile_programs"] == 1  # the start's keys differ
+    assert other.metrics["timings"]["compile_programs"] == 2  # the start and the chunk
+    assert _weights(first.controller)[0].shape == _weights(second.controller)[0].shape
+    assert not np.array_equal(_weights(first.controller)[0], _weights(second.controller)[0])

@@ -34,7 +34,7 @@ from ..errors import ConfigError
 from ..tasks import ContinuousTask, StepLoss, Task
 from ._bptt import Trainer, builtin_loss_name, make_optimizer
 from ._devices import check_devices, mesh_placements, placer
-from ._driver import TrainResult, _check_head, interrupts_deferred, task_params
+from ._driver import TrainResult, _check_head, compiled_once, interrupts_deferred, task_params
 
 MAX_MEMBERS = 2**16
 """The most members one sweep may have."""
@@ -301,8 +301,10 @@ def _run_program(
         arrays, rest = eqx.partition(ts, eqx.is_array)
         ts = eqx.combine(shard(arrays), rest)
         if ndev == 1:  # compiled ahead, to measure compilation apart from training
-            evaluate = evaluate.lower(ts.controller, params, k_eval).compile()
-            chunks = [(e, c.lower(ts, params, jnp.asarray(totals)).compile()) for e, c in chunks]
+            evaluate = compiled_once(evaluate.lower(ts.controller, params, k_eval))
+            chunks = [
+                (e, compiled_once(c.lower(ts, params, jnp.asarray(totals)))) for e, c in chunks
+            ]
     compile_seconds = time.perf_counter() - t0
 
     curves: list[list[dict[str, Any]]] = [[] for _ in range(n)]
