@@ -229,3 +229,18 @@ def test_the_next_seed_in_a_process_reuses_the_compiled_programs():
     assert other.metrics["timings"]["compile_programs"] == 2  # the start and the chunk
     assert _weights(first.controller)[0].shape == _weights(second.controller)[0].shape
     assert not np.array_equal(_weights(first.controller)[0], _weights(second.controller)[0])
+
+
+def test_a_program_that_calls_back_into_python_is_not_reused():
+    """Two runs whose losses call back into Python (each its own list) each call their own."""
+    task = diffcontrol.make("cartpole")
+    cfg = resolve_config(task, updates=2, batch=2, window=3, eval_every=2, eval_episodes=2)
+    seen: list[list] = [[], []]
+    for i in range(2):
+
+        def loss(params, state, action, next_state, reward, calls=seen[i]):
+            jax.debug.callback(lambda r: calls.append(1), reward)
+            return -reward
+
+        train(task, cfg, step_loss=loss)
+    assert len(seen[0]) == len(seen[1]) > 0

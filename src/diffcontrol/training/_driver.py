@@ -5,8 +5,10 @@ from __future__ import annotations
 import collections
 import contextlib
 import dataclasses
+import hashlib
 import math
 import os
+import re
 import signal
 import threading
 import time
@@ -458,6 +460,8 @@ def _check_head(task: AnyTask, head: str) -> None:
 _EXECUTABLES: collections.OrderedDict[Any, Any] = collections.OrderedDict()
 EXECUTABLES_KEPT = 16
 """Compiled programs kept in the process by ``compiled_once`` (the most recently used)."""
+_HOST_CALLBACK = re.compile(r"@\w*python\w*callback")
+"""A call from the program into Python, as JAX lowers it (``xla_ffi_python_cpu_callback``)."""
 
 
 def compiled_once(lowered: jax.stages.Lowered) -> jax.stages.Compiled:
@@ -466,9 +470,15 @@ def compiled_once(lowered: jax.stages.Lowered) -> jax.stages.Compiled:
     Each run traces its own functions, so JAX's in-memory caches do not see that the next
     seed of a comparison or a sweep's next call lowers the same program again; the persistent
     cache does, but loading from it costs about 0.15 s a program. Here the program's text (its
-    computation, constants included) and its argument and result structures are the key.
+    computation, constants included) and its argument and result structures are the key. A
+    program that calls back into Python (a ``jax.debug.callback`` in a user's loss) is compiled
+    each time: its text names a callback by its index only, and a kept program would call the
+    earlier run's function.
     """
-    key = (lowered.as_text(), lowered.in_tree, lowered.out_tree)
+    text = lowered.as_text()
+    if _HOST_CALLBACK.search(text):
+        return lowered.compile()
+    key = (hashlib.sha256(text.encode()).hexdigest(), lowered.in_tree, lowered.out_tree)
     hit = _EXECUTABLES.pop(key, None)
     if hit is None:
         hit = lowered.compile()
