@@ -49,7 +49,7 @@ from ..identify._routes import TrajectoryRoute, parameters_doc
 from ..identify._shooting import FitResult, check_settings, set_params, standard_errors
 from ..identify.data import TrajectoryData
 from ..systems import trebuchet as tb
-from ._trebuchet_record import as64, parameter_names, params_dict, predict_distances
+from ._trebuchet_record import as64, padded_rows, parameter_names, params_dict, predict_distances
 from ._trebuchet_throws import Throws, read_throws, throws_of
 
 MIN_THROWS_PER_PARAMETER = 5
@@ -151,8 +151,9 @@ def _fit(data, names, steps, learning_rate, lm_steps, init, base) -> FitResult:
             f"initial values {dict(zip(names, start.tolist()))} must be finite, and positive "
             "where the nominal value is"
         )
-    inputs = tuple(jnp.asarray(getattr(data, f)) for f in ("wind", "release_angle"))
-    inputs += (jnp.asarray(data.counterweight), jnp.asarray(data.distance))
+    n = data.wind.size
+    columns = (data.wind, data.release_angle, data.counterweight, data.distance)
+    inputs = tuple(jnp.asarray(c) for c in padded_rows(*columns))  # one program per 64 rows
 
     def to_values(z):
         return np.where(positive, np.exp(z), z)
@@ -164,7 +165,7 @@ def _fit(data, names, steps, learning_rate, lm_steps, init, base) -> FitResult:
         r, jac = _residuals_and_jacobian(
             jnp.asarray(z), jnp.asarray(positive), *inputs, base, names=names
         )
-        r, jac = np.asarray(r), np.asarray(jac)
+        r, jac = np.asarray(r)[:n], np.asarray(jac)[:n]
         loss = float(np.mean(r**2))
         ok = math.isfinite(loss) and bool(np.all(np.isfinite(jac)))
         return (loss if ok else math.inf), r, jac, ok

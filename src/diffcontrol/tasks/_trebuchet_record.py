@@ -78,12 +78,26 @@ def _shoot(wind, angle, weight, params):
     return tb.shoot(wind, angle, weight, params)
 
 
+THROW_ROWS = 64
+"""Throw data sets are padded to a multiple of this many rows (the last throw repeated) for
+their compiled programs, so that a loop's growing data and its held-out set share them."""
+
+
+def padded_rows(*columns: Any) -> tuple[np.ndarray, ...]:
+    """The columns (1-D, of one length ``n``) padded to a multiple of ``THROW_ROWS`` rows by
+    repeating their last row; take ``[:n]`` of what is computed from them."""
+    n = len(columns[0])
+    size = -(-max(n, 1) // THROW_ROWS) * THROW_ROWS
+    return tuple(np.concatenate([c, np.repeat(c[-1:], size - n)]) for c in map(np.asarray, columns))
+
+
 def predict_distances(params: tb.TrebuchetParams | None, throws: Throws) -> np.ndarray:
     """The distances (m) the trebuchet ``params`` (default the nominal one) throws with the
     recorded inputs of ``throws``, simulated in float64."""
     with jax.enable_x64(True):
         p = as64(params or tb.TrebuchetParams())
-        return np.asarray(_shoot(throws.wind, throws.release_angle, throws.counterweight, p))
+        inputs = padded_rows(throws.wind, throws.release_angle, throws.counterweight)
+        return np.asarray(_shoot(*inputs, p))[: len(throws.wind)]
 
 
 def record_throws(
