@@ -55,6 +55,27 @@ def test_members_sharded_over_devices_match_one_device(tmp_path):
     _run_with_devices(script)
 
 
+def test_a_program_kept_for_one_device_is_not_run_on_another():
+    """``compiled_once`` keys its programs by device: a run on the second device compiles its
+    own and leaves its controller there; the next run there reuses them."""
+    script = f"""
+        import jax
+        import diffcontrol as dc
+        from diffcontrol.training import train
+        task = dc.make("cartpole")
+        config = task.default_config().replace(**{TINY!r})
+        first = train(task, config)
+        with jax.default_device(jax.devices()[1]):
+            second = train(task, config.replace(seed=1))
+            third = train(task, config.replace(seed=2))
+        programs = [r.metrics["timings"]["compile_programs"] for r in (first, second, third)]
+        assert programs == [3, 3, 1], programs
+        placed = {{x.devices().pop() for x in jax.tree.leaves(second.controller) if hasattr(x, "devices")}}
+        assert placed == {{jax.devices()[1]}}, placed
+        """
+    _run_with_devices(script, devices=2)
+
+
 @pytest.mark.slow
 def test_batch_split_over_devices_matches_one_device(tmp_path):
     """Data-parallel training: 8 simulated CPU devices give the controller one device gives,

@@ -18,7 +18,13 @@ from jax import monitoring
 import diffcontrol
 from diffcontrol import io
 from diffcontrol.evaluation import evaluate
-from diffcontrol.training import TrainingDiverged, make_trainer, resolve_config, train
+from diffcontrol.training import (
+    TrainingDiverged,
+    clear_compiled,
+    make_trainer,
+    resolve_config,
+    train,
+)
 
 
 def _weights(controller):
@@ -229,6 +235,8 @@ def test_the_next_seed_in_a_process_reuses_the_compiled_programs():
     assert other.metrics["timings"]["compile_programs"] == 2  # the start and the chunk
     assert _weights(first.controller)[0].shape == _weights(second.controller)[0].shape
     assert not np.array_equal(_weights(first.controller)[0], _weights(second.controller)[0])
+    clear_compiled()  # the kept programs let go: the next run compiles (or loads) all three
+    assert train(task, cfg.replace(seed=2)).metrics["timings"]["compile_programs"] == 3
 
 
 def test_a_program_that_calls_back_into_python_is_not_reused():

@@ -151,9 +151,9 @@ def _fit(data, names, steps, learning_rate, lm_steps, init, base) -> FitResult:
             f"initial values {dict(zip(names, start.tolist()))} must be finite, and positive "
             "where the nominal value is"
         )
-    n = data.wind.size
     columns = (data.wind, data.release_angle, data.counterweight, data.distance)
-    inputs = tuple(jnp.asarray(c) for c in padded_rows(*columns))  # one program per 64 rows
+    n, padded = padded_rows(*columns)
+    inputs = tuple(jnp.asarray(c) for c in padded)  # one program per 64 rows
 
     def to_values(z):
         return np.where(positive, np.exp(z), z)

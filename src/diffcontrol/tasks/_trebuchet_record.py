@@ -83,21 +83,25 @@ THROW_ROWS = 64
 their compiled programs, so that a loop's growing data and its held-out set share them."""
 
 
-def padded_rows(*columns: Any) -> tuple[np.ndarray, ...]:
-    """The columns (1-D, of one length ``n``) padded to a multiple of ``THROW_ROWS`` rows by
-    repeating their last row; take ``[:n]`` of what is computed from them."""
-    n = len(columns[0])
+def padded_rows(*columns: Any) -> tuple[int, tuple[np.ndarray, ...]]:
+    """The columns broadcast against each other and flattened (``n`` rows), then padded to a
+    multiple of ``THROW_ROWS`` rows by repeating their last row: ``(n, padded columns)``;
+    take ``[:n]`` of what is computed from them."""
+    flat = [c.reshape(-1) for c in np.broadcast_arrays(*map(np.asarray, columns))]
+    n = flat[0].size
     size = -(-max(n, 1) // THROW_ROWS) * THROW_ROWS
-    return tuple(np.concatenate([c, np.repeat(c[-1:], size - n)]) for c in map(np.asarray, columns))
+    return n, tuple(np.concatenate([c, np.repeat(c[-1:], size - n)]) for c in flat)
 
 
 def predict_distances(params: tb.TrebuchetParams | None, throws: Throws) -> np.ndarray:
     """The distances (m) the trebuchet ``params`` (default the nominal one) throws with the
-    recorded inputs of ``throws``, simulated in float64."""
+    recorded inputs of ``throws`` (broadcast against each other), simulated in float64."""
+    columns = (throws.wind, throws.release_angle, throws.counterweight)
+    shape = np.broadcast_shapes(*(np.shape(c) for c in columns))
+    n, inputs = padded_rows(*columns)
     with jax.enable_x64(True):
         p = as64(params or tb.TrebuchetParams())
-        inputs = padded_rows(throws.wind, throws.release_angle, throws.counterweight)
-        return np.asarray(_shoot(*inputs, p))[: len(throws.wind)]
+        return np.asarray(_shoot(*inputs, p))[:n].reshape(shape)
 
 
 def record_throws(

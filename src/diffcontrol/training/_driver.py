@@ -8,7 +8,6 @@ import dataclasses
 import hashlib
 import math
 import os
-import re
 import signal
 import threading
 import time
@@ -400,9 +399,10 @@ _START = eqx.filter_jit(_start)
 START_COMPILER_OPTIONS = {"xla_backend_optimization_level": 1}
 """XLA's options for the start program (the controllers' random weights, the first resets):
 it runs once, and level 1 compiles it 0.5-0.6 s faster than the default level (2.4 s for the
-acrobot's population) with the same bits for every built-in task (Threefry is integer
-arithmetic; level 0 would round the uniform draws' scaling differently). A level set for the
-whole process in ``XLA_FLAGS`` (the test suite's 0) is left as it is."""
+acrobot's population). On a CPU it gives the default level's bits for every built-in task
+(compared leaf by leaf; ``tests/test_startup.py`` keeps checking two of them); level 0 would
+round the uniform draws' scaling differently. Not compared on a GPU. A level named in
+``XLA_FLAGS`` (the test suite's 0) is left as it is."""
 
 
 def _first_state(trainer: Any, seed: int, params: PyTree) -> tuple[Any, PRNGKeyArray]:
@@ -460,8 +460,6 @@ def _check_head(task: AnyTask, head: str) -> None:
 _EXECUTABLES: collections.OrderedDict[Any, Any] = collections.OrderedDict()
 EXECUTABLES_KEPT = 16
 """Compiled programs kept in the process by ``compiled_once`` (the most recently used)."""
-_HOST_CALLBACK = re.compile(r"@\w*python\w*callback")
-"""A call from the program into Python, as JAX lowers it (``xla_ffi_python_cpu_callback``)."""
 
 
 def compiled_once(lowered: jax.stages.Lowered) -> jax.stages.Compiled:
@@ -469,16 +467,28 @@ def compiled_once(lowered: jax.stages.Lowered) -> jax.stages.Compiled:
 
     Each run traces its own functions, so JAX's in-memory caches do not see that the next
     seed of a comparison or a sweep's next call lowers the same program again; the persistent
-    cache does, but loading from it costs about 0.15 s a program. Here the program's text (its
-    computation, constants included) and its argument and result structures are the key. A
-    program that calls back into Python (a ``jax.debug.callback`` in a user's loss) is compiled
-    each time: its text names a callback by its index only, and a kept program would call the
-    earlier run's function.
+    cache does, but loading from it costs about 0.15 s a program. Here the key is the
+    program's text (its computation, constants included), its argument and result
+    structures, and the devices and placements it was lowered for (the text does not name
+    them). A program that calls back into Python (a ``jax.debug.callback`` in a user's loss)
+    is compiled each time: a kept one would call the earlier run's function. Where JAX's
+    lowering does not show its devices and callbacks as expected, nothing is kept.
+    ``clear_compiled`` lets the kept programs go.
     """
-    text = lowered.as_text()
-    if _HOST_CALLBACK.search(text):
+    try:
+        lowering = lowered._lowering  # JAX's own record of the lowering (not public API)
+        args = lowering.compile_args
+        if args["host_callbacks"] or args["keepalive"]:
+            return lowered.compile()
+        placement = (
+            tuple(d.id for d in lowering._device_list),
+            str(args["in_shardings"]),
+            str(args["out_shardings"]),
+        )
+    except (AttributeError, KeyError, TypeError):
         return lowered.compile()
-    key = (hashlib.sha256(text.encode()).hexdigest(), lowered.in_tree, lowered.out_tree)
+    text = hashlib.sha256(lowered.as_text().encode()).hexdigest()
+    key = (text, placement, lowered.in_tree, lowered.out_tree)
     hit = _EXECUTABLES.pop(key, None)
     if hit is None:
         hit = lowered.compile()
@@ -486,6 +496,11 @@ def compiled_once(lowered: jax.stages.Lowered) -> jax.stages.Compiled:
     while len(_EXECUTABLES) > EXECUTABLES_KEPT:
         _EXECUTABLES.popitem(last=False)
     return hit
+
+
+def clear_compiled() -> None:
+    """Let go of the programs ``compiled_once`` keeps (``jax.clear_caches`` does not)."""
+    _EXECUTABLES.clear()
 
 
 def _outputs(shardings: Any) -> dict[str, Any]:
