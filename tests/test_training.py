@@ -223,20 +223,48 @@ def test_persistent_compile_cache_hits_on_a_second_run(tmp_path, task):
 
 
 def test_the_next_seed_in_a_process_reuses_the_compiled_programs():
-    """A second run of the same program shape (another seed) compiles only its start; a
-    setting that changes the training program (the window) compiles its chunk again, but not
-    the evaluation, which the window does not change."""
+    """A second run of the same settings (another seed) compiles nothing; a setting that
+    changes the training program (the window) compiles its start and chunk again, but not the
+    evaluation, which the window does not change."""
     task = diffcontrol.make("cartpole")
     cfg = resolve_config(task, updates=4, batch=2, window=3, eval_every=2, eval_episodes=2)
     first = train(task, cfg)
     second = train(task, cfg.replace(seed=1))
     other = train(task, cfg.replace(seed=1, window=4))
-    assert second.metrics["timings"]["compile_programs"] == 1  # the start's keys differ
+    assert second.metrics["timings"]["compile_programs"] == 0  # the seed is an argument
     assert other.metrics["timings"]["compile_programs"] == 2  # the start and the chunk
     assert _weights(first.controller)[0].shape == _weights(second.controller)[0].shape
     assert not np.array_equal(_weights(first.controller)[0], _weights(second.controller)[0])
     clear_compiled()  # the kept programs let go: the next run compiles (or loads) all three
     assert train(task, cfg.replace(seed=2)).metrics["timings"]["compile_programs"] == 3
+
+
+def test_a_kept_trainer_runs_what_a_fresh_one_runs_and_a_changed_task_gets_its_own(monkeypatch):
+    """The next seed reuses the kept trainer and traces nothing, with the weights a fresh
+    process would give; an attribute of the task changed in between is a new trainer, and a
+    custom loss is never kept (it could read a global changed since)."""
+    task = diffcontrol.make("cartpole")  # the process's shared instance: changed by monkeypatch
+    cfg = resolve_config(task, updates=4, batch=2, window=3, eval_every=2, eval_episodes=2)
+    train(task, cfg)
+    kept = train(task, cfg.replace(seed=1))
+    assert kept.metrics["timings"]["compile_programs"] == 0
+    clear_compiled()
+    fresh = train(task, cfg.replace(seed=1))
+    for a, b in zip(_weights(kept.controller), _weights(fresh.controller)):
+        np.testing.assert_array_equal(a, b)
+    monkeypatch.setattr(task, "episode_length", 7)  # the evaluation's episodes
+    short = train(task, cfg.replace(seed=1))
+    assert short.metrics["timings"]["compile_programs"] >= 2
+    assert short.metrics["curve"][0]["eval_return"] <= 7
+    scale = [1.0]
+
+    def loss(params, state, action, next_state, reward):
+        return -scale[0] * reward
+
+    train(task, cfg, step_loss=loss)
+    scale[0] = 0.0  # a zero loss: the weights cannot move
+    still = train(task, cfg, step_loss=loss)
+    assert still.metrics["timings"]["compile_programs"] >= 1
 
 
 def test_a_program_that_calls_back_into_python_is_not_reused():

@@ -189,11 +189,10 @@ def train(
     if isinstance(task, ContinuousTask):
         if step_loss is not None:
             raise ConfigError(f"task {task.name!r} is continuous-time: pass trajectory_loss")
-        trainer = make_ode_trainer(task, config, trajectory_loss)
-    else:
-        if trajectory_loss is not None:
-            raise ConfigError(f"task {task.name!r} is discrete-time: pass step_loss")
-        trainer = make_trainer(task, config, step_loss)
+    elif trajectory_loss is not None:
+        raise ConfigError(f"task {task.name!r} is discrete-time: pass step_loss")
+    kept = _kept_trainer(task, config, step_loss, trajectory_loss)
+    trainer = kept.trainer
     custom = step_loss is not None or trajectory_loss is not None
     if custom and out_dir is not None and resume:
         say("note: resuming with a custom loss; it must be the same function as before")
@@ -207,7 +206,7 @@ def train(
             )
         divisible(config.batch, devices, "batch", "--batch")
     with interrupts_deferred():  # one program (the keys too), not op by op
-        ts, k_eval = _first_state(trainer, config.seed, params)
+        ts, k_eval = _first_state(kept, config.seed, params)
     ts_sharding, whole = batch_placement(ts, devices, 1 if _population(config) > 1 else 0)
     best = None  # the controller of the best evaluation point so far
 
@@ -236,7 +235,7 @@ def train(
     # The evaluation first: a loss or a solve that fails on the untrained controller is
     # reported before the (longer) compilation of the training chunk.
     with interrupts_deferred():
-        evaluate = jax.jit(trainer.evaluate, **_outputs(whole))
+        evaluate = kept.jitted("evaluate", trainer, whole)
         evaluate = compiled_once(evaluate.lower(ts.controller, params, k_eval))
 
     curve: list[dict[str, Any]] = list(meta["curve"])
@@ -293,9 +292,9 @@ def train(
     total = np.int32(config.updates)
     chunks = []  # (end update, compiled chunk) per stage still to run: see Trainer.stages
     with interrupts_deferred():
-        for end, stage in _stages(trainer):
+        for i, (end, stage) in enumerate(kept.stages):
             if end > int(ts.update):
-                chunk = jax.jit(stage.chunk, **_outputs(ts_sharding and (ts_sharding, whole)))
+                chunk = kept.jitted(f"chunk {i}", stage, ts_sharding and (ts_sharding, whole))
                 chunks.append((end, compiled_once(chunk.lower(ts, params, total))))
 
     stopped_early = False
@@ -405,12 +404,121 @@ round the uniform draws' scaling differently. Not compared on a GPU. A level nam
 ``XLA_FLAGS`` (the test suite's 0) is left as it is."""
 
 
-def _first_state(trainer: Any, seed: int, params: PyTree) -> tuple[Any, PRNGKeyArray]:
+def _first_state(kept: _KeptTrainer, seed: int, params: PyTree) -> tuple[Any, PRNGKeyArray]:
     """``_start`` as one program (the keys too, not op by op), compiled at
-    ``START_COMPILER_OPTIONS`` unless ``XLA_FLAGS`` sets the level."""
-    args = (trainer, np.int32(seed), params)
+    ``START_COMPILER_OPTIONS`` unless ``XLA_FLAGS`` sets the level, and kept with the trainer
+    for the next seed (the seed is an argument)."""
+    args = (kept.trainer, np.int32(seed), params)
     chosen = "xla_backend_optimization_level" in os.environ.get("XLA_FLAGS", "")
-    return _START.lower(*args).compile(None if chosen else START_COMPILER_OPTIONS)(*args)
+    lowered = _START.lower(*args)
+    key = (
+        str(jax.config.jax_default_device),  # the device it runs on is fixed when lowered
+        hashlib.sha256(lowered.as_text().encode()).hexdigest(),
+        chosen,
+    )
+    if key not in kept.starts:
+        kept.starts[key] = lowered.compile(None if chosen else START_COMPILER_OPTIONS)
+    return kept.starts[key](*args)
+
+
+@dataclasses.dataclass
+class _KeptTrainer:
+    """A trainer kept for the next run of the same settings (``_kept_trainer``), with its
+    stages, jitted functions and compiled start programs, so that the next seed traces
+    nothing again."""
+
+    task: Any  # held, so that its id is not reused while it is kept
+    trainer: Any
+    stages: list[tuple[int, Any]]
+    jits: dict[Any, Any] = dataclasses.field(default_factory=dict)
+    starts: dict[Any, Any] = dataclasses.field(default_factory=dict)
+
+    def jitted(self, name: str, owner: Any, shardings: Any) -> Any:
+        """``jax.jit`` of ``owner``'s method ``name`` (``"chunk N"``: stage N's chunk), made
+        once per placement of its outputs."""
+        key = (name, str(shardings))
+        if key not in self.jits:
+            method = owner.evaluate if name == "evaluate" else owner.chunk
+            self.jits[key] = jax.jit(method, **_outputs(shardings))
+        return self.jits[key]
+
+
+_TRAINERS: collections.OrderedDict[Any, _KeptTrainer] = collections.OrderedDict()
+TRAINERS_KEPT = 8
+"""Trainers kept in the process by ``_kept_trainer`` (the most recently used)."""
+_PLAIN = (bool, int, float, complex, str, bytes, type(None))
+
+
+def _fingerprint(task: Any) -> tuple | None:
+    """What the task's programs could depend on beyond its code: its own attributes and the
+    plain-valued attributes of its classes (arrays by their bytes). ``None`` (keep nothing)
+    if an attribute is neither plain, a tuple of plain values nor an array."""
+
+    def frozen(value: Any) -> Any:
+        if isinstance(value, _PLAIN):
+            return value
+        if isinstance(value, tuple) and all(isinstance(v, _PLAIN) for v in value):
+            return value
+        if isinstance(value, np.ndarray | jax.Array):
+            a = np.asarray(value)
+            return ("array", a.dtype.str, a.shape, a.tobytes())
+        raise TypeError
+
+    try:
+        own = tuple(sorted((k, frozen(v)) for k, v in vars(task).items()))
+    except (TypeError, ValueError):
+        return None
+    inherited = tuple(
+        (k, v if isinstance(v, _PLAIN + (tuple,)) else id(v))  # a method replaced: its id
+        for cls in type(task).__mro__
+        for k, v in sorted(vars(cls).items())
+        if not k.startswith("__")
+        and (isinstance(v, _PLAIN + (tuple,)) and _hashable(v) or callable(v))
+    )
+    return own, inherited
+
+
+def _hashable(value: Any) -> bool:
+    """Whether ``value`` can be hashed (a tuple of lists cannot)."""
+    try:
+        hash(value)
+    except TypeError:
+        return False
+    return True
+
+
+def _kept_trainer(task: Any, config: Any, step_loss: Any, trajectory_loss: Any) -> _KeptTrainer:
+    """The trainer of these settings, the same object as for an earlier run that differed only
+    in its seed (trainers do not read the seed: the start program takes it as an argument),
+    so that its programs are not traced again.
+
+    Only a built-in task (its class defined in diffcontrol) with its built-in losses is kept,
+    by identity and fingerprint (an attribute changed in between makes a new trainer): a
+    kept trainer does not trace again, so a user's loss or task that reads a global changed
+    since would run as it was. Anything else gets a new trainer every run, as before.
+    """
+    general = dataclasses.replace(config, seed=0)
+    ours = type(task).__module__.startswith("diffcontrol.")
+    builtin = ours and step_loss is None and trajectory_loss is None
+    fingerprint = _fingerprint(task) if builtin else None
+    fields = tuple(  # NaN (target_return's default) equal to itself, on every Python
+        "nan" if isinstance(v, float) and math.isnan(v) else v for v in dataclasses.astuple(general)
+    )
+    if not _hashable(fields):
+        fingerprint = None
+    key = (id(task), type(task), fingerprint, type(general), fields)
+    kept = _TRAINERS.pop(key, None) if fingerprint is not None else None
+    if kept is None or kept.task is not task:
+        if isinstance(task, ContinuousTask):
+            trainer = make_ode_trainer(task, general, trajectory_loss)
+        else:
+            trainer = make_trainer(task, general, step_loss)
+        kept = _KeptTrainer(task=task, trainer=trainer, stages=_stages(trainer))
+    if fingerprint is not None:
+        _TRAINERS[key] = kept
+        while len(_TRAINERS) > TRAINERS_KEPT:
+            _TRAINERS.popitem(last=False)
+    return kept
 
 
 @contextlib.contextmanager
@@ -499,8 +607,10 @@ def compiled_once(lowered: jax.stages.Lowered) -> jax.stages.Compiled:
 
 
 def clear_compiled() -> None:
-    """Let go of the programs ``compiled_once`` keeps (``jax.clear_caches`` does not)."""
+    """Let go of the programs ``compiled_once`` keeps and of the kept trainers
+    (``jax.clear_caches`` does not)."""
     _EXECUTABLES.clear()
+    _TRAINERS.clear()
 
 
 def _outputs(shardings: Any) -> dict[str, Any]:
