@@ -55,6 +55,7 @@ def test_members_sharded_over_devices_match_one_device(tmp_path):
     _run_with_devices(script)
 
 
+@pytest.mark.slow  # a subprocess with two devices and three trainings: about 10 s
 def test_a_program_kept_for_one_device_is_not_run_on_another():
     """``compiled_once`` keys its programs by device: a run on the second device compiles its
     own and leaves its controller there; the next run there compiles nothing."""

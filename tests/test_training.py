@@ -222,6 +222,7 @@ def test_persistent_compile_cache_hits_on_a_second_run(tmp_path, task):
     assert caches[1]["misses"] == 0 and caches[1]["hits"] == caches[1]["requests"]
 
 
+@pytest.mark.slow  # three to six small trainings: 3-6 s
 def test_the_next_seed_in_a_process_reuses_the_compiled_programs():
     """A second run of the same settings (another seed) compiles nothing; a setting that
     changes the training program (the window) compiles its start and chunk again, but not the
@@ -239,6 +240,7 @@ def test_the_next_seed_in_a_process_reuses_the_compiled_programs():
     assert train(task, cfg.replace(seed=2)).metrics["timings"]["compile_programs"] == 3
 
 
+@pytest.mark.slow  # three to six small trainings: 3-6 s
 def test_a_kept_trainer_runs_what_a_fresh_one_runs_and_a_changed_task_gets_its_own(monkeypatch):
     """The next seed reuses the kept trainer and traces nothing, with the weights a fresh
     process would give; an attribute of the task changed in between is a new trainer, and a
@@ -267,6 +269,7 @@ def test_a_kept_trainer_runs_what_a_fresh_one_runs_and_a_changed_task_gets_its_o
     assert still.metrics["timings"]["compile_programs"] >= 1
 
 
+@pytest.mark.slow  # three to six small trainings: 3-6 s
 def test_a_program_that_calls_back_into_python_is_not_reused():
     """Two runs whose losses call back into Python (each its own list) each call their own."""
     task = diffcontrol.make("cartpole")

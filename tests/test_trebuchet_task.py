@@ -52,6 +52,7 @@ def test_reachable_range_brackets_what_the_heads_can_throw():
     assert np.all(grid.min(axis=(1, 2)) >= shortest - 0.5)
 
 
+@pytest.mark.slow  # compiles a throw program of its own: about 5 s
 def test_evaluation_throws_share_one_compiled_program(monkeypatch):
     """``shoot_in_chunks`` keeps the broadcast shape, pads without leaking, and every batch
     size and the reachability search trace (so compile) one program."""
