@@ -241,3 +241,39 @@ def test_files_are_written_with_normal_permissions(cartpole_run):
     umask = os.umask(0)
     os.umask(umask)
     assert mode == 0o666 & ~umask
+
+
+def test_the_console_script_exits_as_a_normal_exit_would(tmp_path):
+    """``cli.run`` leaves with ``os._exit`` (no interpreter teardown): what a normal exit does
+    first must still happen, in its order: threads joined, ``atexit`` functions run, buffered
+    output written, the command's status returned."""
+    import subprocess
+    import sys
+
+    script = tmp_path / "script.py"
+    script.write_text(
+        "import atexit, sys, threading, time\n"
+        "from diffcontrol.cli import exit_now\n"
+        "def late():\n"
+        "    time.sleep(0.2)\n"
+        "    print('thread done')\n"
+        "threading.Thread(target=late).start()\n"
+        "atexit.register(lambda: print('atexit ran'))\n"
+        "sys.stdout.write('buffered ')\n"
+        "sys.stderr.write('to stderr')\n"
+        "exit_now(3)\n"
+        "print('never')\n"
+    )
+    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True)
+    assert done.returncode == 3
+    assert done.stdout == "buffered thread done\natexit ran\n"
+    assert done.stderr == "to stderr"
+    # The real console script: its output through a pipe, and a usage error's status.
+    cmd = [sys.executable, "-m", "diffcontrol.cli"]
+    listed = subprocess.run([*cmd, "list"], capture_output=True, text=True)
+    assert listed.returncode == 0
+    assert listed.stdout.split()[0] == diffcontrol.list_tasks()[0]
+    bad = subprocess.run([*cmd, "train", "no-such-task", "--out", str(tmp_path / "r")],
+                         capture_output=True, text=True)  # fmt: skip
+    assert bad.returncode == 2
+    assert "no-such-task" in bad.stderr and "Traceback" not in bad.stderr

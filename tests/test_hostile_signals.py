@@ -131,3 +131,32 @@ def test_a_full_disk_ends_with_one_line_and_resumes(tmp_path, reference, capsys)
         assert _weights(out) == reference
     finally:
         subprocess.run(["umount", str(disk)], check=False)
+
+
+def test_a_sigterm_inside_a_garbage_collection_callback_is_sent_again(monkeypatch):
+    """Python drops an exception raised in a GC callback (JAX has one): the handler must not
+    raise there, but deliver the signal again, and raise anywhere else."""
+    import gc
+    import threading
+
+    from diffcontrol import cli
+
+    frames = []
+
+    def callback(phase, info):
+        frames.append(sys._getframe())
+
+    sent = []
+    monkeypatch.setattr(cli.os, "kill", lambda pid, signum: sent.append((pid, signum)))
+    gc.callbacks.append(callback)
+    try:
+        gc.collect()  # the callback's frame, as a signal landing in it would see it
+        cli.interrupt(signal.SIGTERM, frames[0])  # returns: no exception to be dropped
+    finally:
+        gc.callbacks.remove(callback)
+    for thread in threading.enumerate():
+        if isinstance(thread, threading.Timer):
+            thread.join()
+    assert sent == [(os.getpid(), signal.SIGTERM)]
+    with pytest.raises(KeyboardInterrupt):
+        cli.interrupt(signal.SIGTERM, sys._getframe())

@@ -4,13 +4,16 @@ prints what it returns (``_train``, ``_runs``, ``_compare``, ``_identify``; ``_a
 from __future__ import annotations
 
 import argparse
+import atexit
 import contextlib
 import errno
+import gc
 import os
 import signal
 import sys
 import threading
 from collections.abc import Iterator
+from typing import Any, NoReturn
 
 from .._jax_setup import checks_as_nan
 from ..errors import DiffcontrolError, Interrupted
@@ -70,6 +73,31 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_USAGE
 
 
+def run() -> NoReturn:
+    """The ``diffcontrol`` console script: :func:`main`, then a quick exit with its status."""
+    exit_now(main())
+
+
+def exit_now(status: int) -> NoReturn:
+    """End the process as a normal exit would, less the interpreter's own teardown.
+
+    After a JAX run, Python's shutdown frees every module and the XLA client object by object,
+    a visible part of a short command (``docs/benchmarks.md``), with nothing left to write.
+    What a normal exit does first
+    is done here too, in its order: non-daemon threads are joined, ``atexit`` functions run
+    (logging's flush among them), the standard streams are flushed; then ``os._exit``. Only the
+    console script calls it; :func:`main` returns to its caller as before.
+    """
+    for thread in threading.enumerate():
+        if thread is not threading.main_thread() and not thread.daemon:
+            thread.join()
+    atexit._run_exitfuncs()
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):  # a closed pipe: nothing more can be said
+            stream.flush()
+    os._exit(status)
+
+
 @contextlib.contextmanager
 def _terminate_as_interrupt() -> Iterator[None]:
     """SIGTERM (``kill``, a job scheduler's stop) takes the path of Ctrl-C: a
@@ -78,11 +106,28 @@ def _terminate_as_interrupt() -> Iterator[None]:
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    previous = signal.signal(signal.SIGTERM, signal.default_int_handler)
+    previous = {signal.SIGTERM: signal.signal(signal.SIGTERM, interrupt)}
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # not where ignored
+        previous[signal.SIGINT] = signal.signal(signal.SIGINT, interrupt)
     try:
         yield
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+
+
+def interrupt(signum: int, frame: Any) -> None:
+    """The handler of SIGTERM and Ctrl-C: ``KeyboardInterrupt``, as Python's own for Ctrl-C.
+
+    Python drops an exception raised inside a garbage-collection callback (it prints
+    "Exception ignored" and goes on), and JAX registers one: a signal that lands there would
+    be lost and the run would go on. There it is sent again a moment later instead."""
+    if frame is not None and frame.f_code in {getattr(c, "__code__", None) for c in gc.callbacks}:
+        again = threading.Timer(0.01, os.kill, (os.getpid(), signum))
+        again.daemon = True
+        again.start()
+        return
+    raise KeyboardInterrupt
 
 
 _FILE_SYSTEM_ERRORS = {errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EFBIG}

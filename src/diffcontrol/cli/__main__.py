@@ -1,5 +1,5 @@
 """``python -m diffcontrol.cli``."""
 
-from . import main
+from . import run
 
-raise SystemExit(main())
+run()
