@@ -72,7 +72,9 @@ def main() -> None:
 
     def logits(ctrl, obs):
         act = ACTIVATIONS[ctrl.activation]
-        h = (obs - ctrl.obs_offset) * ctrl.obs_scale
+        # The scaling is held, as the controller's own call holds it: the fit trains weights only.
+        offset, scale = jax.lax.stop_gradient((ctrl.obs_offset, ctrl.obs_scale))
+        h = (obs - offset) * scale
         for layer in ctrl.layers[:-1]:
             h = act(layer(h))
         return ctrl.layers[-1](h)
@@ -142,10 +144,7 @@ def main() -> None:
 
         keys = jax.random.split(key, FIT_STEPS)
         (t, _), _ = jax.lax.scan(body, (trained, opt.init(trained)), keys)
-        out = eqx.combine(t, fixed)  # the observation scaling is not trained
-        return eqx.tree_at(
-            lambda m: (m.obs_offset, m.obs_scale), out, (ctrl.obs_offset, ctrl.obs_scale)
-        )
+        return eqx.combine(t, fixed)  # the scaling had no gradient: it is the controller's
 
     def gym_return(ctrl) -> float:
         return float(

@@ -64,7 +64,8 @@ class Acrobot(Task):
     the trained controller to the goal), distilled by DAgger with cross-entropy over 1 to 3
     rounds: the rollout teacher itself scores -64 to -67, but its labels change under 0.01 rad
     perturbations and no network learns them (held-out agreement about 50 %, as the
-    controller's own); distilled -76 to -125 (``benchmarks/acrobot_rollout.py``).
+    controller's own), and neither does a fit weighted by how much the choice matters
+    (cost-sensitive classification); figures in docs/benchmarks.md, "Acrobot".
 
     Note that the power term pays for swinging on rather than finishing (a restarted episode
     gains little power), which the goal term only offsets within ``s`` of the line: the
