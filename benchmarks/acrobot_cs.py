@@ -15,8 +15,7 @@ For each training seed: train with the task's defaults (`diffcontrol.train`), th
   is cross-entropy on `argmin Q` weighted by the gap `max Q - min Q` (`--loss ce`: unweighted,
   the earlier probe). Near-ties, where the action does not matter, contribute about nothing.
   `--beta` adds a trust region, cross-entropy to the old controller's softmax. The observation
-  scaling is held fixed in the fit (`benchmarks/acrobot_rollout.py` trains it and then
-  restores it, which breaks its fit);
+  scaling is held fixed in the fit, as the controller's own call holds it;
 - evaluate the new controller in the simulator on `--eval-episodes` starts (a fixed key, not
   the training ones).
 
