@@ -249,7 +249,10 @@ def main() -> None:
             ctrl = bptt
             best, best_sim, best_round = bptt, sim_return(bptt, cfg["eval_episodes"]), 0
             hist = [{"round": 0, "sim": best_sim}]
-            print(f"{name:>14} {seed:>4} {0:>5} {'':>6} {'':>5} {'':>5} {'':>5} {best_sim:>7.2f}", flush=True)
+            print(
+                f"{name:>14} {seed:>4} {0:>5} {'':>6} {'':>5} {'':>5} {'':>5} {best_sim:>7.2f}",
+                flush=True,
+            )
             data_obs, data_q = [], []
             key = jax.random.PRNGKey(1000 + seed)
             for r in range(1, cfg["rounds"] + 1):
@@ -257,26 +260,42 @@ def main() -> None:
                 states, alive, _ = rollouts(ctrl, kv, cfg["starts"])
                 states = np.asarray(states)[np.asarray(alive)]
                 tq = time.perf_counter()
-                q = q_values(ctrl, jnp.asarray(states), cfg["cap"], cfg["perturb"], cfg["sigma"], kq)
+                q = q_values(
+                    ctrl, jnp.asarray(states), cfg["cap"], cfg["perturb"], cfg["sigma"], kq
+                )
                 q_s = time.perf_counter() - tq
                 qgap = q - q.min(1, keepdims=True)
                 if cfg["diag"]:
                     sub = jnp.asarray(states[:3000])
-                    own = np.asarray(jax.vmap(lambda x: choice(ctrl, x))(sub))
+                    own = np.asarray(jax.vmap(lambda x: choice(ctrl, x))(sub))  # noqa: B023
                     qa = q_values(ctrl, sub, cfg["cap"], cfg["perturb"], cfg["sigma"], kq)
-                    qb = q_values(ctrl, sub, cfg["cap"], cfg["perturb"], cfg["sigma"],
-                                  jax.random.fold_in(kq, 7))
+                    qb = q_values(
+                        ctrl,
+                        sub,
+                        cfg["cap"],
+                        cfg["perturb"],
+                        cfg["sigma"],
+                        jax.random.fold_in(kq, 7),
+                    )
                     if cfg["perturb"] > 1:  # independent perturbations for qa too
-                        qa = q_values(ctrl, sub + 0.0, cfg["cap"], cfg["perturb"], cfg["sigma"],
-                                      jax.random.fold_in(kq, 8))
+                        qa = q_values(
+                            ctrl,
+                            sub + 0.0,
+                            cfg["cap"],
+                            cfg["perturb"],
+                            cfg["sigma"],
+                            jax.random.fold_in(kq, 8),
+                        )
                     gb = qb - qb.min(1, keepdims=True)
-                    pick = lambda a: float(np.take_along_axis(gb, a[:, None], 1).mean())
+                    pick = lambda a: float(np.take_along_axis(gb, a[:, None], 1).mean())  # noqa: B023, E731
                     rng = np.random.default_rng(0)
-                    print(f"  DIAG excess under B of: argmin A {pick(qa.argmin(1)):.2f}, own "
-                          f"{pick(own):.2f}, random {pick(rng.integers(0, 3, len(own))):.2f}, "
-                          f"argmin B {pick(qb.argmin(1)):.2f}; corr(A,B) of Q-mean(Q) "
-                          f"{np.corrcoef((qa - qa.mean(1, keepdims=True)).ravel(), (qb - qb.mean(1, keepdims=True)).ravel())[0, 1]:.2f}",
-                          flush=True)
+                    print(
+                        f"  DIAG excess under B of: argmin A {pick(qa.argmin(1)):.2f}, own "
+                        f"{pick(own):.2f}, random {pick(rng.integers(0, 3, len(own))):.2f}, "
+                        f"argmin B {pick(qb.argmin(1)):.2f}; corr(A,B) of Q-mean(Q) "
+                        f"{np.corrcoef((qa - qa.mean(1, keepdims=True)).ravel(), (qb - qb.mean(1, keepdims=True)).ravel())[0, 1]:.2f}",
+                        flush=True,
+                    )
                 tie = float(np.mean(qgap.max(1) < 0.5))
                 obs = np.asarray(jax.vmap(task.observe)(jnp.asarray(states)))
                 if cfg["aggregate"]:
@@ -297,13 +316,13 @@ def main() -> None:
                 fit_s = time.perf_counter() - tf
                 excess = []
                 for c in (old_ctrl, ctrl):
-                    a = np.asarray(jax.vmap(lambda o: jnp.argmax(logits(c, o)))(ho_obs))
+                    a = np.asarray(jax.vmap(lambda o: jnp.argmax(logits(c, o)))(ho_obs))  # noqa: B023
                     excess.append(float(np.take_along_axis(ho_q, a[:, None], 1).mean()))
                 tr_obs, tr_q = jnp.asarray(obs[:4096]), qgap[:4096]
                 for c in (old_ctrl, ctrl):
-                    a = np.asarray(jax.vmap(lambda o: jnp.argmax(logits(c, o)))(tr_obs))
+                    a = np.asarray(jax.vmap(lambda o: jnp.argmax(logits(c, o)))(tr_obs))  # noqa: B023
                     excess.append(float(np.take_along_axis(tr_q, a[:, None], 1).mean()))
-                z = np.asarray(jax.vmap(lambda o: logits(old_ctrl, o))(tr_obs))
+                z = np.asarray(jax.vmap(lambda o: logits(old_ctrl, o))(tr_obs))  # noqa: B023
                 excess.append(float(np.mean(z.max(1) - np.median(z, 1))))
                 sim = sim_return(ctrl, cfg["eval_episodes"])
                 kept = sim > best_sim + cfg["margin"]
