@@ -307,3 +307,19 @@ def planner_episodes(policy, seeds, task=None, real=None):
     finally:
         env.close()
     return np.asarray(returns), np.asarray(seconds)
+
+
+def controller_logits(ctrl, obs):
+    """An ``MLPController``'s output before its head (the acrobot's three logits), with the
+    observation scaling held, as the controller's own call holds it: a fit through it trains
+    the weights only."""
+    import jax
+
+    from diffcontrol.controllers import ACTIVATIONS
+
+    act = ACTIVATIONS[ctrl.activation]
+    offset, scale = jax.lax.stop_gradient((ctrl.obs_offset, ctrl.obs_scale))
+    h = (obs - offset) * scale
+    for layer in ctrl.layers[:-1]:
+        h = act(layer(h))
+    return ctrl.layers[-1](h)

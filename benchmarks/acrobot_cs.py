@@ -54,6 +54,7 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
+from _common import controller_logits  # noqa: E402
 
 DEFAULTS = dict(
     loss="es",  # es | wce | ce
@@ -94,7 +95,6 @@ def main() -> None:
 
     import diffcontrol
     from diffcontrol import io
-    from diffcontrol.controllers import ACTIVATIONS
     from diffcontrol.evaluation import evaluate
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -109,12 +109,7 @@ def main() -> None:
     params = task.default_params()
     n_actions = task.action_size
 
-    def logits(ctrl, obs):
-        act = ACTIVATIONS[ctrl.activation]
-        h = (obs - ctrl.obs_offset) * ctrl.obs_scale
-        for layer in ctrl.layers[:-1]:
-            h = act(layer(h))
-        return ctrl.layers[-1](h)
+    logits = controller_logits
 
     def choice(ctrl, state):
         return jnp.argmax(logits(ctrl, task.observe(state)))

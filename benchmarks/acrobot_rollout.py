@@ -37,7 +37,7 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from _common import machine  # noqa: E402
+from _common import controller_logits, machine  # noqa: E402
 
 CAP = 300
 """Steps a teacher rollout follows the controller before it is cut off (return -CAP)."""
@@ -60,7 +60,6 @@ def main() -> None:
 
     import diffcontrol
     from diffcontrol import io
-    from diffcontrol.controllers import ACTIVATIONS
     from diffcontrol.evaluation import evaluate
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -70,14 +69,7 @@ def main() -> None:
     params = task.default_params()
     n_actions = task.action_size
 
-    def logits(ctrl, obs):
-        act = ACTIVATIONS[ctrl.activation]
-        # The scaling is held, as the controller's own call holds it: the fit trains weights only.
-        offset, scale = jax.lax.stop_gradient((ctrl.obs_offset, ctrl.obs_scale))
-        h = (obs - offset) * scale
-        for layer in ctrl.layers[:-1]:
-            h = act(layer(h))
-        return ctrl.layers[-1](h)
+    logits = controller_logits
 
     def choice(ctrl, state):
         return jnp.argmax(logits(ctrl, task.observe(state)))
