@@ -309,17 +309,17 @@ def planner_episodes(policy, seeds, task=None, real=None):
     return np.asarray(returns), np.asarray(seconds)
 
 
-def controller_logits(ctrl, obs):
-    """An ``MLPController``'s output before its head (the acrobot's three logits), with the
-    observation scaling held, as the controller's own call holds it: a fit through it trains
-    the weights only."""
+def discrete_choice_steps(task, params):
+    """``choice(ctrl, state)``, the index a controller's ``argmax`` head picks in a state, and
+    ``step(state, index)``, the task's step under that action: what the acrobot probes roll
+    out with."""
     import jax
+    import jax.numpy as jnp
 
-    from diffcontrol.controllers import ACTIVATIONS
+    def choice(ctrl, state):
+        return jnp.argmax(ctrl.logits(task.observe(state)))
 
-    act = ACTIVATIONS[ctrl.activation]
-    offset, scale = jax.lax.stop_gradient((ctrl.obs_offset, ctrl.obs_scale))
-    h = (obs - offset) * scale
-    for layer in ctrl.layers[:-1]:
-        h = act(layer(h))
-    return ctrl.layers[-1](h)
+    def step(state, index):
+        return task.step(params, state, jax.nn.one_hot(index, task.action_size))
+
+    return choice, step

@@ -54,7 +54,7 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from _common import controller_logits  # noqa: E402
+from _common import discrete_choice_steps  # noqa: E402
 
 DEFAULTS = dict(
     loss="es",  # es | wce | ce
@@ -109,13 +109,7 @@ def main() -> None:
     params = task.default_params()
     n_actions = task.action_size
 
-    logits = controller_logits
-
-    def choice(ctrl, state):
-        return jnp.argmax(logits(ctrl, task.observe(state)))
-
-    def step(state, a):
-        return task.step(params, state, jax.nn.one_hot(a, n_actions))
+    choice, step = discrete_choice_steps(task, params)
 
     def steps_to_go(ctrl, state, cap):
         """Steps the controller takes from ``state`` to the goal (at most ``cap``)."""
@@ -186,7 +180,7 @@ def main() -> None:
         gap = qgap.max(1)
         wmean = gap.mean() + 1e-6
         labels = jnp.argmin(qgap, 1)
-        p_old = jax.nn.softmax(jax.vmap(lambda o: logits(ctrl, o))(obs))
+        p_old = jax.nn.softmax(jax.vmap(lambda o: ctrl.logits(o))(obs))
 
         def loss(t, idx):
             # The observation scaling is held (it is an inexact array, so partition marks it
@@ -195,7 +189,7 @@ def main() -> None:
                 lambda m: (m.obs_offset, m.obs_scale), eqx.combine(t, fixed),
                 (ctrl.obs_offset, ctrl.obs_scale),
             )  # fmt: skip
-            z = jax.vmap(lambda o: logits(c, o))(obs[idx])
+            z = jax.vmap(lambda o: c.logits(o))(obs[idx])
             trust = beta * optax.softmax_cross_entropy(z, p_old[idx]).mean()
             if loss_kind == "es":
                 p = jax.nn.softmax(z / temp)
@@ -311,13 +305,13 @@ def main() -> None:
                 fit_s = time.perf_counter() - tf
                 excess = []
                 for c in (old_ctrl, ctrl):
-                    a = np.asarray(jax.vmap(lambda o: jnp.argmax(logits(c, o)))(ho_obs))  # noqa: B023
+                    a = np.asarray(jax.vmap(lambda o: jnp.argmax(c.logits(o)))(ho_obs))  # noqa: B023
                     excess.append(float(np.take_along_axis(ho_q, a[:, None], 1).mean()))
                 tr_obs, tr_q = jnp.asarray(obs[:4096]), qgap[:4096]
                 for c in (old_ctrl, ctrl):
-                    a = np.asarray(jax.vmap(lambda o: jnp.argmax(logits(c, o)))(tr_obs))  # noqa: B023
+                    a = np.asarray(jax.vmap(lambda o: jnp.argmax(c.logits(o)))(tr_obs))  # noqa: B023
                     excess.append(float(np.take_along_axis(tr_q, a[:, None], 1).mean()))
-                z = np.asarray(jax.vmap(lambda o: logits(old_ctrl, o))(tr_obs))  # noqa: B023
+                z = np.asarray(jax.vmap(lambda o: old_ctrl.logits(o))(tr_obs))  # noqa: B023
                 excess.append(float(np.mean(z.max(1) - np.median(z, 1))))
                 sim = sim_return(ctrl, cfg["eval_episodes"])
                 kept = sim > best_sim + cfg["margin"]

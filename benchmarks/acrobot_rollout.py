@@ -37,7 +37,7 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from _common import controller_logits, machine  # noqa: E402
+from _common import discrete_choice_steps, machine  # noqa: E402
 
 CAP = 300
 """Steps a teacher rollout follows the controller before it is cut off (return -CAP)."""
@@ -69,13 +69,7 @@ def main() -> None:
     params = task.default_params()
     n_actions = task.action_size
 
-    logits = controller_logits
-
-    def choice(ctrl, state):
-        return jnp.argmax(logits(ctrl, task.observe(state)))
-
-    def step(state, a):
-        return task.step(params, state, jax.nn.one_hot(a, n_actions))
+    choice, step = discrete_choice_steps(task, params)
 
     def return_to_go(ctrl, state):
         """The controller's return from ``state`` over at most CAP steps (to its ``done``)."""
@@ -125,7 +119,7 @@ def main() -> None:
 
         def loss(t, idx):
             c = eqx.combine(t, fixed)
-            z = jax.vmap(lambda o: logits(c, o))(obs[idx])
+            z = jax.vmap(lambda o: c.logits(o))(obs[idx])
             return optax.softmax_cross_entropy_with_integer_labels(z, labels[idx]).mean()
 
         def body(c, k):
