@@ -243,37 +243,39 @@ def test_files_are_written_with_normal_permissions(cartpole_run):
     assert mode == 0o666 & ~umask
 
 
-def test_the_console_script_exits_as_a_normal_exit_would(tmp_path):
-    """``cli.run`` leaves with ``os._exit`` (no interpreter teardown): what a normal exit does
-    first must still happen, in its order: threads joined, ``atexit`` functions run, buffered
-    output written, the command's status returned."""
+def test_the_console_script_freezes_the_collector_then_exits_normally(tmp_path):
+    """``cli.run`` (the console script) freezes the objects made so far out of the garbage
+    collector, so that the shutdown's last collections skip them, and leaves the exit itself
+    to Python: the status, the output and a failed write of it are as before."""
+    import resource
+    import signal
     import subprocess
     import sys
 
     script = tmp_path / "script.py"
     script.write_text(
-        "import atexit, sys, threading, time\n"
-        "from diffcontrol.cli import exit_now\n"
-        "def late():\n"
-        "    time.sleep(0.2)\n"
-        "    print('thread done')\n"
-        "threading.Thread(target=late).start()\n"
-        "atexit.register(lambda: print('atexit ran'))\n"
-        "sys.stdout.write('buffered ')\n"
-        "sys.stderr.write('to stderr')\n"
-        "exit_now(3)\n"
-        "print('never')\n"
+        "import atexit, gc, sys\n"
+        "from diffcontrol import cli\n"
+        "atexit.register(lambda: print('frozen:', gc.get_freeze_count() > 0))\n"
+        "sys.argv = ['diffcontrol', 'list']\n"
+        "sys.exit(cli.run())\n"
     )
     done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True)
-    assert done.returncode == 3
-    assert done.stdout == "buffered thread done\natexit ran\n"
-    assert done.stderr == "to stderr"
-    # The real console script: its output through a pipe, and a usage error's status.
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split()[0] == diffcontrol.list_tasks()[0]
+    assert done.stdout.endswith("frozen: True\n")
     cmd = [sys.executable, "-m", "diffcontrol.cli"]
-    listed = subprocess.run([*cmd, "list"], capture_output=True, text=True)
-    assert listed.returncode == 0
-    assert listed.stdout.split()[0] == diffcontrol.list_tasks()[0]
     bad = subprocess.run([*cmd, "train", "no-such-task", "--out", str(tmp_path / "r")],
                          capture_output=True, text=True)  # fmt: skip
     assert bad.returncode == 2
     assert "no-such-task" in bad.stderr and "Traceback" not in bad.stderr
+
+    def no_room():  # the output's file may not grow: its write fails, as on a full disk
+        resource.setrlimit(resource.RLIMIT_FSIZE, (0, 0))
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"}
+    with open(tmp_path / "listing.txt", "w") as out:
+        full = subprocess.run([*cmd, "list"], stdout=out, stderr=subprocess.PIPE,
+                              preexec_fn=no_room, env=env, text=True)  # fmt: skip
+    assert full.returncode != 0, "a lost output must not end with status 0"

@@ -2,4 +2,4 @@
 
 from . import run
 
-run()
+raise SystemExit(run())

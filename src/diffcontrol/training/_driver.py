@@ -531,15 +531,16 @@ def interrupts_deferred() -> Iterator[None]:
         yield
         return
     pending: list[int] = []
-    signums = (signal.SIGINT, signal.SIGTERM)  # SIGTERM takes Ctrl-C's path (the CLI's)
-    previous = [signal.signal(s, lambda signum, frame: pending.append(signum)) for s in signums]
+    # SIGTERM takes Ctrl-C's path (the CLI's); a signal the process ignores stays ignored.
+    signums = [s for s in (signal.SIGINT, signal.SIGTERM) if signal.getsignal(s) != signal.SIG_IGN]
+    previous = {s: signal.signal(s, lambda signum, frame: pending.append(signum)) for s in signums}
     try:
         yield
     finally:
-        for s, handler in zip(signums, previous):
+        for s, handler in previous.items():
             signal.signal(s, handler)
     if pending:
-        if signal.SIGTERM in pending and previous[1] in (signal.SIG_DFL, None):
+        if signal.SIGTERM in pending and previous[signal.SIGTERM] in (signal.SIG_DFL, None):
             signal.raise_signal(signal.SIGTERM)  # no handler of ours: end as SIGTERM would
         raise KeyboardInterrupt
 
