@@ -243,6 +243,7 @@ def test_files_are_written_with_normal_permissions(cartpole_run):
     assert mode == 0o666 & ~umask
 
 
+@pytest.mark.slow  # three fresh interpreters that import diffcontrol: 1.3 s on one core
 def test_the_console_script_freezes_the_collector_then_exits_normally(tmp_path):
     """``cli.run`` (the console script) freezes the objects made so far out of the garbage
     collector, so that the shutdown's last collections skip them, and leaves the exit itself
