@@ -11,13 +11,18 @@ measured from outside (interpreter start-up and exit included). Also timed: `dif
 
     python benchmarks/startup.py                         # the four tasks, cold and warm
     python benchmarks/startup.py --tasks cartpole --repeat 3
+    git worktree add /tmp/before HEAD~1
+    python benchmarks/startup.py --tasks cartpole --repeat 2 --baseline /tmp/before/src
 
-Prints a table and writes benchmarks/results/startup.json (machine, date, every figure).
+With `--baseline`, the package in that directory (the commit before a change, say) runs too,
+alternating with this one, so that both meet the same machine: its speed can move by a
+quarter within an hour, and only paired runs compare. Prints a table and writes benchmarks/results/startup.json (machine, date, every figure).
 """
 
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import os
 import shutil
@@ -43,21 +48,24 @@ def _pinned(cmd: list[str]) -> list[str]:
     return ["taskset", "-c", "0", *cmd] if shutil.which("taskset") else cmd
 
 
-def run_command(args: list[str], cache: Path) -> float:
-    """Run `diffcontrol ARGS` in a fresh process on core 0; returns its wall-clock seconds."""
+def run_command(args: list[str], cache: Path, src: str | None = None) -> float:
+    """Run `diffcontrol ARGS` in a fresh process on core 0 (with the package found first in
+    ``src``, where given); returns its wall-clock seconds."""
     cmd = _pinned([sys.executable, "-m", "diffcontrol.cli", *args])
     env = {k: v for k, v in os.environ.items() if k != "DIFFCONTROL_NO_COMPILE_CACHE"}
     env["DIFFCONTROL_CACHE_DIR"] = str(cache)
+    if src:
+        env["PYTHONPATH"] = os.pathsep.join(p for p in (src, env.get("PYTHONPATH")) if p)
     t0 = time.perf_counter()
     subprocess.run(cmd, check=True, env=env, stdout=subprocess.DEVNULL)
     return time.perf_counter() - t0
 
 
-def train_once(task: str, out: Path, cache: Path, extra: list[str]) -> dict:
+def train_once(task: str, out: Path, cache: Path, extra: list[str], src: str | None) -> dict:
     """`diffcontrol train TASK --out OUT --seed 0`: the timings of its metrics.json, the whole
     process's seconds and the headline figure."""
     seconds = run_command(
-        ["train", task, "--out", str(out), "--seed", "0", "--quiet", *extra], cache
+        ["train", task, "--out", str(out), "--seed", "0", "--quiet", *extra], cache, src
     )
     metrics = json.loads((out / "metrics.json").read_text())
     ev = metrics.get(metrics.get("final_evaluation") or "", {})
@@ -78,12 +86,21 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=1, help="cold/warm pairs per task")
     parser.add_argument("--extra", default="", help="more options for every train command")
     parser.add_argument("--out", type=Path, default=HERE / "results" / "startup.json")
+    parser.add_argument(
+        "--baseline",
+        metavar="SRC",
+        help="also time the package in SRC (e.g. a worktree's src of the commit before a "
+        "change), alternating with this one run by run, so that both meet the same machine",
+    )
     args = parser.parse_args()
     extra = args.extra.split()
+    codes = [("baseline", args.baseline), ("current", None)] if args.baseline else [("", None)]
 
     rows = []
     header = (
-        f"{'task':<17} {'cache':<5} {'import':>6} {'compile':>7} {'progs':>5} {'train':>6} "
+        f"{'code':<8} "
+        * bool(args.baseline)
+        + f"{'task':<17} {'cache':<5} {'import':>6} {'compile':>7} {'progs':>5} {'train':>6} "
         f"{'evaluate':>8} {'write':>6} {'total':>6} {'process':>7} {'target':>6}  result"
     )
     with tempfile.TemporaryDirectory() as tmp:
@@ -94,31 +111,39 @@ def main() -> None:
         print("  ".join(f"diffcontrol {k}: {v:.2f} s" for k, v in commands.items()))
         print(header)
         print("-" * len(header))
-        for task in args.tasks.split(","):
-            for rep in range(args.repeat):
-                cache = work / f"cache-{task}-{rep}"  # fresh: the cold run compiles everything
-                for state in ("cold", "warm"):
-                    out = work / f"{task}-{rep}-{state}"
-                    r = {"task": task, "cache": state, **train_once(task, out, cache, extra)}
-                    target = (TARGETS_COLD if state == "cold" else TARGETS_WARM).get(task)
-                    r["target"] = target
-                    rows.append(r)
-                    print(
-                        f"{task:<17} {state:<5} {r['import']:>6.2f} {r['compile']:>7.2f} "
-                        f"{r['compile_programs']:>5} {r['train']:>6.2f} {r['evaluate']:>8.2f} "
-                        f"{r['write']:>6.2f} {r['total'] or 0:>6.2f} {r['process']:>7.2f} "
-                        f"{target or '':>6}  {r['result']}",
-                        flush=True,
-                    )
+        for task, rep, (code, src) in itertools.product(
+            args.tasks.split(","), range(args.repeat), codes
+        ):
+            cache = work / f"cache-{task}-{code}-{rep}"  # fresh: the cold run compiles everything
+            for state in ("cold", "warm"):
+                out = work / f"{task}-{code}-{rep}-{state}"
+                r = {"task": task, "cache": state, **train_once(task, out, cache, extra, src)}
+                if code:
+                    r["code"] = code
+                target = (TARGETS_COLD if state == "cold" else TARGETS_WARM).get(task)
+                r["target"] = target
+                rows.append(r)
+                print(
+                    f"{code:<8} " * bool(code) + f"{task:<17} {state:<5} {r['import']:>6.2f} "
+                    f"{r['compile']:>7.2f} "
+                    f"{r['compile_programs']:>5} {r['train']:>6.2f} {r['evaluate']:>8.2f} "
+                    f"{r['write']:>6.2f} {r['total'] or 0:>6.2f} {r['process']:>7.2f} "
+                    f"{target or '':>6}  {r['result']}",
+                    flush=True,
+                )
     summary = {}
-    for task in args.tasks.split(","):
-        for state in ("cold", "warm"):
-            seconds = [r["process"] for r in rows if r["task"] == task and r["cache"] == state]
-            summary[f"{task} {state}"] = statistics.median(seconds)
+    for task, state, (code, _) in itertools.product(args.tasks.split(","), ("cold", "warm"), codes):
+        seconds = [
+            r["process"]
+            for r in rows
+            if r["task"] == task and r["cache"] == state and r.get("code", "") == code
+        ]
+        summary[f"{code} {task} {state}".strip()] = statistics.median(seconds)
     doc = {
         "machine": machine(),
         "note": "process = the whole `diffcontrol train TASK --out DIR --seed 0` pinned to "
         "core 0; cold = an empty persistent compilation cache, warm = the one the cold run filled",
+        "baseline": args.baseline,
         "commands": commands,
         "runs": rows,
         "median_process_seconds": summary,
