@@ -79,8 +79,8 @@ def run() -> int:
     exit, with the objects made so far frozen out of the garbage collector first.
 
     After a JAX run the interpreter's shutdown spent most of its time in its last full
-    collections, each walking every object that JAX, Equinox and the run had made (0.3-0.4 s
-    of a short command, ``docs/benchmarks.md``). Frozen (``gc.freeze``), they are skipped;
+    collections, each walking every object that JAX, Equinox and the run had made (measured
+    in ``docs/benchmarks.md``, "A shorter exit"). Frozen (``gc.freeze``), they are skipped;
     everything else a normal exit does still happens (threads joined, ``atexit`` functions,
     modules torn down, files flushed and closed, a failed write of the output reported). Only
     objects in reference cycles are no longer collected at the very end, which Python never
