@@ -16,6 +16,7 @@ from diffcontrol.training import make_trainer, task_params
 TINY = dict(updates=6, eval_every=3, eval_episodes=2, batch=4, window=5)
 
 
+@pytest.mark.slow  # a trainer's start and chunk compiled: 2.6 s on one core
 def test_second_call_of_a_jitted_trainer_step_does_not_recompile():
     _timing.watch_compiles()
     task = diffcontrol.make("cartpole")

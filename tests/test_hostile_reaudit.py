@@ -209,6 +209,7 @@ def test_model_file_fields_of_the_wrong_kind(cartpole_run, tmp_path, change, nee
 # --- the fit's output is what the next command accepts -----------------------------------------
 
 
+@pytest.mark.slow  # a grey-box fit compiled: 2.4 s on one core
 def test_a_fit_never_writes_a_parameter_out_of_its_range(fitted_dir):
     from diffcontrol import identify, tasks
     from diffcontrol.identify.data import read_trajectories

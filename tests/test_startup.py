@@ -154,6 +154,7 @@ def test_a_discrete_time_run_does_not_load_diffrax(tmp_path):
     assert "jax" in imported and "diffrax" not in imported, imported
 
 
+@pytest.mark.slow  # the start compiled at two levels: 2.5 s (cartpole) on one core
 @pytest.mark.parametrize("name", ["cartpole", "cartpole-swingup"])
 def test_the_start_program_at_its_level_gives_the_default_levels_bits(name):
     """``START_COMPILER_OPTIONS`` compiles the start faster with the same weights, resets and

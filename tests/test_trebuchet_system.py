@@ -301,6 +301,7 @@ def test_equations_of_motion_conserve_energy(x64, phase):
         np.testing.assert_allclose(y, -p.pivot_height, atol=1e-8)
 
 
+@pytest.mark.slow  # a float64 throw and three more, each compiled: 4.4 s on one core
 def test_flight_without_drag(x64):
     """With ``rho = 0``: ``v_x`` is constant, Euler's energy error is exactly ``g^2 dt^2 / 2``
     per step, and the wind has no effect."""
