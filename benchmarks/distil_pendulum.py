@@ -13,6 +13,8 @@ Pendulum-v1, against the planner itself and the reference optimum.
 
     taskset -c 0 python benchmarks/distil_pendulum.py                     # the full benchmark
     python benchmarks/distil_pendulum.py --points 401 --rounds 4          # a quicker look
+    taskset -c 0 python benchmarks/distil_pendulum.py --points 201 --rounds 8 --fit-steps 3000 \
+        --seeds 0 1 2 3 4 --out benchmarks/results/distil_pendulum-201.json  # under a minute each
 
 Prints a table and writes benchmarks/results/distil_pendulum.json (machine, date, load, figures).
 """
@@ -56,6 +58,7 @@ def main():
     parser.add_argument("--episodes", type=int, default=100, help="Gymnasium seeds per set")
     parser.add_argument("--seeds", type=int, nargs="+", default=[0], help="distillation seeds")
     parser.add_argument("--rounds", type=int, default=None, help="default: distil's")
+    parser.add_argument("--fit-steps", type=int, default=None, help="default: distil's")
     parser.add_argument("--out", type=Path, default=HERE / "results" / "distil_pendulum.json")
     args = parser.parse_args()
     task = Pendulum()
@@ -92,6 +95,8 @@ def main():
 
     runs = []
     options = {} if args.rounds is None else {"rounds": args.rounds}
+    if args.fit_steps is not None:
+        options["fit_steps"] = args.fit_steps
     with tempfile.TemporaryDirectory() as tmp:
         for seed in args.seeds:
             print(f"\ndistilling (seed {seed})...", flush=True)
