@@ -134,13 +134,13 @@ def test_a_full_disk_ends_with_one_line_and_resumes(tmp_path, reference, capsys)
 
 
 def test_a_sigterm_inside_a_garbage_collection_callback_is_sent_again(monkeypatch):
-    """Python drops an exception raised in a GC callback (JAX has one): inside a command the
-    CLI's handler must not raise there but deliver the signal again, and raise anywhere
-    else."""
+    """Python drops an exception raised in a GC callback (JAX has one): inside a command
+    (``terminate_as_interrupt``, the CLI's) the handler must not raise there but deliver the
+    signal again, and raise anywhere else."""
     import gc
     import threading
 
-    from diffcontrol import cli
+    from diffcontrol import _interrupts
 
     frames = []
 
@@ -153,21 +153,21 @@ def test_a_sigterm_inside_a_garbage_collection_callback_is_sent_again(monkeypatc
         sent.append((pid, signum))
         again.set()
 
-    monkeypatch.setattr(cli.os, "kill", kill)
+    monkeypatch.setattr(_interrupts.os, "kill", kill)
     before = signal.getsignal(signal.SIGTERM)
-    with cli._terminate_as_interrupt():
-        assert signal.getsignal(signal.SIGTERM) is cli._interrupt
+    with _interrupts.terminate_as_interrupt():
+        assert signal.getsignal(signal.SIGTERM) is _interrupts.interrupt
         gc.callbacks.append(callback)
         try:
             gc.collect()  # the callback's frame, as a signal landing in it would see it
             try:
-                cli._interrupt(signal.SIGTERM, frames[0])
+                _interrupts.interrupt(signal.SIGTERM, frames[0])
             except KeyboardInterrupt:
                 pytest.fail("raised inside a GC callback, where Python would drop it")
         finally:
             gc.callbacks.remove(callback)
         assert again.wait(10)
         with pytest.raises(KeyboardInterrupt):
-            cli._interrupt(signal.SIGTERM, sys._getframe())
+            _interrupts.interrupt(signal.SIGTERM, sys._getframe())
     assert sent == [(os.getpid(), signal.SIGTERM)]
     assert signal.getsignal(signal.SIGTERM) == before

@@ -3,19 +3,13 @@ prints what it returns (``_train``, ``_runs``, ``_compare``, ``_identify``; ``_a
 
 from __future__ import annotations
 
-import _thread
 import argparse
-import contextlib
 import errno
 import gc
 import os
-import signal
 import sys
-import threading
-import time
-from collections.abc import Iterator
-from typing import Any
 
+from .._interrupts import terminate_as_interrupt
 from .._jax_setup import checks_as_nan
 from ..errors import DiffcontrolError, Interrupted
 from . import _compare, _identify, _runs, _train
@@ -49,7 +43,7 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     args.command_line = " ".join(["diffcontrol", *argv])  # to continue a long command
     try:
-        with _terminate_as_interrupt():
+        with terminate_as_interrupt():
             return COMMANDS[args.command](args)
     except Interrupted as e:
         print(f"\n{e}", file=sys.stderr)
@@ -89,47 +83,6 @@ def run() -> int:
     status = main()
     gc.freeze()
     return status
-
-
-@contextlib.contextmanager
-def _terminate_as_interrupt() -> Iterator[None]:
-    """SIGTERM (``kill``, a job scheduler's stop) takes the path of Ctrl-C, and both become a
-    ``KeyboardInterrupt`` through ``_interrupt``, so that a run ends with the same line and
-    resume command, leaves no partial file, and is held while XLA compiles
-    (``training.interrupts_deferred``). Ctrl-C is left alone where it is ignored."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    previous = {signal.SIGTERM: signal.signal(signal.SIGTERM, _interrupt)}
-    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # not where ignored
-        previous[signal.SIGINT] = signal.signal(signal.SIGINT, _interrupt)
-    try:
-        yield
-    finally:
-        for signum, handler in previous.items():
-            signal.signal(signum, handler)
-
-
-def _interrupt(signum: int, frame: Any) -> None:
-    """The handler of SIGTERM and Ctrl-C: ``KeyboardInterrupt``, as Python's own for Ctrl-C.
-
-    Python drops an exception raised inside a garbage-collection callback (it prints
-    "Exception ignored" and goes on), and JAX registers one: a signal that lands there would
-    be lost and the run would go on. There it is sent again a moment later, from a thread of
-    its own (``_thread``, which takes none of ``threading``'s locks inside a handler)."""
-    if frame is not None and frame.f_code in {getattr(c, "__code__", None) for c in gc.callbacks}:
-        _thread.start_new_thread(_send_again, (signum,))
-        return
-    raise KeyboardInterrupt
-
-
-def _send_again(signum: int) -> None:
-    """Send ``signum`` to this process after 10 ms, unless the command has ended meanwhile
-    (its handler is Python's default again: the signal would then kill the exiting process
-    or raise in its last lines). A handler of ``interrupts_deferred`` holds it, as any."""
-    time.sleep(0.01)
-    if signal.getsignal(signum) not in (signal.SIG_DFL, signal.SIG_IGN, signal.default_int_handler):
-        os.kill(os.getpid(), signum)
 
 
 _FILE_SYSTEM_ERRORS = {errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EFBIG}
