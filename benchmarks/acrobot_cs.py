@@ -183,12 +183,7 @@ def main() -> None:
         p_old = jax.nn.softmax(jax.vmap(lambda o: ctrl.logits(o))(obs))
 
         def loss(t, idx):
-            # The observation scaling is held (it is an inexact array, so partition marks it
-            # trainable; training it and restoring it afterwards would break the fit).
-            c = eqx.tree_at(
-                lambda m: (m.obs_offset, m.obs_scale), eqx.combine(t, fixed),
-                (ctrl.obs_offset, ctrl.obs_scale),
-            )  # fmt: skip
+            c = eqx.combine(t, fixed)  # its logits hold the observation scaling: no gradient
             z = jax.vmap(lambda o: c.logits(o))(obs[idx])
             trust = beta * optax.softmax_cross_entropy(z, p_old[idx]).mean()
             if loss_kind == "es":
@@ -207,10 +202,7 @@ def main() -> None:
 
         (t, _), ls = jax.lax.scan(body, (trained, opt.init(trained)), jax.random.split(key, steps))
         jax.debug.print("fit loss first {a} last {b}", a=ls[:50].mean(), b=ls[-50:].mean())
-        out = eqx.combine(t, fixed)
-        return eqx.tree_at(
-            lambda m: (m.obs_offset, m.obs_scale), out, (ctrl.obs_offset, ctrl.obs_scale)
-        )
+        return eqx.combine(t, fixed)  # the scaling, without gradient, is the controller's
 
     def gym_return(ctrl, episodes=100) -> float:
         pol = io.NumpyPolicy(io.controller_to_dict(ctrl, task))

@@ -16,7 +16,9 @@ measured from outside (interpreter start-up and exit included). Also timed: `dif
 
 With `--baseline`, the package in that directory (the commit before a change, say) runs too,
 alternating with this one, so that both meet the same machine: its speed can move by a
-quarter within an hour, and only paired runs compare. Prints a table and writes benchmarks/results/startup.json (machine, date, every figure).
+quarter within an hour, and only paired runs compare.
+
+Prints a table and writes benchmarks/results/startup.json (machine, date, every figure).
 """
 
 from __future__ import annotations
