@@ -149,6 +149,7 @@ def test_unknown_task(capsys, tmp_path):
         ("--param", "g", "--param"),
         ("--keep-best", "maybe", "--keep-best"),
         ("--final-window", "-1", "--final-window"),
+        ("--value-grid", "1002", "--value-grid"),
     ],
 )
 def test_bad_option_values(capsys, tmp_path, option, value, needle):
@@ -167,6 +168,7 @@ def test_bad_option_values(capsys, tmp_path, option, value, needle):
         (["--param", "gravity=3"], "'gravity'"),
         (["--recipe", "fancy"], "'fancy'"),
         (["--final-window-fraction", "0"], "final_window_fraction"),
+        (["--value-grid", "2"], "value_grid"),
     ],
 )
 def test_bad_settings(capsys, tmp_path, args, needle):

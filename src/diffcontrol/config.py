@@ -34,6 +34,9 @@ MAX_HORIZON_S = 1e6
 """The longest closed-loop solve (s): float32 times lose the solver's steps beyond it."""
 MAX_WIDTH = 2**20
 """The largest batch, population, layer width or number of episodes a run may ask for."""
+MAX_VALUE_GRID = 1001
+"""The finest grid of a terminal value (a planner's, a training window's): points per state
+axis; its table is solved once per load or run (Pendulum: 0.8 GB)."""
 _WIDE = ("batch", "eval_episodes", "population", "starts")
 
 
@@ -270,6 +273,17 @@ class TrainConfig(_Config):
     final_window_fraction: float = _opt(
         "Share of the updates, at the end of the run, that use final_window.", default=0.25
     )
+    value_grid: int = _opt(
+        "Terminal cost of every window: minus the value (the best return to go) at the "
+        "window's last state, from the task's grid dynamic program (diffcontrol.optimal) with "
+        "this many points per state axis, so that a short window is credited with what comes "
+        "after it; for a loss that is minus the reward, and tasks with a state grid "
+        "(Pendulum). 0: none.",
+        default=0,
+        metavar="POINTS",
+        low=0,
+        high=MAX_VALUE_GRID,
+    )
 
     def __post_init__(self) -> None:
         self._check_types()
@@ -287,6 +301,11 @@ class TrainConfig(_Config):
                 f"horizon must be 0 (the task's) or a positive integer, got {self.horizon!r}"
             )
         _check_curriculum(self)
+        if self.value_grid in (1, 2) or self.value_grid > MAX_VALUE_GRID:
+            raise ConfigError(
+                f"value_grid must be 0 (no terminal value) or 3 ... {MAX_VALUE_GRID} grid points "
+                f"per state axis, got {self.value_grid!r}"
+            )
         if not (0 < self.final_window_fraction <= 1):
             raise ConfigError(
                 f"final_window_fraction must be a fraction in (0, 1], got "

@@ -15,7 +15,7 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from .config import MAX_COUNT, MAX_WIDTH, _opt, layer_widths
+from .config import MAX_COUNT, MAX_VALUE_GRID, MAX_WIDTH, _opt, layer_widths
 from .errors import ConfigError
 
 MODELS = ("params", "hybrid", "neural")
@@ -274,8 +274,6 @@ class CompareConfig(_Settings):
 
 SOLVERS = ("ilqr", "shooting")
 """The planner's solvers (``mpc.ILQR``, ``mpc.Shooting`` with Adam)."""
-MAX_VALUE_GRID = 1001
-"""The finest terminal-value grid: its table is solved once per load (Pendulum: 0.8 GB)."""
 
 
 @dataclass(frozen=True)

@@ -86,6 +86,9 @@ class Trainer(eqx.Module):
     window: int = eqx.field(static=True)
     """The simulated steps per update of this trainer's chunks (``config.window``, or
     ``config.final_window`` for the last stage of a window curriculum: ``stages``)."""
+    value: Any = eqx.field(static=True, default=None)
+    """The windows' terminal value (``config.value_grid``): the grid dynamic program's
+    ``ValueTable`` holding ``V_0`` only, in a ``Constant``; or ``None``."""
 
     def init(self, key: PRNGKeyArray, params: PyTree) -> TrainState:
         """A fresh training state: a random controller and ``batch`` reset simulations."""
@@ -124,7 +127,11 @@ class Trainer(eqx.Module):
     def window_loss(
         self, controller, params, env_state, env_time, episode_return, keys, horizon=None
     ):
-        """Mean step loss over one window and the batch, and the carried-out states."""
+        """Mean step loss over one window and the batch, and the carried-out states.
+
+        With a terminal value (``value``), each simulation's window loss also has minus the
+        value of the state it leaves the window in, divided by the window's steps (none when
+        its episode ended at the window's last step: the return stops there)."""
         task, step_loss = self.task, self.step_loss
         horizon = self.horizon if horizon is None else horizon
 
@@ -142,7 +149,11 @@ class Trainer(eqx.Module):
                 return (carried, jnp.where(done, 0, time), jnp.where(done, 0.0, ret)), out
 
             carry, (losses, done, rets) = jax.lax.scan(body, (state, time, ret), env_keys)
-            return carry, (jnp.mean(losses), jnp.sum(done), jnp.sum(jnp.where(done, rets, 0.0)))
+            loss = jnp.mean(losses)
+            if self.value is not None:  # minus the return to go of the state left, per step
+                to_go = jnp.where(done[-1], 0.0, self.value.table.value(0, carry[0]))
+                loss = loss - to_go / losses.shape[0]
+            return carry, (loss, jnp.sum(done), jnp.sum(jnp.where(done, rets, 0.0)))
 
         carry, (losses, n_done, ret_sum) = jax.vmap(one_env, in_axes=(0, 0, 0, 1))(
             env_state, env_time, episode_return, keys
@@ -384,13 +395,55 @@ def builtin_loss_name(task: Any, requested: str, argument: str) -> str:
     return name
 
 
+class Constant:
+    """A value a trainer's programs hold as a constant: hashed and compared by identity, so
+    that a trainer holding arrays stays a static, hashable part of its jitted methods."""
+
+    def __init__(self, table: Any) -> None:
+        self.table = table
+
+
+def terminal_value(
+    task: Task, config: TrainConfig, params: PyTree, progress: Any = None
+) -> Constant | None:
+    """The windows' terminal value of ``config.value_grid``: the task's grid dynamic program
+    (``diffcontrol.optimal.solve``, 41 actions per action dimension) solved with ``params``,
+    ``V_0`` only; ``None`` without one.
+
+    Raises:
+        ConfigError: the task has no state grid or no action bounds.
+    """
+    if not config.value_grid:
+        return None
+    from .. import optimal
+    from ..errors import ConfigError
+
+    if progress:
+        progress(
+            f"solving the windows' terminal value: the grid optimum of {config.value_grid} "
+            "points per state axis"
+        )
+    try:
+        table = optimal.solve(task, config.value_grid, params=params)
+    except ConfigError as e:
+        raise ConfigError(f"value_grid={config.value_grid} (a terminal value): {e}") from None
+    return Constant(eqx.tree_at(lambda t: t.values, table, table.values[:1]))
+
+
 def make_trainer(
-    task: Task, config: TrainConfig, step_loss: StepLoss | None = None
+    task: Task,
+    config: TrainConfig,
+    step_loss: StepLoss | None = None,
+    params: PyTree = None,
+    progress: Any = None,
 ) -> Trainer | PopulationTrainer:
     """Build the ``Trainer`` for ``task`` and ``config`` (validating the loss name); a
-    ``PopulationTrainer`` of them when ``config.population > 1``."""
+    ``PopulationTrainer`` of them when ``config.population > 1``. ``params`` (default the
+    task's) are the physics a terminal value (``config.value_grid``) is solved with."""
     if step_loss is None:
         step_loss = task.step_loss(builtin_loss_name(task, config.loss, "step_loss"))
+    if params is None and config.value_grid:
+        params = task.default_params()
     trainer = Trainer(
         task=task,
         config=config,
@@ -398,6 +451,7 @@ def make_trainer(
         optimizer=make_optimizer(config),
         horizon=config.horizon or task.episode_length,
         window=config.window,
+        value=terminal_value(task, config, params, progress),
     )
     if config.population > 1:
         return PopulationTrainer(trainer, config.population)

@@ -191,7 +191,7 @@ def train(
             raise ConfigError(f"task {task.name!r} is continuous-time: pass trajectory_loss")
     elif trajectory_loss is not None:
         raise ConfigError(f"task {task.name!r} is discrete-time: pass step_loss")
-    kept = _kept_trainer(task, config, step_loss, trajectory_loss)
+    kept = _kept_trainer(task, config, step_loss, trajectory_loss, params, say)
     trainer = kept.trainer
     custom = step_loss is not None or trajectory_loss is not None
     if custom and out_dir is not None and resume:
@@ -487,7 +487,14 @@ def _hashable(value: Any) -> bool:
     return True
 
 
-def _kept_trainer(task: Any, config: Any, step_loss: Any, trajectory_loss: Any) -> _KeptTrainer:
+def _kept_trainer(
+    task: Any,
+    config: Any,
+    step_loss: Any,
+    trajectory_loss: Any,
+    params: PyTree = None,
+    progress: Any = None,
+) -> _KeptTrainer:
     """The trainer of these settings, the same object as for an earlier run that differed only
     in its seed (trainers do not read the seed: the start program takes it as an argument),
     so that its programs are not traced again.
@@ -512,7 +519,8 @@ def _kept_trainer(task: Any, config: Any, step_loss: Any, trajectory_loss: Any) 
         if isinstance(task, ContinuousTask):
             trainer = make_ode_trainer(task, general, trajectory_loss)
         else:
-            trainer = make_trainer(task, general, step_loss)
+            with interrupts_deferred():  # a terminal value's grid is compiled and solved
+                trainer = make_trainer(task, general, step_loss, params, progress)
         kept = _KeptTrainer(task=task, trainer=trainer, stages=_stages(trainer))
     if fingerprint is not None:
         _TRAINERS[key] = kept

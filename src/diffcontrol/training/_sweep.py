@@ -32,7 +32,7 @@ from jaxtyping import PyTree
 from ..config import TrainConfig
 from ..errors import ConfigError
 from ..tasks import ContinuousTask, StepLoss, Task
-from ._bptt import Trainer, builtin_loss_name, make_optimizer
+from ._bptt import Trainer, builtin_loss_name, make_optimizer, terminal_value
 from ._devices import check_devices, mesh_placements, placer
 from ._driver import TrainResult, _check_head, compiled_once, interrupts_deferred, task_params
 
@@ -266,6 +266,8 @@ def _run_program(
     def factory(learning_rate):
         return make_optimizer(cfg, learning_rate)
 
+    with interrupts_deferred():  # a terminal value's grid is compiled and solved
+        value = terminal_value(task, cfg, params, say)
     trainer = Trainer(
         task=task,
         config=cfg,
@@ -273,6 +275,7 @@ def _run_program(
         optimizer=optax.inject_hyperparams(factory)(learning_rate=cfg.learning_rate),
         horizon=cfg.horizon or task.episode_length,
         window=cfg.window,
+        value=value,
     )
     n = len(configs)
     keys = jnp.stack([jax.random.split(jax.random.PRNGKey(c.seed)) for c in configs])

@@ -1,0 +1,112 @@
+"""The windows' terminal value (``value_grid``): truncated BPTT credited with the return to go
+that the task's grid dynamic program gives the state each window leaves."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import diffcontrol as dc
+from diffcontrol import optimal
+from diffcontrol.cli import main
+from diffcontrol.training import make_trainer, train
+from diffcontrol.training._driver import _start
+
+PENDULUM = dc.make("pendulum")
+NAN = float("nan")
+# 3 simulations, 5-step windows, 7-step episodes: started at times 0, 2 and 4, the first is
+# mid-episode at the window's end, the second ends its episode at the window's last step and
+# the third ends it at the window's third step (and goes on from a fresh start).
+TINY = dict(batch=3, window=5, horizon=7, eval_episodes=2, hidden=(8,), target_return=NAN)
+
+
+@pytest.mark.slow
+def test_the_window_loss_adds_minus_the_value_of_the_state_left_per_step():
+    cfg = PENDULUM.default_config().replace(**TINY, value_grid=11)
+    params = PENDULUM.default_params()
+    with_value, plain = (
+        make_trainer(PENDULUM, cfg),
+        make_trainer(PENDULUM, cfg.replace(value_grid=0)),
+    )
+    ts, _ = _start(with_value, np.int32(0), params)
+    times = jnp.array([0, 2, 4], jnp.int32)
+    keys = jax.random.split(jax.random.PRNGKey(1), (cfg.window, cfg.batch))
+    args = (ts.controller, params, ts.env_state, times, ts.episode_return, keys)
+    loss, (carry, n_done, _) = with_value.window_loss(*args)
+    plain_loss, (plain_carry, plain_done, _) = plain.window_loss(*args)
+    for a, b in zip(carry, plain_carry, strict=True):  # the same simulation
+        np.testing.assert_array_equal(a, b)
+    assert int(n_done) == int(plain_done) == 2
+    np.testing.assert_array_equal(carry[1], [5, 0, 2])  # the second restarted at its last step
+
+    table = optimal.solve(PENDULUM, 11)  # solved apart: the same grid, 41 torques
+    v0 = np.array([float(table.value(0, s)) for s in np.asarray(carry[0])])
+    to_go = v0 * np.array([1.0, 0.0, 1.0])  # none for the episode that just ended
+    expected = float(plain_loss) - np.mean(to_go) / cfg.window
+    assert abs(float(plain_loss) - expected) > 1.0  # the values are not negligible here
+    np.testing.assert_allclose(float(loss), expected, rtol=1e-5)
+
+
+@pytest.mark.parametrize(
+    "task, grid, needle",
+    [
+        ("pendulum", 1, "value_grid must be 0"),
+        ("pendulum", 2, "value_grid must be 0"),
+        ("pendulum", 1002, "value_grid must be 0"),
+        ("cartpole", 11, "value_grid=11 (a terminal value): task 'cartpole' offers no state grid"),
+        ("pendulum-unclipped", 11, "value_grid=11 (a terminal value): task 'pendulum-unclipped'"),
+    ],
+)
+def test_a_value_grid_the_task_cannot_have_is_refused_in_one_line(task, grid, needle):
+    task = dc.make(task)
+    with pytest.raises(dc.ConfigError) as exc:
+        train(task, task.default_config().replace(updates=1, eval_every=1, value_grid=grid))
+    assert needle in str(exc.value) and "\n" not in str(exc.value)
+
+
+def test_the_command_line_refuses_it_before_writing_anything(capsys, tmp_path):
+    out = tmp_path / "run"
+    assert main(["train", "cartpole", "--value-grid", "11", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "value_grid=11" in err and "state grid" in err
+    assert len(err.splitlines()) == 1 and "Traceback" not in err
+    assert not out.exists()
+
+
+@pytest.mark.slow
+def test_short_windows_learn_the_swing_up_only_with_the_value():
+    """10-step windows alone are too myopic for the swing-up (the default's 20 were chosen for
+    that); with the grid's value at their end the same budget swings up and holds."""
+    cfg = PENDULUM.default_config().replace(
+        updates=1500, batch=16, window=10, learning_rate=5e-3, eval_every=500, eval_episodes=64,
+        target_return=NAN, keep_best=False,
+    )  # fmt: skip
+    with_value = train(PENDULUM, cfg.replace(value_grid=51)).curve[-1]["eval_return"]
+    plain = train(PENDULUM, cfg).curve[-1]["eval_return"]
+    assert with_value > -300 and plain < -500, (with_value, plain)
+
+
+@pytest.mark.slow
+def test_a_sweep_member_is_the_run_train_would_make():
+    from diffcontrol.training import grid, sweep
+
+    cfg = PENDULUM.default_config().replace(
+        updates=4, eval_every=2, **{**TINY, "horizon": 0}, value_grid=11, keep_best=False
+    )  # the last weights: those of every update
+    member = sweep(PENDULUM, grid(cfg, [0, 1])).members[1]
+    alone, plain = (
+        train(PENDULUM, cfg.replace(seed=1)),
+        train(PENDULUM, cfg.replace(seed=1, value_grid=0)),
+    )
+    weights = [_weights(r.controller) for r in (member, alone, plain)]
+    for a, b in zip(weights[0], weights[1], strict=True):
+        np.testing.assert_allclose(a, b, rtol=1e-4, atol=1e-5)
+    assert not all(np.allclose(a, b) for a, b in zip(weights[1], weights[2], strict=True))
+
+
+def _weights(controller):
+    import equinox as eqx
+
+    return [np.asarray(x) for x in jax.tree.leaves(eqx.filter(controller, eqx.is_inexact_array))]
