@@ -8,6 +8,9 @@ then evaluated in Gymnasium's own environment on reset seeds 0-99.
     python benchmarks/core.py                 # defaults, 5 training seeds per task
     python benchmarks/core.py --original      # also the 2019 recipes, swept over 1-20 episodes
     python benchmarks/core.py --seeds 1 --tasks cartpole
+    python benchmarks/core.py --tasks pendulum --recipe grid-value --no-defaults \
+        --more-seeds 1000 --out benchmarks/results/core-grid-value.json  # a recipe instead,
+                                                         # also on Gymnasium seeds 1000-1099
 
 Prints a table and writes benchmarks/results/core.json (machine, date, every figure).
 """
@@ -39,10 +42,20 @@ def first_reached(curve: list[dict], threshold: float | None) -> dict:
     return {"episodes": None, "seconds": None}
 
 
-def run_train(task: str, seed: int, label: str, extra: list[str], workdir: Path) -> dict:
+def run_train(
+    task: str, seed: int, label: str, extra: list[str], workdir: Path, more_seeds: int | None
+) -> dict:
     out = workdir / f"{task}-{seed}-{abs(hash(tuple(extra))) % 10**6}"
-    metrics, _ = train_cli(task, seed, out, ["--no-animation", "--final-eval", "100", *extra])
+    metrics, wall = train_cli(task, seed, out, ["--no-animation", "--final-eval", "100", *extra])
     reached = first_reached(metrics["curve"], THRESHOLDS.get(task))
+    more = {}
+    if more_seeds is not None:  # the saved model.json's NumPy policy, in this process
+        import diffcontrol
+
+        ev = diffcontrol.evaluate(
+            diffcontrol.load(out), diffcontrol.make(task), episodes=100, seed=more_seeds
+        )
+        more = {"more_seeds_first": more_seeds, "more_seeds_eval_mean": ev.mean}
     return {
         "task": task,
         "recipe": label,
@@ -60,6 +73,8 @@ def run_train(task: str, seed: int, label: str, extra: list[str], workdir: Path)
         "threshold": THRESHOLDS.get(task),
         "threshold_first_episodes": reached["episodes"],
         "threshold_first_seconds": reached["seconds"],
+        "wall_seconds": wall,
+        **more,
     }
 
 
@@ -77,10 +92,20 @@ def main() -> None:
         default="1,2,5,10,20",
         help="training-episode counts for the original Pendulum recipes (default 1,2,5,10,20)",
     )
+    parser.add_argument(
+        "--recipe", action="append", default=[], metavar="NAME",
+        help="also run each task of --tasks with `--recipe NAME` (repeatable)",
+    )  # fmt: skip
+    parser.add_argument("--no-defaults", action="store_true", help="skip the defaults' runs")
+    parser.add_argument(
+        "--more-seeds", type=int, default=None, metavar="FIRST",
+        help="also evaluate each controller on Gymnasium's reset seeds FIRST..FIRST+99",
+    )  # fmt: skip
     parser.add_argument("--out", type=Path, default=HERE / "results" / "core.json")
     args = parser.parse_args()
 
-    configs = [(task, "defaults", []) for task in args.tasks]
+    configs = [] if args.no_defaults else [(task, "defaults", []) for task in args.tasks]
+    configs += [(task, name, ["--recipe", name]) for name in args.recipe for task in args.tasks]
     if args.original:
         for task, per_episode in ORIGINAL_UPDATES_PER_EPISODE.items():
             for n in (int(x) for x in args.original_episodes.split(",")):
@@ -97,13 +122,14 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         for task, label, extra in configs:
             for seed in range(args.seeds):
-                r = run_train(task, seed, label, extra, Path(tmp))
+                r = run_train(task, seed, label, extra, Path(tmp), args.more_seeds)
                 rows.append(r)
+                more = f"  {r['more_seeds_eval_mean']:.1f}" if "more_seeds_first" in r else ""
                 print(
                     f"{r['task']:<19} {label:<16} {seed:>4} {r['simulated_episodes']:>9.4g} "
                     f"{r['simulated_steps']:>9} {r['train_seconds']:>7.1f} "
                     f"{r['compile_seconds']:>9.1f}  {r['eval_mean']:>9.1f} ± {r['eval_std']:<6.1f} "
-                    f"({r['gym_env']})",
+                    f"({r['gym_env']}){more}",
                     flush=True,
                 )
     summary = []

@@ -20,7 +20,7 @@ BUILTIN: tuple[tuple[str, str, tuple[str, ...], tuple[str, ...]], ...] = (
         "pendulum",
         "Pendulum-v1 swing-up by BPTT through the exact Gymnasium dynamics (torque |u| <= 2)",
         ("cost", "squared_cost"),
-        ("original", "long-windows"),
+        ("original", "long-windows", "grid-value"),
     ),
     (
         "pendulum-unclipped",
