@@ -11,6 +11,7 @@ import pytest
 import diffcontrol as dc
 from diffcontrol import optimal
 from diffcontrol.cli import main
+from diffcontrol.errors import RunDirectoryError
 from diffcontrol.training import make_trainer, train
 from diffcontrol.training._driver import _start
 
@@ -55,8 +56,8 @@ def test_the_window_loss_adds_minus_the_value_of_the_state_left_per_step():
         ("pendulum", 1, "value_grid must be 0"),
         ("pendulum", 2, "value_grid must be 0"),
         ("pendulum", 1002, "value_grid must be 0"),
-        ("cartpole", 11, "value_grid=11 (a terminal value): task 'cartpole' offers no state grid"),
-        ("pendulum-unclipped", 11, "value_grid=11 (a terminal value): task 'pendulum-unclipped'"),
+        ("cartpole", 11, "value_grid=11 needs the task's grid optimum, but task 'cartpole'"),
+        ("pendulum-unclipped", 11, "but task 'pendulum-unclipped' has no action bounds"),
     ],
 )
 def test_a_value_grid_the_task_cannot_have_is_refused_in_one_line(task, grid, needle):
@@ -64,15 +65,93 @@ def test_a_value_grid_the_task_cannot_have_is_refused_in_one_line(task, grid, ne
     with pytest.raises(dc.ConfigError) as exc:
         train(task, task.default_config().replace(updates=1, eval_every=1, value_grid=grid))
     assert needle in str(exc.value) and "\n" not in str(exc.value)
+    if grid > 2 and grid < 1002:
+        assert "leave out --value-grid" in str(exc.value)
+
+
+def test_the_range_is_named_as_it_is():
+    for bad in (-1, 10**30):
+        with pytest.raises(
+            dc.ConfigError, match=r"value_grid must be 0 \(no terminal value\) or 3"
+        ):
+            PENDULUM.default_config().replace(value_grid=bad)
+
+
+def test_too_many_grid_points_over_more_axes_are_refused_before_anything_is_solved():
+    from diffcontrol.optimal import GridAxis
+    from diffcontrol.training._bptt import check_value_grid
+
+    class Cube:  # three state axes with bounds: only what the check reads
+        name, action_low, action_high = "cube", (-1.0,), (1.0,)
+
+        def default_params(self):
+            return None
+
+        def state_grid(self, params):
+            return (GridAxis(0.0, 1.0),) * 3
+
+    check_value_grid(Cube(), 100)  # 10^6 points: allowed
+    with pytest.raises(
+        dc.ConfigError, match="8,120,601 grid points .* at most 100 points per axis"
+    ):
+        check_value_grid(Cube(), 201)
+
+
+def test_a_run_stored_before_the_setting_existed_is_still_the_same_run(tmp_path):
+    from diffcontrol import io
+
+    config = PENDULUM.default_config().to_json()
+    old = {"task": "pendulum", "config": {k: v for k, v in config.items() if k != "value_grid"}}
+    io.check_same_run(tmp_path, old, {"task": "pendulum", "config": config})  # no error
+    changed = {"task": "pendulum", "config": {**config, "value_grid": 11}}
+    with pytest.raises(RunDirectoryError, match="differs in: value_grid"):
+        io.check_same_run(tmp_path, old, changed)
+
+
+def test_a_directory_that_cannot_take_the_run_is_named_before_the_grid_is_solved(tmp_path):
+    (tmp_path / "other").write_text("x")
+    lines = []
+    cfg = PENDULUM.default_config().replace(value_grid=401)
+    with pytest.raises(RunDirectoryError, match="not empty"):
+        train(PENDULUM, cfg, out_dir=tmp_path, progress=lines.append)
+    assert not any("solving" in line for line in lines), lines
+
+
+def test_make_trainer_solves_the_value_with_the_configs_physics():
+    cfg = PENDULUM.default_config().replace(value_grid=5, params=(("g", 3.0),))
+    assert float(make_trainer(PENDULUM, cfg).value.table.params.g) == 3.0
+    with pytest.raises(dc.ConfigError, match="no terminal value"):
+        from diffcontrol.training import Trainer
+
+        plain = make_trainer(PENDULUM, cfg.replace(value_grid=0))
+        Trainer(**{**vars(plain), "config": cfg})
+
+
+def test_a_sweep_refuses_it_before_any_member_trains():
+    from diffcontrol.training import grid, sweep
+
+    cartpole = dc.make("cartpole")
+    configs = grid(cartpole.default_config(), [0], {"value_grid": [0, 11]})
+    lines = []
+    with pytest.raises(dc.ConfigError, match="value_grid=11 needs the task's grid optimum"):
+        sweep(cartpole, configs, progress=lines.append)
+    assert not any("update" in line for line in lines), lines
 
 
 def test_the_command_line_refuses_it_before_writing_anything(capsys, tmp_path):
     out = tmp_path / "run"
-    assert main(["train", "cartpole", "--value-grid", "11", "--out", str(out)]) == 2
-    err = capsys.readouterr().err.strip()
-    assert "value_grid=11" in err and "state grid" in err
-    assert len(err.splitlines()) == 1 and "Traceback" not in err
-    assert not out.exists()
+    for argv in (
+        ["train", "cartpole", "--value-grid", "11", "--out", str(out)],
+        ["sweep", "cartpole", "--seeds", "0", "--value-grid", "11", "--out", str(out)],
+        ["sweep", "cartpole-swingup", "--seeds", "0", "--value-grid", "11", "--out", str(out)],
+    ):
+        assert main(argv) == 2, argv
+        captured = capsys.readouterr()
+        err = captured.err.strip()
+        assert len(err.splitlines()) == 1 and "Traceback" not in err, err
+        assert "value_grid=11" in err or "continuous-time" in err, err
+        assert "solving" not in captured.out
+        assert not out.exists()
 
 
 @pytest.mark.slow

@@ -274,11 +274,11 @@ class TrainConfig(_Config):
         "Share of the updates, at the end of the run, that use final_window.", default=0.25
     )
     value_grid: int = _opt(
-        "Terminal cost of every window: minus the value (the best return to go) at the "
-        "window's last state, from the task's grid dynamic program (diffcontrol.optimal) with "
-        "this many points per state axis, so that a short window is credited with what comes "
-        "after it; for a loss that is minus the reward, and tasks with a state grid "
-        "(Pendulum). 0: none.",
+        "Terminal cost of every window: minus the value V_0 (the best return of a whole "
+        "episode from there) of the window's last state, from the task's grid dynamic program "
+        "(diffcontrol.optimal) with this many points per state axis, so that a short window "
+        "is credited with what comes after it; for a loss that is minus the reward, and tasks "
+        "with a state grid (Pendulum). 0: none.",
         default=0,
         metavar="POINTS",
         low=0,
@@ -286,6 +286,16 @@ class TrainConfig(_Config):
     )
 
     def __post_init__(self) -> None:
+        grid = self.value_grid  # its range before the generic bound, which would name 1 and 2
+        if (
+            isinstance(grid, int)
+            and not isinstance(grid, bool)
+            and not (grid == 0 or 3 <= grid <= MAX_VALUE_GRID)
+        ):
+            raise ConfigError(
+                f"value_grid must be 0 (no terminal value) or 3 ... {MAX_VALUE_GRID} grid points "
+                f"per state axis, got {grid!r}"
+            )
         self._check_types()
         if math.isinf(self.target_return):
             raise ConfigError(
@@ -301,11 +311,6 @@ class TrainConfig(_Config):
                 f"horizon must be 0 (the task's) or a positive integer, got {self.horizon!r}"
             )
         _check_curriculum(self)
-        if self.value_grid in (1, 2) or self.value_grid > MAX_VALUE_GRID:
-            raise ConfigError(
-                f"value_grid must be 0 (no terminal value) or 3 ... {MAX_VALUE_GRID} grid points "
-                f"per state axis, got {self.value_grid!r}"
-            )
         if not (0 < self.final_window_fraction <= 1):
             raise ConfigError(
                 f"final_window_fraction must be a fraction in (0, 1], got "

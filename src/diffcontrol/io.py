@@ -761,12 +761,28 @@ def load_checkpoint(path: str | os.PathLike, like: Any) -> tuple[Any, dict]:
 RUN_FILE = "run.json"
 
 
+ADDED_SETTINGS = {"value_grid": 0}
+"""Settings added to the configs after runs were stored, each with the value that trains as
+before it existed: a stored config without one is read as having that value, so that its run
+can still be resumed (``check_same_run``, and the sweeps' claim)."""
+
+
+def stored_config(config: Any) -> Any:
+    """A stored config (a dict from ``run.json`` or ``sweep.json``) with the settings added
+    since it was written (``ADDED_SETTINGS``) at their old behaviour; anything else as is."""
+    if not isinstance(config, dict):
+        return config
+    return {**{k: v for k, v in ADDED_SETTINGS.items() if k not in config}, **config}
+
+
 def check_same_run(out: Path, old: dict, run: dict) -> None:
     """Refuse to resume ``old`` (a ``run.json``) as ``run``: another task or other settings.
 
     Raises:
         RunDirectoryError: naming what differs.
     """
+    old = {**old, "config": stored_config(old.get("config"))}
+    run = {**run, "config": stored_config(run["config"])}
     if old.get("task") != run["task"] or old.get("config") != run["config"]:
         stored = old.get("config") if isinstance(old.get("config"), dict) else {}
         changed = sorted(
@@ -779,15 +795,13 @@ def check_same_run(out: Path, old: dict, run: dict) -> None:
         )
 
 
-def prepare_run_dir(out_dir: str | os.PathLike, run: dict, resume: bool) -> Path:
-    """Check that ``out_dir`` can take this run, create it, and write ``run.json``.
-
-    ``run`` identifies the run (task and config). Without ``resume`` the directory must be
-    new or empty; with it, it must hold the same run. Nothing existing is overwritten.
+def check_run_dir(out_dir: str | os.PathLike, run: dict, resume: bool) -> None:
+    """Refuse a directory that cannot take this run (``prepare_run_dir``'s checks), writing
+    nothing: a run with work to do before it claims its directory (a grid to solve) calls it
+    first, so that a directory it cannot have is named before that work.
 
     Raises:
-        RunDirectoryError: the directory is not writable, holds something else, or holds a
-            different run.
+        RunDirectoryError: as ``prepare_run_dir``.
     """
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
@@ -805,13 +819,31 @@ def prepare_run_dir(out_dir: str | os.PathLike, run: dict, resume: bool) -> Path
         check_same_run(out, old, run)
         if old.get("complete"):
             raise RunDirectoryError(f"{out} holds a finished run; there is nothing to resume")
-        return out
+        return
     if resume:
         raise RunDirectoryError(f"nothing to resume: {out} holds no {RUN_FILE}; drop --resume")
     if out.exists() and any(out.iterdir()):
         raise RunDirectoryError(
             f"{out} is not empty and holds no diffcontrol run; choose a new or empty --out"
         )
+
+
+def prepare_run_dir(out_dir: str | os.PathLike, run: dict, resume: bool) -> Path:
+    """Check that ``out_dir`` can take this run (``check_run_dir``), create it, and write
+    ``run.json``.
+
+    ``run`` identifies the run (task and config). Without ``resume`` the directory must be
+    new or empty; with it, it must hold the same run. Nothing existing is overwritten.
+
+    Raises:
+        RunDirectoryError: the directory is not writable, holds something else, or holds a
+            different run.
+    """
+    check_run_dir(out_dir, run, resume)
+    out = Path(out_dir)
+    existing = out / RUN_FILE
+    if existing.exists():  # the same run, to resume
+        return out
     try:
         out.mkdir(parents=True, exist_ok=True)
         write_json_new(existing, run)  # the claim: of two processes, one gets the directory

@@ -80,7 +80,7 @@ def sweep_dir(
         ConfigError, RunDirectoryError: bad settings, or a directory that holds something else.
     """
     from ..training import resolve_config
-    from ..training._sweep import check_members, grid, sweep
+    from ..training._sweep import check_discrete, check_members, grid, sweep
 
     say = progress or (lambda line: None)
     out = Path(out_dir)
@@ -89,6 +89,7 @@ def sweep_dir(
         raise ConfigError("name the TASK to sweep (or --resume the sweep in --out)")
     seeds = parse_seeds(seeds) if isinstance(seeds, str) else seeds
     the_task = resolve(task)
+    check_discrete(the_task)  # before a continuous task's config is given BPTT's settings
     if not resume and values is not None and not isinstance(values, dict):
         values = parse_values(values, the_task.default_config())
     if compile_cache and not os.environ.get("DIFFCONTROL_NO_COMPILE_CACHE"):
@@ -172,8 +173,9 @@ def _claim(out: Path, doc: dict, resume: bool) -> None:
             raise RunDirectoryError(f"{out} holds no sweep to resume; start one without --resume")
         stored = io.read_json(path, "sweep file")
         same = isinstance(stored, dict) and all(
-            stored.get(k) == doc[k] for k in ("format", "task", "config", "seeds", "values")
+            stored.get(k) == doc[k] for k in ("format", "task", "seeds", "values")
         )
+        same = same and io.stored_config(stored.get("config")) == io.stored_config(doc["config"])
         if not same:
             raise RunDirectoryError(
                 f"{out} holds a different sweep; resume it with its own settings "

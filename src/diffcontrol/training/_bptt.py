@@ -90,6 +90,15 @@ class Trainer(eqx.Module):
     """The windows' terminal value (``config.value_grid``): the grid dynamic program's
     ``ValueTable`` holding ``V_0`` only, in a ``Constant``; or ``None``."""
 
+    def __check_init__(self) -> None:
+        if self.config.value_grid and self.value is None:
+            from ..errors import ConfigError
+
+            raise ConfigError(
+                f"value_grid={self.config.value_grid} but the trainer was given no terminal "
+                "value; build it with make_trainer (or value=terminal_value(...))"
+            )
+
     def init(self, key: PRNGKeyArray, params: PyTree) -> TrainState:
         """A fresh training state: a random controller and ``batch`` reset simulations."""
         k_ctrl, k_env, k_run = jax.random.split(key, 3)
@@ -403,30 +412,58 @@ class Constant:
         self.table = table
 
 
+def check_value_grid(task: Any, points: int, params: PyTree = None) -> None:
+    """Refuse a terminal value (``value_grid=points``) the task cannot have: no state grid,
+    no action bounds, or more grid points than ``MAX_VALUE_GRID`` squared; nothing solved.
+
+    Raises:
+        ConfigError: one line, naming the value and the way out.
+    """
+    import math
+
+    from .. import optimal
+    from ..config import MAX_VALUE_GRID
+    from ..errors import ConfigError
+
+    params = task.default_params() if params is None else params
+    try:
+        axes, sizes = optimal._check_grid(task, params, points, 2)
+        optimal._action_grid(task, 2)
+    except ConfigError as e:
+        raise ConfigError(
+            f"value_grid={points} needs the task's grid optimum, but {e}; train without it "
+            "(value_grid=0: leave out --value-grid)"
+        ) from None
+    total, most = math.prod(sizes), MAX_VALUE_GRID**2
+    if total > most:
+        each = int(most ** (1 / len(axes)))
+        raise ConfigError(
+            f"value_grid={points} makes {total:,} grid points over the task's {len(axes)} state "
+            f"axes, more than {most:,}; choose at most {each} points per axis"
+        )
+
+
 def terminal_value(
     task: Task, config: TrainConfig, params: PyTree, progress: Any = None
 ) -> Constant | None:
     """The windows' terminal value of ``config.value_grid``: the task's grid dynamic program
     (``diffcontrol.optimal.solve``, 41 actions per action dimension) solved with ``params``,
-    ``V_0`` only; ``None`` without one.
+    ``V_0`` only (the best return of a whole episode from each state); ``None`` without one.
 
     Raises:
-        ConfigError: the task has no state grid or no action bounds.
+        ConfigError: the task cannot have one (``check_value_grid``).
     """
     if not config.value_grid:
         return None
     from .. import optimal
-    from ..errors import ConfigError
 
+    check_value_grid(task, config.value_grid, params)
     if progress:
         progress(
             f"solving the windows' terminal value: the grid optimum of {config.value_grid} "
             "points per state axis"
         )
-    try:
-        table = optimal.solve(task, config.value_grid, params=params)
-    except ConfigError as e:
-        raise ConfigError(f"value_grid={config.value_grid} (a terminal value): {e}") from None
+    table = optimal.solve(task, config.value_grid, params=params)
     return Constant(eqx.tree_at(lambda t: t.values, table, table.values[:1]))
 
 
@@ -439,11 +476,14 @@ def make_trainer(
 ) -> Trainer | PopulationTrainer:
     """Build the ``Trainer`` for ``task`` and ``config`` (validating the loss name); a
     ``PopulationTrainer`` of them when ``config.population > 1``. ``params`` (default the
-    task's) are the physics a terminal value (``config.value_grid``) is solved with."""
+    task's with ``config.params`` applied) are the physics a terminal value
+    (``config.value_grid``) is solved with."""
     if step_loss is None:
         step_loss = task.step_loss(builtin_loss_name(task, config.loss, "step_loss"))
     if params is None and config.value_grid:
-        params = task.default_params()
+        from ._driver import task_params  # (it imports this module)
+
+        params = task_params(task, config.params)
     trainer = Trainer(
         task=task,
         config=config,

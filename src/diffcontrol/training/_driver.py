@@ -191,6 +191,11 @@ def train(
             raise ConfigError(f"task {task.name!r} is continuous-time: pass trajectory_loss")
     elif trajectory_loss is not None:
         raise ConfigError(f"task {task.name!r} is discrete-time: pass step_loss")
+    run = {"format": "diffcontrol-run", "task": task.name, "config": config.to_json()}
+    if invocation:
+        run["invocation"] = invocation
+    if out_dir is not None and is_writer():  # before a terminal value's grid is solved
+        io.check_run_dir(out_dir, run, resume)
     kept = _kept_trainer(task, config, step_loss, trajectory_loss, params, say)
     trainer = kept.trainer
     custom = step_loss is not None or trajectory_loss is not None
@@ -218,9 +223,6 @@ def train(
         "best_index": 0,
     }
     if out_dir is not None:
-        run = {"format": "diffcontrol-run", "task": task.name, "config": config.to_json()}
-        if invocation:
-            run["invocation"] = invocation
         out = io.prepare_run_dir(out_dir, run, resume) if is_writer() else Path(out_dir)
         ckpt = out / CHECKPOINT_FILE
         if resume and ckpt.exists():
@@ -519,8 +521,7 @@ def _kept_trainer(
         if isinstance(task, ContinuousTask):
             trainer = make_ode_trainer(task, general, trajectory_loss)
         else:
-            with interrupts_deferred():  # a terminal value's grid is compiled and solved
-                trainer = make_trainer(task, general, step_loss, params, progress)
+            trainer = make_trainer(task, general, step_loss, params, progress)
         kept = _KeptTrainer(task=task, trainer=trainer, stages=_stages(trainer))
     if fingerprint is not None:
         _TRAINERS[key] = kept

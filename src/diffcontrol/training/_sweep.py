@@ -32,7 +32,13 @@ from jaxtyping import PyTree
 from ..config import TrainConfig
 from ..errors import ConfigError
 from ..tasks import ContinuousTask, StepLoss, Task
-from ._bptt import Trainer, builtin_loss_name, make_optimizer, terminal_value
+from ._bptt import (
+    Trainer,
+    builtin_loss_name,
+    check_value_grid,
+    make_optimizer,
+    terminal_value,
+)
 from ._devices import check_devices, mesh_placements, placer
 from ._driver import TrainResult, _check_head, compiled_once, interrupts_deferred, task_params
 
@@ -187,17 +193,26 @@ def sweep(
     return SweepResult(task=task, members=list(results), metrics=metrics)
 
 
-def check_members(task: Task, configs: Sequence[TrainConfig], devices: int | None = None) -> None:
-    """Refuse what ``sweep`` cannot train, before anything is compiled.
+def check_discrete(task: Any) -> None:
+    """Refuse a continuous-time task: a sweep trains discrete-time tasks by BPTT.
 
     Raises:
-        ConfigError: see ``sweep``.
+        ConfigError: naming what to use instead.
     """
     if isinstance(task, ContinuousTask):
         raise ConfigError(
             f"task {task.name!r} is continuous-time; sweep its seeds with "
             "ODETrainConfig.population (--population) or run `diffcontrol train` per setting"
         )
+
+
+def check_members(task: Task, configs: Sequence[TrainConfig], devices: int | None = None) -> None:
+    """Refuse what ``sweep`` cannot train, before anything is compiled.
+
+    Raises:
+        ConfigError: see ``sweep``.
+    """
+    check_discrete(task)
     if not configs:
         raise ConfigError("a sweep needs at least one member config")
     expected = type(task.default_config())
@@ -210,6 +225,8 @@ def check_members(task: Task, configs: Sequence[TrainConfig], devices: int | Non
                 f"{c.population}; a sweep is itself a population of runs"
             )
         _check_head(task, c.head)
+    for n in sorted({c.value_grid for c in configs} - {0}):
+        check_value_grid(task, n)  # before any member trains
     check_devices(devices)
 
 
@@ -266,8 +283,7 @@ def _run_program(
     def factory(learning_rate):
         return make_optimizer(cfg, learning_rate)
 
-    with interrupts_deferred():  # a terminal value's grid is compiled and solved
-        value = terminal_value(task, cfg, params, say)
+    value = terminal_value(task, cfg, params, say)
     trainer = Trainer(
         task=task,
         config=cfg,
