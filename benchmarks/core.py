@@ -11,6 +11,9 @@ then evaluated in Gymnasium's own environment on reset seeds 0-99.
     python benchmarks/core.py --tasks pendulum --recipe grid-value --no-defaults \
         --more-seeds 1000 --out benchmarks/results/core-grid-value.json  # a recipe instead,
                                                          # also on Gymnasium seeds 1000-1099
+    python benchmarks/core.py --tasks mountain-car-continuous --recipe grid-value \
+        --optimum 201 --out benchmarks/results/core-mountain-car-grid-value.json
+                                     # the defaults and a recipe, each with its gap to the optimum
 
 Prints a table and writes benchmarks/results/core.json (machine, date, every figure).
 """
@@ -101,8 +104,21 @@ def main() -> None:
         "--more-seeds", type=int, default=None, metavar="FIRST",
         help="also evaluate each controller on Gymnasium's reset seeds FIRST..FIRST+99",
     )  # fmt: skip
+    parser.add_argument(
+        "--optimum", type=int, default=None, metavar="POINTS",
+        help="also solve each task's grid optimum (POINTS per state axis, 41 actions; tasks "
+        "with a state grid) on Gymnasium's seeds 0-99 and report every controller's gap to it",
+    )  # fmt: skip
     parser.add_argument("--out", type=Path, default=HERE / "results" / "core.json")
     args = parser.parse_args()
+    optima = {}
+    if args.optimum is not None:
+        import diffcontrol
+        from diffcontrol import optimal
+
+        for task in args.tasks:
+            optima[task] = optimal.optimal_return(diffcontrol.make(task), range(100), args.optimum)
+            print(optima[task].summary(), flush=True)
 
     configs = [] if args.no_defaults else [(task, "defaults", []) for task in args.tasks]
     configs += [(task, name, ["--recipe", name]) for name in args.recipe for task in args.tasks]
@@ -123,6 +139,8 @@ def main() -> None:
         for task, label, extra in configs:
             for seed in range(args.seeds):
                 r = run_train(task, seed, label, extra, Path(tmp), args.more_seeds)
+                if task in optima:
+                    r["gap_to_optimum"] = optima[task].gap(r["eval_mean"])
                 rows.append(r)
                 more = f"  {r['more_seeds_eval_mean']:.1f}" if "more_seeds_first" in r else ""
                 print(
@@ -169,7 +187,17 @@ def main() -> None:
         )
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(
-        json.dumps({"machine": machine(), "runs": rows, "summary": summary}, indent=1) + "\n"
+        json.dumps(
+            {
+                "machine": machine(),
+                "runs": rows,
+                "summary": summary,
+                "optima": {k: v.to_json() for k, v in optima.items()},
+                "command": "python benchmarks/core.py " + " ".join(sys.argv[1:]),
+            },
+            indent=1,
+        )
+        + "\n"
     )
     print(f"\nwrote {args.out}")
 

@@ -68,7 +68,7 @@ BUILTIN: tuple[tuple[str, str, tuple[str, ...], tuple[str, ...]], ...] = (
         "mountain-car-continuous",
         "MountainCarContinuous-v0 by BPTT through the exact Gymnasium dynamics, with an energy-shaped loss (the reward's flag has no gradient)",
         ("energy", "cost"),
-        (),
+        ("grid-value",),
     ),
 )
 

@@ -284,6 +284,13 @@ class TrainConfig(_Config):
         low=0,
         high=MAX_VALUE_GRID,
     )
+    value_time: bool = _opt(
+        "With value_grid: the value with the steps the training episode has left (V_t) instead "
+        "of a whole episode's (V_0), for tasks where waiting costs nothing under V_0 (the "
+        "mountain car: a car at rest can still reach the flag in a whole episode); the "
+        "training program then holds the whole table, horizon + 1 grids.",
+        default=False,
+    )
 
     def __post_init__(self) -> None:
         grid = self.value_grid  # its range before the generic bound, which would name 1 and 2
@@ -311,6 +318,11 @@ class TrainConfig(_Config):
                 f"horizon must be 0 (the task's) or a positive integer, got {self.horizon!r}"
             )
         _check_curriculum(self)
+        if self.value_time and not self.value_grid:
+            raise ConfigError(
+                "value_time needs a value_grid: set one (--value-grid N, e.g. 101) or leave "
+                "value_time off"
+            )
         if not (0 < self.final_window_fraction <= 1):
             raise ConfigError(
                 f"final_window_fraction must be a fraction in (0, 1], got "

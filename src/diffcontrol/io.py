@@ -761,7 +761,7 @@ def load_checkpoint(path: str | os.PathLike, like: Any) -> tuple[Any, dict]:
 RUN_FILE = "run.json"
 
 
-ADDED_SETTINGS = {"value_grid": 0}
+ADDED_SETTINGS = {"value_grid": 0, "value_time": False}
 """Settings added to the configs after runs were stored, each with the value that trains as
 before it existed: a stored config without one is read as having that value, so that its run
 can still be resumed (``check_same_run``, and the sweeps' claim)."""

@@ -160,7 +160,8 @@ class Trainer(eqx.Module):
             carry, (losses, done, rets) = jax.lax.scan(body, (state, time, ret), env_keys)
             loss = jnp.mean(losses)
             if self.value is not None:  # minus the return to go of the state left, per step
-                to_go = jnp.where(done[-1], 0.0, self.value.table.value(0, carry[0]))
+                t = carry[1] if self.config.value_time else 0  # steps of the episode so far
+                to_go = jnp.where(done[-1], 0.0, self.value.table.value(t, carry[0]))
                 loss = loss - to_go / losses.shape[0]
             return carry, (loss, jnp.sum(done), jnp.sum(jnp.where(done, rets, 0.0)))
 
@@ -447,8 +448,9 @@ def terminal_value(
     task: Task, config: TrainConfig, params: PyTree, progress: Any = None
 ) -> Constant | None:
     """The windows' terminal value of ``config.value_grid``: the task's grid dynamic program
-    (``diffcontrol.optimal.solve``, 41 actions per action dimension) solved with ``params``,
-    ``V_0`` only (the best return of a whole episode from each state); ``None`` without one.
+    (``diffcontrol.optimal.solve``, 41 actions per action dimension) over the training
+    horizon, solved with ``params``: ``V_0`` only (the best return of a whole episode from
+    each state), or with ``config.value_time`` every ``V_t``; ``None`` without one.
 
     Raises:
         ConfigError: the task cannot have one (``check_value_grid``).
@@ -463,8 +465,11 @@ def terminal_value(
             f"solving the windows' terminal value: the grid optimum of {config.value_grid} "
             "points per state axis"
         )
-    table = optimal.solve(task, config.value_grid, params=params)
-    return Constant(eqx.tree_at(lambda t: t.values, table, table.values[:1]))
+    horizon = config.horizon or task.episode_length
+    table = optimal.solve(task, config.value_grid, params=params, horizon=horizon)
+    if not config.value_time:
+        table = eqx.tree_at(lambda t: t.values, table, table.values[:1])
+    return Constant(table)
 
 
 def make_trainer(
