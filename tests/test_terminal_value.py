@@ -24,8 +24,10 @@ TINY = dict(batch=3, window=5, horizon=7, eval_episodes=2, hidden=(8,), target_r
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("timed", [False, True])
-def test_the_window_loss_adds_minus_the_value_of_the_state_left_per_step(timed):
+@pytest.mark.parametrize("timed, episode", [(False, 7), (True, 7), (True, 6)])
+def test_the_window_loss_adds_minus_the_value_of_the_state_left_per_step(timed, episode):
+    """``episode`` below the horizon (7) is the horizon curriculum's: V_t then counts the
+    steps of that shorter episode."""
     cfg = PENDULUM.default_config().replace(**TINY, value_grid=11, value_time=timed)
     params = PENDULUM.default_params()
     with_value = make_trainer(PENDULUM, cfg)
@@ -33,19 +35,21 @@ def test_the_window_loss_adds_minus_the_value_of_the_state_left_per_step(timed):
     ts, _ = _start(with_value, np.int32(0), params)
     times = jnp.array([0, 2, 4], jnp.int32)
     keys = jax.random.split(jax.random.PRNGKey(1), (cfg.window, cfg.batch))
-    args = (ts.controller, params, ts.env_state, times, ts.episode_return, keys)
+    args = (ts.controller, params, ts.env_state, times, ts.episode_return, keys, episode)
     loss, (carry, n_done, _) = with_value.window_loss(*args)
     plain_loss, (plain_carry, plain_done, _) = plain.window_loss(*args)
     for a, b in zip(carry, plain_carry, strict=True):  # the same simulation
         np.testing.assert_array_equal(a, b)
     assert int(n_done) == int(plain_done) == 2
-    np.testing.assert_array_equal(carry[1], [5, 0, 2])  # the second restarted at its last step
+    steps = np.asarray(carry[1])
+    # 7: the second restarts at its last step; 6: the second and third restart inside
+    np.testing.assert_array_equal(steps, [5, 0, 2] if episode == 7 else [5, 1, 3])
 
     # solved apart: the same grid over the training horizon (7 steps), 41 torques
     table = optimal.solve(PENDULUM, 11, horizon=cfg.horizon)
-    states, steps = np.asarray(carry[0]), np.asarray(carry[1]) if timed else [0, 0, 0]
-    value = np.array([float(table.value(t, x)) for t, x in zip(steps, states, strict=True)])
-    to_go = value * np.array([1.0, 0.0, 1.0])  # none for the episode that just ended
+    index = steps + (cfg.horizon - episode) if timed else np.zeros(3, int)
+    value = np.array([float(table.value(t, x)) for t, x in zip(index, np.asarray(carry[0]))])
+    to_go = value * (steps != 0)  # none for an episode that ended at the window's last step
     expected = float(plain_loss) - np.mean(to_go) / cfg.window
     assert abs(float(plain_loss) - expected) > 0.5  # the values are not negligible here
     np.testing.assert_allclose(float(loss), expected, rtol=1e-5)
@@ -68,6 +72,41 @@ def test_a_value_grid_the_task_cannot_have_is_refused_in_one_line(task, grid, ne
     assert needle in str(exc.value) and "\n" not in str(exc.value)
     if grid > 2 and grid < 1002:
         assert "leave out --value-grid" in str(exc.value)
+
+
+def test_tables_too_large_to_solve_or_hold_are_refused():
+    from diffcontrol.training import resolve_config
+    from diffcontrol.training._bptt import check_value_grid
+
+    car = dc.make("mountain-car-continuous")
+    recipe = resolve_config(car, "grid-value")
+    check_value_grid(car, recipe)  # 1,000 grids of 101 x 101: held
+    with pytest.raises(dc.ConfigError, match="held by the training program.* at most 183 points"):
+        check_value_grid(car, recipe.replace(value_grid=201))
+    check_value_grid(car, recipe.replace(value_grid=201, value_time=False))  # V_0 only held
+    long = PENDULUM.default_config().replace(value_grid=201, horizon=100_000)
+    with pytest.raises(dc.ConfigError, match="to be solved.* or a shorter horizon"):
+        check_value_grid(PENDULUM, long)
+
+
+def test_the_mountain_car_keeps_its_own_planner():
+    """Its grid would give it the grid-valued planner of a task with a state grid, whose
+    -V_0 makes waiting free there."""
+    from diffcontrol.compare._planning import planning_methods
+
+    car = dc.make("mountain-car-continuous")
+    assert car.state_grid(car.default_params()) is not None
+    assert car.loop_planner() == car.default_plan_config()
+    assert planning_methods(car) == [] and planning_methods(PENDULUM) != []
+
+
+def test_a_sweep_sets_value_time_against_the_recipes_grid(capsys, tmp_path):
+    blocker = tmp_path / "a-file"
+    blocker.write_text("x")
+    argv = ["sweep", "mountain-car-continuous", "--recipe", "grid-value", "--seeds", "0"]
+    assert main([*argv, "--set", "value_time=yes,no", "--out", str(blocker)]) == 2
+    err = capsys.readouterr().err
+    assert "is not an empty directory" in err and "needs a value_grid" not in err, err
 
 
 def test_value_time_needs_a_grid():
@@ -113,11 +152,12 @@ def test_too_many_grid_points_over_more_axes_are_refused_before_anything_is_solv
         def state_grid(self, params):
             return (GridAxis(0.0, 1.0),) * 3
 
-    check_value_grid(Cube(), 100)  # 10^6 points: allowed
-    with pytest.raises(
-        dc.ConfigError, match="8,120,601 grid points .* at most 100 points per axis"
-    ):
-        check_value_grid(Cube(), 201)
+    def config(points):  # one step: only the grid's points count
+        return PENDULUM.default_config().replace(value_grid=points, horizon=1)
+
+    check_value_grid(Cube(), config(100))  # 10^6 points: allowed
+    with pytest.raises(dc.ConfigError, match="8,120,601 grid points .* at most 100 points"):
+        check_value_grid(Cube(), config(201))
 
 
 def test_a_run_stored_before_the_setting_existed_is_still_the_same_run(tmp_path):

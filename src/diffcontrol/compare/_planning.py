@@ -35,9 +35,12 @@ DISTIL: dict = {}
 
 
 def planning_methods(task: Task) -> list[str]:
-    """``PLANNING_METHODS`` where ``task`` can take them (action bounds and a state grid)."""
+    """``PLANNING_METHODS`` where ``task`` can take them: action bounds, a state grid, and a
+    loop planner with a grid value (the task's choice: ``Task.loop_planner``; the mountain
+    car, with a grid, declines it)."""
     bounded = task.action_low is not None and task.action_high is not None
-    return list(PLANNING_METHODS) if bounded and task.state_grid(task.default_params()) else []
+    grid = task.state_grid(task.default_params()) and task.loop_planner().value_grid
+    return list(PLANNING_METHODS) if bounded and grid else []
 
 
 def run_planning(

@@ -90,8 +90,10 @@ def sweep_dir(
     seeds = parse_seeds(seeds) if isinstance(seeds, str) else seeds
     the_task = resolve(task)
     check_discrete(the_task)  # before a continuous task's config is given BPTT's settings
-    if not resume and values is not None and not isinstance(values, dict):
-        values = parse_values(values, the_task.default_config())
+    if not resume:  # the settings every member starts from; values checked against them
+        base = resolve_config(the_task, recipe, **(settings or {}))
+        if values is not None and not isinstance(values, dict):
+            values = parse_values(values, base)
     if compile_cache and not os.environ.get("DIFFCONTROL_NO_COMPILE_CACHE"):
         from .. import _jax_setup
 
@@ -100,8 +102,6 @@ def sweep_dir(
         stored = stored_sweep(out)
         base = type(the_task.default_config()).from_json(stored["config"])
         seeds, values = stored["seeds"], stored["values"]
-    else:
-        base = resolve_config(the_task, recipe, **(settings or {}))
     configs = grid(base, seeds, values)
     swept = ["seed", *(values or {})]
     doc = {

@@ -158,8 +158,8 @@ class Pendulum(Task):
             # swing-up it leads to without a long window's local minima. 12,000 updates on 64
             # simulations, no early stop, the best of 512 simulated starts kept: -134.6 to
             # -135.9 on Gymnasium's seeds 0-99 for training seeds 0-4 (docs/benchmarks.md),
-            # 1.4-2.3 % from the optimum, in about 1.6x the defaults' training time. Pendulum
-            # only (a task with a state grid); lr 1e-2 diverged late, 20-step windows did less.
+            # 1.4-2.3 % from the optimum, in about 1.6x the defaults' training time. For tasks
+            # with a state grid; lr 1e-2 diverged late, 20-step windows did less.
             "grid-value": dict(
                 updates=12_000,
                 window=10,

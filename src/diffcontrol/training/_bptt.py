@@ -88,7 +88,8 @@ class Trainer(eqx.Module):
     ``config.final_window`` for the last stage of a window curriculum: ``stages``)."""
     value: Any = eqx.field(static=True, default=None)
     """The windows' terminal value (``config.value_grid``): the grid dynamic program's
-    ``ValueTable`` holding ``V_0`` only, in a ``Constant``; or ``None``."""
+    ``ValueTable`` (``V_0`` only, or every ``V_t`` with ``config.value_time``) in a
+    ``Constant``; or ``None``."""
 
     def __check_init__(self) -> None:
         if self.config.value_grid and self.value is None:
@@ -160,7 +161,9 @@ class Trainer(eqx.Module):
             carry, (losses, done, rets) = jax.lax.scan(body, (state, time, ret), env_keys)
             loss = jnp.mean(losses)
             if self.value is not None:  # minus the return to go of the state left, per step
-                t = carry[1] if self.config.value_time else 0  # steps of the episode so far
+                # V_t with the steps the episode has left: ``horizon - t`` of its (under the
+                # curriculum, shorter) horizon, which is V at ``t + self.horizon - horizon``
+                t = carry[1] + (self.horizon - horizon) if self.config.value_time else 0
                 to_go = jnp.where(done[-1], 0.0, self.value.table.value(t, carry[0]))
                 loss = loss - to_go / losses.shape[0]
             return carry, (loss, jnp.sum(done), jnp.sum(jnp.where(done, rets, 0.0)))
@@ -413,9 +416,19 @@ class Constant:
         self.table = table
 
 
-def check_value_grid(task: Any, points: int, params: PyTree = None) -> None:
-    """Refuse a terminal value (``value_grid=points``) the task cannot have: no state grid,
-    no action bounds, or more grid points than ``MAX_VALUE_GRID`` squared; nothing solved.
+MAX_TABLE = 201 * 1001**2
+"""The most values a terminal value's solve may hold (every step's grid: ``horizon + 1``
+grids), Pendulum's 1001 x 1001 table over 200 steps: 0.8 GB."""
+MAX_HELD = 2**25
+"""The most values a training program may hold as its terminal value (``value_time``: every
+step's grid, a constant of the compiled program and of its cache entry): 128 MB."""
+
+
+def check_value_grid(task: Any, config: TrainConfig, params: PyTree = None) -> None:
+    """Refuse a terminal value (``config.value_grid``) the task cannot have: no state grid, no
+    action bounds, more grid points than ``MAX_VALUE_GRID`` squared, or a table over the
+    training horizon larger than ``MAX_TABLE`` values (``MAX_HELD`` with ``value_time``);
+    nothing solved.
 
     Raises:
         ConfigError: one line, naming the value and the way out.
@@ -426,6 +439,7 @@ def check_value_grid(task: Any, points: int, params: PyTree = None) -> None:
     from ..config import MAX_VALUE_GRID
     from ..errors import ConfigError
 
+    points = config.value_grid
     params = task.default_params() if params is None else params
     try:
         axes, sizes = optimal._check_grid(task, params, points, 2)
@@ -441,6 +455,16 @@ def check_value_grid(task: Any, points: int, params: PyTree = None) -> None:
         raise ConfigError(
             f"value_grid={points} makes {total:,} grid points over the task's {len(axes)} state "
             f"axes, more than {most:,}; choose at most {each} points per axis"
+        )
+    steps = (config.horizon or task.episode_length) + 1
+    limit, what = (MAX_HELD, "held by the training program") if config.value_time else (
+        MAX_TABLE, "solved")  # fmt: skip
+    if steps * total > limit:
+        each = int((limit / steps) ** (1 / len(axes)))
+        raise ConfigError(
+            f"value_grid={points} over {steps - 1} steps makes a table of {steps * total:,} "
+            f"values to be {what}, more than {limit:,}; choose at most {each} points per axis"
+            + (" or leave value_time off" if config.value_time else " or a shorter horizon")
         )
 
 
@@ -459,7 +483,7 @@ def terminal_value(
         return None
     from .. import optimal
 
-    check_value_grid(task, config.value_grid, params)
+    check_value_grid(task, config, params)
     if progress:
         progress(
             f"solving the windows' terminal value: the grid optimum of {config.value_grid} "
