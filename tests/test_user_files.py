@@ -18,6 +18,7 @@ PUBLIC_IMPORTS = {
     "from ..config import TrainConfig": "from diffcontrol import TrainConfig",
     "from ._base import StepLoss, Task": "from diffcontrol.tasks import StepLoss, Task",
     "from ..animation import close, scene": "from diffcontrol.animation import close, scene",
+    "from ._grid import GridAxis": "from diffcontrol.optimal import GridAxis",
 }
 
 

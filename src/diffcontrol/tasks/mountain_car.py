@@ -9,6 +9,7 @@ import jax.numpy as jnp
 from ..config import TrainConfig
 from ..systems import mountain_car as mc
 from ._base import StepLoss, Task
+from ._grid import GridAxis
 
 
 class MountainCarContinuous(Task):
@@ -91,8 +92,6 @@ class MountainCarContinuous(Task):
 
     def state_grid(self, params):
         """Position in its clip ``[min_position, max_position]``, velocity in ``+-max_speed``."""
-        from ._grid import GridAxis
-
         lo, hi = float(params.min_position), float(params.max_position)
         speed = float(params.max_speed)
         return GridAxis(lo, hi), GridAxis(-speed, speed)
