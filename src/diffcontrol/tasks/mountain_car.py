@@ -45,8 +45,10 @@ class MountainCarContinuous(Task):
       already 0 and stops asking for more. ``deficit_weight`` sets the trade-off between time
       and effort (0.05: about 165 steps to the flag; 0.03 is cheaper but at times learns
       to fall short everywhere).
-    - ``cost``: Gymnasium's own ``-reward``, for reference. Its gradient is that of the action
-      cost alone, so BPTT from it learns to stand still (a return of about 0).
+    - ``cost``: Gymnasium's own ``-reward``. Its gradient is that of the action cost alone, so
+      BPTT from it learns to stand still (a return of about 0), unless every window ends on
+      the value of the steps left, ``V_t`` of the grid optimum (``value_grid`` with
+      ``value_time``: the recipe ``grid-value``, 96-99 on Gymnasium's seeds 0-99).
     """
 
     name = "mountain-car-continuous"
