@@ -457,8 +457,8 @@ def check_value_grid(task: Any, config: TrainConfig, params: PyTree = None) -> N
             f"axes, more than {most:,}; choose at most {each} points per axis"
         )
     steps = (config.horizon or task.episode_length) + 1
-    limit, what = (MAX_HELD, "held by the training program") if config.value_time else (
-        MAX_TABLE, "solved")  # fmt: skip
+    limit = MAX_HELD if config.value_time else MAX_TABLE
+    what = "held by the training program" if config.value_time else "solved"
     if steps * total > limit:
         each = int((limit / steps) ** (1 / len(axes)))
         raise ConfigError(

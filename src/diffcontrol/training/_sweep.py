@@ -225,7 +225,6 @@ def check_members(task: Task, configs: Sequence[TrainConfig], devices: int | Non
                 f"{c.population}; a sweep is itself a population of runs"
             )
         _check_head(task, c.head)
-    for c in configs:
         if c.value_grid:
             check_value_grid(task, c)  # before any member trains
     check_devices(devices)
