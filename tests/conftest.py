@@ -8,13 +8,36 @@ import tempfile
 # A private persistent compilation cache for the whole test session, set before any
 # diffcontrol import reads it; the user's own cache is never touched by the tests.
 os.environ.setdefault("DIFFCONTROL_CACHE_DIR", tempfile.mkdtemp(prefix="diffcontrol-test-cache-"))
-# The tests' programs are small and most run a few steps: XLA's backend optimisation costs
-# more than it saves there (measured on tests/test_trebuchet_task.py and test_swingup.py,
-# 12 % less CPU time in all). It changes how fast the code runs, not what it computes (up to
-# the rounding of fused operations, which the tests' tolerances are for).
-if "xla_backend_optimization_level" not in os.environ.get("XLA_FLAGS", ""):
-    flags = os.environ.get("XLA_FLAGS", "") + " --xla_backend_optimization_level=0"
-    os.environ["XLA_FLAGS"] = flags.strip()
+# XLA's CPU compiler, for the tests' programs, which are small and most run a few steps: its
+# older fusion emitters at backend optimisation level 1 compile them fastest (paired on the
+# 2-core AMD EPYC: the whole suite 8 min 54 s -> 6 min 54 s, the fast tier on one core 85 ->
+# 66 s; docs/development.md). They compute what XLA's defaults compute up to rounding, which
+# the tests' tolerances are for (tests/test_compile_flags.py checks it); not at level 0, where
+# a swing-up population's gradients became NaN. The library's own programs keep XLA's
+# defaults; tests that compare compiled bits name their options (tests/test_startup.py). A
+# level or emitter already in XLA_FLAGS is left as it is; where this jaxlib does not know the
+# emitter flag (an unknown flag aborts the process), level 0 alone, as before.
+_FAST_COMPILE = ("--xla_backend_optimization_level=1", "--xla_cpu_use_fusion_emitters=false")
+
+
+def _xla_knows(flags: str) -> bool:
+    """Whether a JAX process with ``XLA_FLAGS=flags`` starts (XLA aborts on an unknown flag)."""
+    import subprocess
+    import sys
+
+    code = "import jax.numpy as jnp; jnp.zeros(1).block_until_ready()"
+    env = dict(os.environ, XLA_FLAGS=flags)
+    return (
+        subprocess.run([sys.executable, "-c", code], env=env, capture_output=True).returncode == 0
+    )
+
+
+_given = os.environ.get("XLA_FLAGS", "")
+if "xla_backend_optimization_level" not in _given and "xla_cpu_use_fusion_emitters" not in _given:
+    _fast = " ".join((_given, *_FAST_COMPILE)).strip()
+    # pytest-xdist's workers inherit the flags from the controller, which probes once
+    _slow = f"{_given} --xla_backend_optimization_level=0".strip()  # what ran before
+    os.environ["XLA_FLAGS"] = _fast if _xla_knows(_fast) else _slow
 # As the command line sets it (``cli.main``): Equinox's checks as NaN, not host callbacks,
 # so the ODE tasks' programs go into the session's cache too.
 os.environ.setdefault("EQX_ON_ERROR", "nan")
