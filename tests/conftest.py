@@ -14,9 +14,10 @@ os.environ.setdefault("DIFFCONTROL_CACHE_DIR", tempfile.mkdtemp(prefix="diffcont
 # 66 s; docs/development.md). They compute what XLA's defaults compute up to rounding, which
 # the tests' tolerances are for (tests/test_compile_flags.py checks it); not at level 0, where
 # a swing-up population's gradients became NaN. The library's own programs keep XLA's
-# defaults; tests that compare compiled bits name their options (tests/test_startup.py). A
-# level or emitter already in XLA_FLAGS is left as it is; where this jaxlib does not know the
-# emitter flag (an unknown flag aborts the process), level 0 alone, as before.
+# defaults; the tests that compare the bits of two compilations name their options
+# (tests/test_startup.py), and the bit-for-bit comparisons with Gymnasium run under these
+# flags. A level or emitter already in XLA_FLAGS is left as it is; where this jaxlib does not
+# know the emitter flag (an unknown flag aborts the process), level 0 alone, as before.
 _FAST_COMPILE = ("--xla_backend_optimization_level=1", "--xla_cpu_use_fusion_emitters=false")
 
 
@@ -27,9 +28,13 @@ def _xla_knows(flags: str) -> bool:
 
     code = "import jax.numpy as jnp; jnp.zeros(1).block_until_ready()"
     env = dict(os.environ, XLA_FLAGS=flags)
-    return (
-        subprocess.run([sys.executable, "-c", code], env=env, capture_output=True).returncode == 0
-    )
+    try:
+        done = subprocess.run(
+            [sys.executable, "-c", code], env=env, capture_output=True, timeout=120
+        )
+    except (OSError, subprocess.TimeoutExpired):
+        return False
+    return done.returncode == 0
 
 
 _given = os.environ.get("XLA_FLAGS", "")
@@ -49,6 +54,12 @@ from diffcontrol.cli import main  # noqa: E402
 
 # Tests that train the same small configurations share compiled programs through the cache.
 enable_compile_cache()
+
+
+def pytest_report_header(config):
+    """The compiler flags the session runs under (see above), in pytest's header."""
+    return f"XLA_FLAGS: {os.environ.get('XLA_FLAGS', '')!r}"
+
 
 TINY_CARTPOLE = [
     "--updates",

@@ -16,10 +16,16 @@ SCRIPT = """
 import json, sys
 import equinox as eqx, jax, numpy as np
 import diffcontrol
+# The last controller (keep_best=False): which evaluation point is best could hinge on a tie.
+# The swing-up's population under the horizon curriculum is where the older emitters at
+# level 0 gave non-finite gradients (docs/development.md).
+discrete = dict(updates=10, eval_every=5, batch=4, window=10, eval_episodes=4, keep_best=False)
 runs = {
-    "cartpole": dict(updates=10, eval_every=5, batch=4, window=10, eval_episodes=4),
-    "pendulum": dict(updates=10, eval_every=5, batch=4, window=10, eval_episodes=4),
-    "cartpole-swingup": dict(updates=10, eval_every=5, population=2),
+    "cartpole": discrete,
+    "pendulum": discrete,
+    "cartpole-swingup": dict(
+        updates=20, eval_every=10, population=3, curriculum_start=0.5, keep_best=False
+    ),
 }
 out = {}
 for name, settings in runs.items():
@@ -32,6 +38,12 @@ for name, settings in runs.items():
     }
 json.dump(out, sys.stdout)
 """
+
+
+WEIGHTS_ATOL = {"cartpole": 1e-5, "pendulum": 1e-5, "cartpole-swingup": 1e-2}
+"""How far apart the weights may end. The swing-up's adaptive solves over 20 updates at a rate
+of 0.05 carry rounding further: measured 1.5e-3 apart under the session's flags, 1.65e-3 at
+the level 0 the suite used before (CartPole 1.2e-7 and 1.25e-6, the Pendulum 0 and 1.9e-7)."""
 
 
 def _trained(xla_flags: str | None) -> dict:
@@ -49,8 +61,10 @@ def _trained(xla_flags: str | None) -> dict:
 def test_the_sessions_compiler_flags_agree_with_xlas_defaults_to_rounding():
     ours, users = _trained(os.environ.get("XLA_FLAGS", "")), _trained(None)
     for name in users:
+        assert np.all(np.isfinite(np.concatenate(ours[name]["weights"]))), name
+        assert np.all(np.isfinite(ours[name]["curve"])), name
         for a, b in zip(ours[name]["weights"], users[name]["weights"], strict=True):
-            np.testing.assert_allclose(a, b, rtol=1e-3, atol=1e-5, err_msg=name)
+            np.testing.assert_allclose(a, b, rtol=1e-3, atol=WEIGHTS_ATOL[name], err_msg=name)
         (loss, ret), (user_loss, user_ret) = (np.asarray(r[name]["curve"]).T for r in (ours, users))
         np.testing.assert_allclose(loss, user_loss, rtol=1e-3, atol=1e-4, err_msg=name)
         # a return is a count of steps: rounding may end one evaluation episode a step or two

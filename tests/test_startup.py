@@ -3,6 +3,7 @@ names are still there when used, and the start program's cheaper compilation kee
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 
@@ -158,7 +159,7 @@ def test_a_discrete_time_run_does_not_load_diffrax(tmp_path):
 @pytest.mark.parametrize("name", ["cartpole", "cartpole-swingup"])
 def test_the_start_program_at_its_level_gives_the_default_levels_bits(name):
     """``START_COMPILER_OPTIONS`` compiles the start faster with the same weights, resets and
-    keys as XLA's default level 2 (a discrete-time and a continuous-time trainer)."""
+    keys as XLA's default level 3 (a discrete-time and a continuous-time trainer)."""
     import jax
     import numpy as np
 
@@ -182,10 +183,12 @@ def test_the_start_program_at_its_level_gives_the_default_levels_bits(name):
             for x in jax.tree.leaves(out)
         ]
 
-    # XLA's default emitters named, since the test session compiles with the older ones
-    emitters = {"xla_cpu_use_fusion_emitters": True} if jax.default_backend() == "cpu" else {}
+    # The users' compiler: XLA's default level (3) and, where the session chose the older CPU
+    # emitters (conftest.py), the default ones named
+    chosen = "xla_cpu_use_fusion_emitters" in os.environ.get("XLA_FLAGS", "")
+    emitters = {"xla_cpu_use_fusion_emitters": True} if chosen else {}
     ours = leaves({**_driver.START_COMPILER_OPTIONS, **emitters})
-    default = leaves({"xla_backend_optimization_level": 2, **emitters})
+    default = leaves({"xla_backend_optimization_level": 3, **emitters})
     assert len(ours) == len(default) > 5
     for a, b in zip(ours, default):
         np.testing.assert_array_equal(a, b)

@@ -403,7 +403,7 @@ it runs once, and level 1 compiles it 0.5-0.6 s faster than the default level (2
 acrobot's population). On a CPU it gives the default level's bits for every built-in task
 (compared leaf by leaf; ``tests/test_startup.py`` keeps checking two of them); level 0 would
 round the uniform draws' scaling differently. Not compared on a GPU. A level named in
-``XLA_FLAGS`` (the test suite's 0) is left as it is."""
+``XLA_FLAGS`` (the test suite's) is left as it is."""
 
 
 def _first_state(kept: _KeptTrainer, seed: int, params: PyTree) -> tuple[Any, PRNGKeyArray]:
