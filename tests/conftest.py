@@ -10,7 +10,7 @@ import tempfile
 os.environ.setdefault("DIFFCONTROL_CACHE_DIR", tempfile.mkdtemp(prefix="diffcontrol-test-cache-"))
 # XLA's CPU compiler, for the tests' programs, which are small and most run a few steps: its
 # older fusion emitters at backend optimisation level 1 compile them fastest (paired on the
-# 2-core AMD EPYC: the whole suite 8 min 54 s -> 6 min 54 s, the fast tier on one core 85 ->
+# 2-core AMD EPYC: the whole suite 9 min 18 s -> 7 min 20 s, the fast tier on one core 85 ->
 # 66 s; docs/development.md). They compute what XLA's defaults compute up to rounding, which
 # the tests' tolerances are for (tests/test_compile_flags.py checks it); not at level 0, where
 # a swing-up population's gradients became NaN. The library's own programs keep XLA's
