@@ -67,6 +67,6 @@ def test_the_sessions_compiler_flags_agree_with_xlas_defaults_to_rounding():
             np.testing.assert_allclose(a, b, rtol=1e-3, atol=WEIGHTS_ATOL[name], err_msg=name)
         (loss, ret), (user_loss, user_ret) = (np.asarray(r[name]["curve"]).T for r in (ours, users))
         np.testing.assert_allclose(loss, user_loss, rtol=1e-3, atol=1e-4, err_msg=name)
-        # a return is a count of steps: rounding may end one evaluation episode a step or two
-        # apart (XLA's level 0 did, 382.25 against 381.75 for CartPole's mean of 4 episodes)
+        # a return is a count of steps: rounding may move an evaluation episode's end by a step
+        # (XLA's level 0 did: 382.25 against 381.75, two steps in CartPole's 4 episodes)
         np.testing.assert_allclose(ret, user_ret, rtol=1e-4, atol=1.0, err_msg=name)
