@@ -65,7 +65,9 @@ class Acrobot(Task):
     rounds: the rollout teacher itself scores -64 to -67, but its labels change under 0.01 rad
     perturbations and no network learns them (held-out agreement about 50 %, as the
     controller's own), and neither does a fit weighted by how much the choice matters
-    (cost-sensitive classification); figures in docs/benchmarks.md, "Acrobot".
+    (cost-sensitive classification). Evolution strategies on Gymnasium's return itself, after
+    BPTT, come closest but not to the bar on every seed, at four times the time; figures in
+    docs/benchmarks.md, "Acrobot".
 
     Note that the power term pays for swinging on rather than finishing (a restarted episode
     gains little power), which the goal term only offsets within ``s`` of the line: the
