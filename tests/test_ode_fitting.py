@@ -174,10 +174,15 @@ def test_cli_fit_swingup_end_to_end(tmp_path, data, capsys):
         "hybrid",
         "--out",
         str(out),
+        # the settings of the hybrid_fit fixture, on the same two episodes: the same programs
         "--window",
-        "3",
-        "--steps",
         "5",
+        "--steps",
+        "60",
+        "--learning-rate",
+        "0.01",
+        "--hidden",
+        "16,16",
         "--holdout",
         "0.34",
         "--quiet",
@@ -200,7 +205,8 @@ def test_cli_fit_swingup_end_to_end(tmp_path, data, capsys):
     # train through the fitted hybrid, evaluated on the system the data came from
     run = tmp_path / "run"
     train = ["train", "cartpole-swingup-friction", "--model", str(out), "--out", str(run)]
-    tiny = ["--updates", "2", "--eval-every", "1", "--population", "1", "--no-animation"]
+    tiny = ["--updates", "4", "--eval-every", "2", "--population", "1", "--no-animation"]
+    tiny += ["--horizon-s", "1", "--saves", "10"]  # test_training_through_the_fitted_model's
     assert main([*train, *tiny, "--quiet"]) == 0
     metrics = json.loads((run / "metrics.json").read_text())
     assert metrics["model"]["kind"] == "hybrid"

@@ -43,6 +43,7 @@ def test_closed_loop_gradient_in_the_value_weights_matches_finite_differences(gr
         starts = jnp.array([[0.4, -0.5], [-0.7, 0.3]])
         params, static = eqx.partition(value, eqx.is_inexact_array)
 
+        @eqx.filter_jit  # one program for the gradient, one for both differences
         def loss(p):
             net = eqx.combine(p, static)
             p_ = eqx.tree_at(lambda q: q.problem.terminal_cost, planner, net)
@@ -124,9 +125,10 @@ def test_a_warm_policy_is_one_more_start_and_only_the_unrolled_gradient_reaches_
     solver = mpc.ILQR(iterations=1)
     plain = mpc.make_planner(task, solver, 6)
     with_policy = mpc.make_planner(task, solver, 6, warm_policy=policy)
-    _, info = with_policy.plan(x, warm)
-    _, alone = plain.plan(x, warm)
-    _, from_proposal = plain.plan(x, with_policy.proposal(x))
+    plan = eqx.filter_jit(lambda planner, guess: planner.plan(x, guess))  # not op by op
+    _, info = plan(with_policy, warm)
+    _, alone = plan(plain, warm)
+    _, from_proposal = plan(plain, eqx.filter_jit(with_policy.proposal)(x))
     assert float(from_proposal.cost) < float(alone.cost) - 1.0  # the proposal is the better
     assert float(info.cost) == pytest.approx(float(from_proposal.cost))
 
@@ -135,7 +137,7 @@ def test_a_warm_policy_is_one_more_start_and_only_the_unrolled_gradient_reaches_
         return planner.plan(x, warm)[0].sum()
 
     for gradient, nonzero in (("unroll", True), ("implicit", False)):
-        g = eqx.filter_grad(lambda p, gr=gradient: plan_sum(p, gr))(policy)
+        g = eqx.filter_jit(eqx.filter_grad(lambda p, gr=gradient: plan_sum(p, gr)))(policy)
         norm = float(sum(jnp.sum(leaf**2) for leaf in jax.tree.leaves(_weights(g))))
         assert (norm > 0) == nonzero, (gradient, norm)
 
