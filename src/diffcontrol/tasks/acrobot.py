@@ -66,7 +66,7 @@ class Acrobot(Task):
     perturbations and no network learns them (held-out agreement about 50 %, as the
     controller's own), and neither does a fit weighted by how much the choice matters
     (cost-sensitive classification). Evolution strategies on Gymnasium's return itself, after
-    BPTT, come closest but not to the bar on every seed, at four times the time; figures in
+    BPTT, come closest but not to the bar on every seed, at about five times the time; figures in
     docs/benchmarks.md, "Acrobot".
 
     Note that the power term pays for swinging on rather than finishing (a restarted episode
