@@ -130,7 +130,8 @@ def test_a_warm_policy_is_one_more_start_and_only_the_unrolled_gradient_reaches_
     _, alone = plan(plain, warm)
     _, from_proposal = plan(plain, eqx.filter_jit(with_policy.proposal)(x))
     assert float(from_proposal.cost) < float(alone.cost) - 1.0  # the proposal is the better
-    assert float(info.cost) == pytest.approx(float(from_proposal.cost))
+    # the same solve from the same start, in two programs: equal up to float32 fusion's rounding
+    assert float(info.cost) == pytest.approx(float(from_proposal.cost), rel=1e-5)
 
     def plan_sum(p, gradient):  # most actions are at a bound; the last is free
         planner = mpc.make_planner(task, solver, 6, warm_policy=p, gradient=gradient)
