@@ -34,7 +34,6 @@ import sys
 import time
 from pathlib import Path
 
-import diffrax
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -51,7 +50,6 @@ from diffcontrol.tasks.fitted_swingup import (  # noqa: E402
     ACTION_COLUMNS,
     STATE_COLUMNS,
     FittedSwingUp,
-    SwingUpModel,
 )
 
 TASK = "cartpole-swingup-friction"
@@ -62,24 +60,7 @@ def record_controller(task, params, controller, duration_s: float) -> Trajectory
     """One episode of the real system from the hanging start with ``controller``'s force held
     over each ``DT_S`` (float64 Tsit5 at 1e-9, as ``record_swingup`` solves)."""
     with jax.enable_x64(True):
-        p = jax.tree.map(lambda x: jnp.asarray(x, jnp.float64), params)
-        model = SwingUpModel("params", p)
-
-        @jax.jit
-        def advance(y, f):
-            term = diffrax.ODETerm(lambda t, y, f: model.vector_field(t, y, lambda t, s: f)[:4])
-            sol = diffrax.diffeqsolve(
-                term,
-                diffrax.Tsit5(),
-                0.0,
-                DT_S,
-                None,
-                y,
-                args=f,
-                stepsize_controller=diffrax.PIDController(rtol=1e-9, atol=1e-9),
-                max_steps=10_000,
-            )
-            return sol.ys[-1]
+        advance = jax.jit(of.held_force_step(params, DT_S))
 
         y = jnp.asarray(task.initial_state(params), jnp.float64)[:4]
         ys, fs = [], []

@@ -288,6 +288,32 @@ def state_error(pred: Array, target: Array) -> Array:
     return err.at[..., 2].set(cp.wrap_angle(err[..., 2]))
 
 
+def held_force_step(params: cp.SwingUpParams, dt_s: float):
+    """``advance(y, f)``: the state ``y`` (x, x_dot, theta, theta_dot) of the system with
+    ``params`` after ``dt_s`` seconds with the force ``f`` held, solved with Tsit5 at rtol
+    1e-9 / atol 1e-9 in float64 (call it, and build it, under ``jax.enable_x64(True)``): how
+    the "real" system is recorded."""
+    p = jax.tree.map(lambda x: jnp.asarray(x, jnp.float64), params)
+    model = SwingUpModel("params", p)
+
+    def advance(y, f):
+        term = diffrax.ODETerm(lambda t, y, f: model.vector_field(t, y, lambda t, s: f)[:4])
+        sol = diffrax.diffeqsolve(
+            term,
+            diffrax.Tsit5(),
+            0.0,
+            dt_s,
+            None,
+            y,
+            args=f,
+            stepsize_controller=diffrax.PIDController(rtol=1e-9, atol=1e-9),
+            max_steps=10_000,
+        )
+        return sol.ys[-1]
+
+    return advance
+
+
 def record_swingup(
     params: cp.SwingUpParams,
     episodes: int,
@@ -326,23 +352,7 @@ def record_swingup(
     steps = int(round(duration_s / dt_s))
     hold = max(1, int(round(hold_s / dt_s)))
     with jax.enable_x64(True):
-        p = jax.tree.map(lambda x: jnp.asarray(x, jnp.float64), params)
-        model = SwingUpModel("params", p)
-
-        def advance(y, f):
-            term = diffrax.ODETerm(lambda t, y, f: model.vector_field(t, y, lambda t, s: f)[:4])
-            sol = diffrax.diffeqsolve(
-                term,
-                diffrax.Tsit5(),
-                0.0,
-                dt_s,
-                None,
-                y,
-                args=f,
-                stepsize_controller=diffrax.PIDController(rtol=1e-9, atol=1e-9),
-                max_steps=10_000,
-            )
-            return sol.ys[-1]
+        advance = held_force_step(params, dt_s)
 
         @jax.jit
         def episode(key):
