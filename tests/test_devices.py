@@ -25,7 +25,9 @@ TINY = dict(updates=20, eval_every=10, batch=4, window=10, eval_episodes=4, hidd
 
 
 def _run_with_devices(script: str, devices: int = 8) -> None:
-    env = {**os.environ, "XLA_FLAGS": f"--xla_force_host_platform_device_count={devices}"}
+    # the session's compiler flags (conftest.py) and the simulated devices
+    flags = f"{os.environ.get('XLA_FLAGS', '')} --xla_force_host_platform_device_count={devices}"
+    env = {**os.environ, "XLA_FLAGS": flags.strip()}
     proc = subprocess.run(
         [sys.executable, "-c", textwrap.dedent(script)], env=env, capture_output=True, text=True
     )
