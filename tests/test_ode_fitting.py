@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 import json
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -112,6 +113,15 @@ def test_training_through_the_fitted_model(hybrid_fit):
     result = diffcontrol.train(wrapped, config)
     assert result.metrics["updates"] == 4
     assert np.isfinite(result.metrics["final_eval_return"])
+    # A refit (here: three times the network's output) is an argument of the same programs:
+    # its training compiles nothing and runs through its own network, not the first one's.
+    model = hybrid_fit.model
+    tripled = 3 * np.asarray(model.correction.out_scale)  # float64, as fitted
+    refit = eqx.tree_at(lambda m: m.correction.out_scale, model, tripled)
+    again = diffcontrol.train(FittedSwingUp(task, refit), config)
+    assert again.metrics["timings"]["compile_programs"] == 0
+    before, after = (r.curve[0]["eval_loss"] for r in (result, again))  # the same controller
+    assert np.isfinite(after) and abs(after - before) > 1e-3 * abs(before)
 
 
 def test_too_little_data_says_how_much_is_needed(data):

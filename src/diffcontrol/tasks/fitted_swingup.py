@@ -139,13 +139,30 @@ class SwingUpModel(eqx.Module):
         return jnp.stack([y[1], x_acc, y[3], theta_acc, force, power])
 
 
+class FittedSwingUpParams(cp.SwingUpParams):
+    """The parameters a ``FittedSwingUp`` with a network passes to its compiled programs: the
+    model's physical parameters, as ``SwingUpParams``, and its network (``correction``).
+
+    The network travels as an argument, not as constants baked into the programs, so a refit
+    (the next round of a loop, the next seed) runs the programs already compiled for a model
+    of the same shape instead of compiling its own.
+    """
+
+    correction: Any = None
+    """The model's network (``SwingUpModel.correction``)."""
+
+
+_PHYSICAL = tuple(f.name for f in dataclasses.fields(cp.SwingUpParams))
+
+
 class FittedSwingUp(CartPoleSwingUp):
     """A swing-up task whose simulator is a fitted ``SwingUpModel`` (module docstring).
 
     Everything but the vector field is the wrapped task's: losses, horizon, training
-    configuration, controller. The physical parameters that ``train`` passes (and
-    ``config.params`` overrides) are the model's. The model's weights are constants of the
-    training (only the controller is trained).
+    configuration, controller. The parameters that ``train`` passes (and ``config.params``
+    overrides) are the model's: its physical ones and, for a model with a network, the
+    network (``FittedSwingUpParams``), an argument of the compiled programs that only the
+    controller's training does not change.
     """
 
     def __init__(self, task: CartPoleSwingUp, model: SwingUpModel):
@@ -160,7 +177,11 @@ class FittedSwingUp(CartPoleSwingUp):
 
     def default_params(self) -> cp.SwingUpParams:
         # plain floats, as every task's: the trainer makes them arrays of its own precision
-        return jax.tree.map(float, self.model.params)
+        physical = jax.tree.map(float, self.model.params)
+        if self.model.correction is None:
+            return physical
+        values = {n: getattr(physical, n) for n in _PHYSICAL}
+        return FittedSwingUpParams(**values, correction=self.model.correction)
 
     def default_config(self):
         return self.base.default_config()
@@ -170,10 +191,26 @@ class FittedSwingUp(CartPoleSwingUp):
 
     def vector_field(self, t, y, args):
         params, force_fn = args
-        # the model's weights in the solve's precision (fitted in float64, trained in float32)
-        model = jax.tree.map(lambda a: jnp.asarray(a, y.dtype), self.model)
-        model = eqx.tree_at(lambda m: m.params, model, params)
+        # the network passed in ``params`` (default_params), or this model's own where the
+        # caller passed physical parameters only
+        correction = getattr(params, "correction", None)
+        if correction is None:
+            correction = self.model.correction
+        if correction is not None:  # in the solve's precision (fitted in float64)
+            correction = jax.tree.map(lambda a: jnp.asarray(a, y.dtype), correction)
+        physical = cp.SwingUpParams(**{n: getattr(params, n) for n in _PHYSICAL})
+        model = SwingUpModel(self.model.model_type, physical, correction)
         return model.vector_field(t, y, force_fn)
+
+    def _programs_key(self) -> tuple[CartPoleSwingUp, tuple]:
+        """What this task's compiled programs depend on, for ``training._driver`` to reuse
+        the trainer of an equal key: the wrapped task, and the kind of model and the shapes
+        of its network, not its weights or physical parameters, which are arguments
+        (``default_params``)."""
+        leaves = jax.tree.leaves(self.model.correction)
+        shapes = tuple((np.shape(x), np.asarray(x).dtype.str) for x in leaves)
+        structure = jax.tree.structure(self.model.correction)
+        return self.base, (self.name, self.losses, self.model.model_type, structure, shapes)
 
     def __repr__(self) -> str:
         return f"<task {self.name}>"

@@ -510,14 +510,23 @@ def _kept_trainer(
     ours = type(task).__module__.startswith("diffcontrol.")
     builtin = ours and step_loss is None and trajectory_loss is None
     fingerprint = _fingerprint(task) if builtin else None
+    # A built-in wrapper whose programs read nothing of it but the task it wraps and what
+    # ``_programs_key`` names (``FittedSwingUp``: its network is a parameter) shares its
+    # trainer with every equal wrapper of that task (kept alive by the kept wrapper).
+    shared = getattr(task, "_programs_key", None) if builtin else None
+    if shared:
+        inner, extra = shared()
+        inner_ours = type(inner).__module__.startswith("diffcontrol.")
+        inner_print = _fingerprint(inner) if inner_ours else None
+        fingerprint = inner_print and ("shared", id(inner), type(inner), inner_print, extra)
     fields = tuple(  # NaN (target_return's default) equal to itself, on every Python
         "nan" if isinstance(v, float) and math.isnan(v) else v for v in dataclasses.astuple(general)
     )
     if not _hashable(fields):
         fingerprint = None
-    key = (id(task), type(task), fingerprint, type(general), fields)
+    key = (None if shared else id(task), type(task), fingerprint, type(general), fields)
     kept = _TRAINERS.pop(key, None) if fingerprint is not None else None
-    if kept is None or kept.task is not task:
+    if kept is None or (kept.task is not task and not shared):
         if isinstance(task, ContinuousTask):
             trainer = make_ode_trainer(task, general, trajectory_loss)
         else:
