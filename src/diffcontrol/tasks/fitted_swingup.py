@@ -210,7 +210,7 @@ class FittedSwingUp(CartPoleSwingUp):
         leaves = jax.tree.leaves(self.model.correction)
         shapes = tuple((np.shape(x), np.asarray(x).dtype.str) for x in leaves)
         structure = jax.tree.structure(self.model.correction)
-        return self.base, (self.name, self.losses, self.model.model_type, structure, shapes)
+        return self.base, (self.losses, self.model.model_type, structure, shapes)
 
     def __repr__(self) -> str:
         return f"<task {self.name}>"
