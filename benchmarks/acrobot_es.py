@@ -72,6 +72,7 @@ DEFAULTS = dict(
     alpha=0.0,  # weight of the BPTT pump-loss direction (0: plain ES)
     window=40,
     bptt_batch=32,
+    cap=500,  # steps of a fitness episode at most (its return then -cap); Gymnasium's 500
 )
 
 
@@ -112,9 +113,9 @@ def main() -> None:
     def with_theta(ctrl, unravel, theta):
         return eqx.tree_at(lambda c: c.layers, ctrl, unravel(theta))
 
-    def returns(ctrl, unravel, thetas, starts):
+    def returns(ctrl, unravel, thetas, starts, limit=horizon):
         """Gymnasium returns (M, N) of the controllers ``thetas`` (M, D) from ``starts`` (N, 4),
-        stopping when every episode is done."""
+        stopping when every episode is done or after ``limit`` steps."""
         m, n = thetas.shape[0], starts.shape[0]
 
         def act(theta, s):
@@ -131,7 +132,7 @@ def main() -> None:
 
         s0 = jnp.broadcast_to(starts, (m, n, 4))
         init = (jnp.int32(0), s0, jnp.zeros((m, n), bool), jnp.zeros((m, n)))
-        _, _, _, ret = jax.lax.while_loop(lambda c: (c[0] < horizon) & ~jnp.all(c[2]), body, init)
+        _, _, _, ret = jax.lax.while_loop(lambda c: (c[0] < limit) & ~jnp.all(c[2]), body, init)
         return ret
 
     @eqx.filter_jit
@@ -173,12 +174,12 @@ def main() -> None:
 
     @eqx.filter_jit
     def es_iter(ctrl, unravel, theta, opt_state, key, scale, sigma, pairs, nstarts, lr, wd,
-                alpha, batch, window):  # fmt: skip
+                alpha, batch, window, cap):  # fmt: skip
         ke, ks, kb = jax.random.split(key, 3)
         eps = jax.random.normal(ke, (pairs, theta.shape[0])) * scale
         starts = jax.vmap(lambda k: task.reset(k, params))(jax.random.split(ks, nstarts))
         thetas = jnp.concatenate([theta + sigma * eps, theta - sigma * eps])
-        fit = returns(ctrl, unravel, thetas, starts).mean(1)  # (2P,)
+        fit = returns(ctrl, unravel, thetas, starts, cap).mean(1)  # (2P,)
         ranks = jnp.argsort(jnp.argsort(fit)).astype(jnp.float32)
         shaped = ranks / (2 * pairs - 1) - 0.5
         g = (shaped[:pairs] - shaped[pairs:]) @ (eps / scale) / (2 * pairs * sigma)
@@ -225,7 +226,7 @@ def main() -> None:
                 theta, opt_state, fmean, fmax = es_iter(
                     bptt, unravel, theta, opt_state, k, scale, cfg["sigma"], cfg["pairs"],
                     cfg["starts"], cfg["lr"], cfg["wd"], cfg["alpha"], cfg["bptt_batch"],
-                    cfg["window"],
+                    cfg["window"], cfg["cap"],
                 )  # fmt: skip
                 it += 1
                 if it % cfg["every"] == 0:
