@@ -470,14 +470,19 @@ def _fingerprint(task: Any) -> tuple | None:
         own = tuple(sorted((k, frozen(v)) for k, v in vars(task).items()))
     except (TypeError, ValueError):
         return None
-    inherited = tuple(
-        (k, v if isinstance(v, _PLAIN + (tuple,)) else id(v))  # a method replaced: its id
+    return own, _class_fingerprint(task)
+
+
+def _class_fingerprint(task: Any) -> tuple:
+    """The plain-valued attributes of the task's classes, and the identity of their methods
+    (a method replaced changes it)."""
+    return tuple(
+        (k, v if isinstance(v, _PLAIN + (tuple,)) else id(v))
         for cls in type(task).__mro__
         for k, v in sorted(vars(cls).items())
         if not k.startswith("__")
         and (isinstance(v, _PLAIN + (tuple,)) and _hashable(v) or callable(v))
     )
-    return own, inherited
 
 
 def _hashable(value: Any) -> bool:
@@ -510,15 +515,22 @@ def _kept_trainer(
     ours = type(task).__module__.startswith("diffcontrol.")
     builtin = ours and step_loss is None and trajectory_loss is None
     fingerprint = _fingerprint(task) if builtin else None
-    # A built-in wrapper whose programs read nothing of it but the task it wraps and what
-    # ``_programs_key`` names (``FittedSwingUp``: its network is a parameter) shares its
-    # trainer with every equal wrapper of that task (kept alive by the kept wrapper).
+    # A built-in wrapper whose programs read nothing of its own but its class, the task it
+    # wraps and what ``_programs_key`` names (``FittedSwingUp``: its network is a parameter)
+    # shares its trainer with every equal wrapper of that task (kept alive by the kept one).
     shared = getattr(task, "_programs_key", None) if builtin else None
     if shared:
         inner, extra = shared()
         inner_ours = type(inner).__module__.startswith("diffcontrol.")
         inner_print = _fingerprint(inner) if inner_ours else None
-        fingerprint = inner_print and ("shared", id(inner), type(inner), inner_print, extra)
+        fingerprint = inner_print and (
+            "shared",
+            _class_fingerprint(task),
+            id(inner),
+            type(inner),
+            inner_print,
+            extra,
+        )
     fields = tuple(  # NaN (target_return's default) equal to itself, on every Python
         "nan" if isinstance(v, float) and math.isnan(v) else v for v in dataclasses.astuple(general)
     )
