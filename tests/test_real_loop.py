@@ -236,9 +236,10 @@ def test_compare_real_fits_ensembles_for_the_network_models_only(tmp_path):
     out = tmp_path / "real"
     kw = dict(seeds=1, max_rounds=1, steps={"params": 150, "hybrid": 250}, updates=2)
     doc = run_real_comparison(
-        "cartpole", out, models=["params", "hybrid"], members=2, final_episodes=1, **kw
-    )
-    assert doc["members"] == 2
+        "cartpole", out, models=["params", "hybrid"], members=2, final_episodes=1,
+        fit_steps=50, **kw
+    )  # fmt: skip
+    assert doc["members"] == 2 and doc["fit_steps"] == 50
     loops = out / "loops"
     hybrid = json.loads((loops / "hybrid-seed0" / "loop.json").read_text())["settings"]
     assert (
@@ -248,6 +249,7 @@ def test_compare_real_fits_ensembles_for_the_network_models_only(tmp_path):
     )  # a grey box has no network
     fitted = json.loads((loops / "hybrid-seed0" / "round_1" / "fit" / "fitted.json").read_text())
     assert len(fitted["network"]["members"]) == 2
+    assert len(fitted["fit"]["loss_history"]) == 50  # the fit took the steps asked for
 
 
 class _QuickPlanPendulum(Pendulum):

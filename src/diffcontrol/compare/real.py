@@ -62,6 +62,7 @@ def run_real_comparison(
     controllers: tuple[str, ...] = ("train",),
     explore_noise: float = 0.1,
     updates: int | None = None,
+    fit_steps: int | None = None,
     final_episodes: int = 100,
     eval_seed: int = 1000,
     rl_results: str | Path | None = None,
@@ -92,6 +93,7 @@ def run_real_comparison(
         explore_noise: action noise while a controller records (``identify.loop``).
         updates: gradient updates of each round's training (default the task's, which stops
             early at its target return).
+        fit_steps: Adam steps of each round's fit (default the model's: ``LoopConfig``).
         final_episodes: evaluation episodes of each round's controller (not counted).
         eval_seed: their first reset seed (``diffcontrol compare``'s: 1000).
         rl_results: a ``diffcontrol compare`` result (its ``comparison.json``, or the
@@ -140,6 +142,7 @@ def run_real_comparison(
         "updates": updates,
         # new settings only where not the default, so a comparison before them still resumes
         **({"members": members} if members > 1 else {}),
+        **({"fit_steps": fit_steps} if fit_steps is not None else {}),
         **({"controllers": controllers} if controllers != ["train"] else {}),
         "final_episodes": final_episodes,
         "eval_seed": eval_seed,
@@ -178,6 +181,7 @@ def run_real_comparison(
                     start=start if model != "neural" else {},
                     explore_noise=explore_noise,
                     updates=updates,
+                    fit_steps=fit_steps,
                     members=members if model != "params" else 1,
                     controller=controller,
                 )
