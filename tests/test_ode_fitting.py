@@ -122,6 +122,13 @@ def test_training_through_the_fitted_model(hybrid_fit):
     assert again.metrics["timings"]["compile_programs"] == 0
     before, after = (r.curve[0]["eval_loss"] for r in (result, again))  # the same controller
     assert np.isfinite(after) and abs(after - before) > 1e-3 * abs(before)
+    # an attribute set on the wrapper is read by the programs: its own trainer, its own head
+    bounded = FittedSwingUp(task, refit)
+    bounded.action_head, bounded.action_low, bounded.action_high = "tanh", (-1.0,), (1.0,)
+    assert diffcontrol.train(bounded, config).controller.head == "tanh"
+    # the network is the fit's, not a parameter to set
+    with pytest.raises(ConfigError, match="correction"):
+        diffcontrol.train(wrapped, config.replace(params=(("correction", 1.0),)))
 
 
 def test_too_little_data_says_how_much_is_needed(data):

@@ -451,10 +451,11 @@ TRAINERS_KEPT = 8
 _PLAIN = (bool, int, float, complex, str, bytes, type(None))
 
 
-def _fingerprint(task: Any) -> tuple | None:
-    """What the task's programs could depend on beyond its code: its own attributes and the
-    plain-valued attributes of its classes (arrays by their bytes). ``None`` (keep nothing)
-    if an attribute is neither plain, a tuple of plain values nor an array."""
+def _fingerprint(task: Any, covered: tuple[str, ...] = ()) -> tuple | None:
+    """What the task's programs could depend on beyond its code: its own attributes (but
+    ``covered``, which the caller keys otherwise) and the plain-valued attributes of its
+    classes (arrays by their bytes). ``None`` (keep nothing) if an attribute is neither plain,
+    a tuple of plain values nor an array."""
 
     def frozen(value: Any) -> Any:
         if isinstance(value, _PLAIN):
@@ -467,7 +468,7 @@ def _fingerprint(task: Any) -> tuple | None:
         raise TypeError
 
     try:
-        own = tuple(sorted((k, frozen(v)) for k, v in vars(task).items()))
+        own = tuple(sorted((k, frozen(v)) for k, v in vars(task).items() if k not in covered))
     except (TypeError, ValueError):
         return None
     return own, _class_fingerprint(task)
@@ -515,22 +516,17 @@ def _kept_trainer(
     ours = type(task).__module__.startswith("diffcontrol.")
     builtin = ours and step_loss is None and trajectory_loss is None
     fingerprint = _fingerprint(task) if builtin else None
-    # A built-in wrapper whose programs read nothing of its own but its class, the task it
-    # wraps and what ``_programs_key`` names (``FittedSwingUp``: its network is a parameter)
-    # shares its trainer with every equal wrapper of that task (kept alive by the kept one).
+    # A built-in wrapper whose programs read of it only its plain attributes, its classes,
+    # the task it wraps and what ``_programs_key`` names (``FittedSwingUp``: its network is a
+    # parameter) shares its trainer with every equal wrapper of that task (kept alive by the
+    # kept one); ``covered``: its attributes that the key stands for.
     shared = getattr(task, "_programs_key", None) if builtin else None
     if shared:
-        inner, extra = shared()
+        inner, extra, covered = shared()
         inner_ours = type(inner).__module__.startswith("diffcontrol.")
-        inner_print = _fingerprint(inner) if inner_ours else None
-        fingerprint = inner_print and (
-            "shared",
-            _class_fingerprint(task),
-            id(inner),
-            type(inner),
-            inner_print,
-            extra,
-        )
+        own = _fingerprint(task, covered)
+        inner_print = _fingerprint(inner) if inner_ours and own else None
+        fingerprint = inner_print and ("shared", own, id(inner), type(inner), inner_print, extra)
     fields = tuple(  # NaN (target_return's default) equal to itself, on every Python
         "nan" if isinstance(v, float) and math.isnan(v) else v for v in dataclasses.astuple(general)
     )
