@@ -144,8 +144,8 @@ class FittedSwingUpParams(cp.SwingUpParams):
     model's physical parameters, as ``SwingUpParams``, and its network (``correction``).
 
     The network travels as an argument, not as constants baked into the programs, so a refit
-    (the next round of a loop, the next seed) runs the programs already compiled for a model
-    of the same shape instead of compiling its own.
+    (the next fit of a benchmark's round or seed) runs the programs already compiled for a
+    model of the same shape instead of compiling its own.
     """
 
     correction: Any = None
@@ -208,7 +208,8 @@ class FittedSwingUp(CartPoleSwingUp):
         """What this task's compiled programs depend on besides its plain attributes, for
         ``training._driver`` to reuse the trainer of an equal key: the wrapped task, and the
         kind of model and the shapes of its network, not its weights or physical parameters,
-        which are arguments (``default_params``); and the attributes that stands for."""
+        which are arguments (``default_params``); and the names of the attributes those
+        stand for."""
         leaves = jax.tree.leaves(self.model.correction)
         shapes = tuple((np.shape(x), np.asarray(x).dtype.str) for x in leaves)
         structure = jax.tree.structure(self.model.correction)
