@@ -49,10 +49,11 @@ def test_several_starts_train_and_evaluate_on_the_reset_distribution():
     params = task_params(TASK)
     y0s = trainer.starts_of(jax.random.PRNGKey(0), params)
     assert y0s.shape == (3, 2) and not np.allclose(y0s[0], y0s[1])
-    a = trainer.evaluate(_one(result.controller), params, jax.random.PRNGKey(0))
-    b = trainer.evaluate(_one(result.controller), params, jax.random.PRNGKey(1))
+    evaluate = jax.jit(trainer.evaluate)  # one program, not the solve's operations one by one
+    a = evaluate(_one(result.controller), params, jax.random.PRNGKey(0))
+    b = evaluate(_one(result.controller), params, jax.random.PRNGKey(1))
     assert np.isfinite(a).all() and not np.allclose(a, b)  # the starts come from the key
-    loss, _ = trainer.member_loss(result.controller, params, jnp.asarray(4.0), y0s)
+    loss, _ = jax.jit(trainer.member_loss)(result.controller, params, jnp.asarray(4.0), y0s)
     assert float(-a[0]) == pytest.approx(float(loss), rel=1e-5)
 
 
