@@ -18,7 +18,13 @@ os.environ.setdefault("DIFFCONTROL_CACHE_DIR", tempfile.mkdtemp(prefix="diffcont
 # (tests/test_startup.py), and the bit-for-bit comparisons with Gymnasium run under these
 # flags. A level or emitter already in XLA_FLAGS is left as it is; where this jaxlib does not
 # know the emitter flag (an unknown flag aborts the process), level 0 alone, as before.
-_FAST_COMPILE = ("--xla_backend_optimization_level=1", "--xla_cpu_use_fusion_emitters=false")
+# One LLVM module per program, not XLA's 32 parts compiled on a thread pool: two workers on two
+# cores gain nothing from the pool, and splitting costs (the same bits: docs/development.md).
+_FAST_COMPILE = (
+    "--xla_backend_optimization_level=1",
+    "--xla_cpu_use_fusion_emitters=false",
+    "--xla_cpu_parallel_codegen_split_count=1",
+)
 
 
 def _xla_knows(flags: str) -> bool:
