@@ -17,7 +17,7 @@ os.environ.setdefault("DIFFCONTROL_CACHE_DIR", tempfile.mkdtemp(prefix="diffcont
 # defaults; the tests that compare the bits of two compilations name their options
 # (tests/test_startup.py), and the bit-for-bit comparisons with Gymnasium run under these
 # flags. A level or emitter already in XLA_FLAGS is left as it is; where this jaxlib does not
-# know the emitter flag (an unknown flag aborts the process), level 0 alone, as before.
+# know a flag (an unknown flag aborts the process), fewer of them (below).
 # One LLVM module per program, not XLA's 32 parts compiled on a thread pool: two workers on two
 # cores gain nothing from the pool, and splitting costs (the same bits: docs/development.md).
 _FAST_COMPILE = (
@@ -45,10 +45,11 @@ def _xla_knows(flags: str) -> bool:
 
 _given = os.environ.get("XLA_FLAGS", "")
 if "xla_backend_optimization_level" not in _given and "xla_cpu_use_fusion_emitters" not in _given:
-    _fast = " ".join((_given, *_FAST_COMPILE)).strip()
-    # pytest-xdist's workers inherit the flags from the controller, which probes once
-    _slow = f"{_given} --xla_backend_optimization_level=0".strip()  # what ran before
-    os.environ["XLA_FLAGS"] = _fast if _xla_knows(_fast) else _slow
+    # pytest-xdist's workers inherit the flags from the controller, which probes them: all
+    # three, else without the split, else level 0 alone (what ran before)
+    _tries = (_FAST_COMPILE, _FAST_COMPILE[:2], ("--xla_backend_optimization_level=0",))
+    _flags = [" ".join((_given, *t)).strip() for t in _tries]
+    os.environ["XLA_FLAGS"] = next((f for f in _flags[:2] if _xla_knows(f)), _flags[2])
 # As the command line sets it (``cli.main``): Equinox's checks as NaN, not host callbacks,
 # so the ODE tasks' programs go into the session's cache too.
 os.environ.setdefault("EQX_ON_ERROR", "nan")
