@@ -13,13 +13,15 @@ from pathlib import Path
 
 
 def machine() -> dict:
-    """The library's description of the machine (CPU, versions), the cores used and the date."""
+    """The library's description of the machine (CPU, versions), the cores used, the date and
+    the XLA_FLAGS the run was given."""
     from diffcontrol.compare import machine as describe
 
     return {
         **describe(),
         "cores_used": 1 if shutil.which("taskset") else os.cpu_count(),
         "date": dt.date.today().isoformat(),
+        "xla_flags": os.environ.get("XLA_FLAGS", ""),  # XLA's compiler settings, if any
     }
 
 
