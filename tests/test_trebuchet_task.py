@@ -132,6 +132,20 @@ def test_cli_train_writes_everything_and_load_aims(trebuchet_run):
 
 
 @pytest.mark.slow
+def test_the_throws_gif_plays_in_real_time_and_holds_the_landing(trebuchet_run):
+    from PIL import Image
+
+    with Image.open(trebuchet_run / "rollout.gif") as gif:
+        durations = []
+        for i in range(gif.n_frames):
+            gif.seek(i)
+            durations.append(gif.info["duration"])
+    # 30 frames a second (GIF stores centiseconds), the landing held for about 1 s
+    assert len(durations) > 30 and set(durations[:-1]) <= {30, 40}, durations
+    assert 950 <= durations[-1] <= 1100, durations[-1]
+
+
+@pytest.mark.slow
 def test_cli_aim_evaluate_animate(trebuchet_run, capsys, tmp_path):
     assert main(["aim", str(trebuchet_run), "--target", "70", "--wind", "2", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)

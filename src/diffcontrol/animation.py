@@ -39,8 +39,11 @@ def close(fig) -> None:
     plt.close(fig)
 
 
-def _write_gif(frames: list[np.ndarray], duration_ms: float, path: str | Path) -> Path:
-    """Encode RGB frames as a looping GIF (``duration_ms`` per frame) and write it atomically.
+def _write_gif(
+    frames: list[np.ndarray], duration_ms: float | list[float], path: str | Path
+) -> Path:
+    """Encode RGB frames as a looping GIF (``duration_ms`` per frame, or one per frame) and
+    write it atomically.
 
     One adaptive palette of up to 255 colours, from up to 8 frames spread over the clip, maps
     every frame without dithering: flat drawings need no more, and encoding skips a
@@ -61,7 +64,11 @@ def _write_gif(frames: list[np.ndarray], duration_ms: float, path: str | Path) -
         format="GIF",
         save_all=True,
         append_images=images[1:],
-        duration=max(1, round(duration_ms)),
+        duration=(
+            [max(1, round(d)) for d in duration_ms]
+            if isinstance(duration_ms, list)
+            else max(1, round(duration_ms))
+        ),
         loop=0,
     )
     write_bytes(path, buffer.getvalue())
@@ -133,7 +140,9 @@ def animate_throw(throw: Any, target: float, wind: float, path: str | Path, fps:
     x_max = max(float(np.max(proj[: last + 1, 0])), target) + 5
     y_max = max(float(np.max(proj[: last + 1, 1])) + 3, 8)
     hold = int(round(1.0 / (every * dt)))  # hold the landing for about 1 s
-    indices = list(range(0, last + 1, every)) + [last] * hold
+    # the held landing is drawn once and shown for ``hold`` frames' time (the GIF merges
+    # identical frames into one all the same)
+    indices = list(range(0, last + 1, every)) + [last]
     fig, ax = plt.subplots(figsize=(6.4, 2.8), dpi=75)
     moving = _throw_frame(ax, throw, 0, target, wind)
     ax.set_xlim(-5, x_max)
@@ -151,7 +160,8 @@ def animate_throw(throw: Any, target: float, wind: float, path: str | Path, fps:
         ax.set_title(f"t = {times[i]:4.2f} s   x = {proj[i, 0]:6.2f} m", fontsize=9)
         frames.append(render(fig))
     plt.close(fig)
-    return _write_gif(frames, 1000.0 * every * dt, path)
+    frame_ms = 1000.0 * every * dt
+    return _write_gif(frames, [frame_ms] * (len(frames) - 1) + [hold * frame_ms], path)
 
 
 def animate_swingup(recording: Any, path: str | Path, fps: int = 25) -> Path:
