@@ -75,10 +75,12 @@ def _write_gif(
     return Path(path)
 
 
-def _held(frames: int, frame_ms: float, hold: int) -> list[float]:
-    """Per-frame durations of a clip of ``frames`` frames whose last one stands for ``hold``
-    frames: a held ending is drawn once, not ``hold`` times (the GIF would merge the
-    identical frames into one all the same)."""
+def _held(frames: int, every: int, dt: float) -> list[float]:
+    """Per-frame durations (ms) of a clip of ``frames`` frames, each ``every`` steps of ``dt``
+    s, whose last one is held for about 1 s: a held ending is drawn once, not once per frame
+    of the hold (the GIF would merge the identical frames into one all the same)."""
+    hold = int(round(1.0 / (every * dt)))
+    frame_ms = 1000.0 * every * dt
     return [frame_ms] * (frames - 1) + [hold * frame_ms]
 
 
@@ -146,8 +148,7 @@ def animate_throw(throw: Any, target: float, wind: float, path: str | Path, fps:
     proj, phases = np.asarray(throw.projectile), np.asarray(throw.phases)
     x_max = max(float(np.max(proj[: last + 1, 0])), target) + 5
     y_max = max(float(np.max(proj[: last + 1, 1])) + 3, 8)
-    hold = int(round(1.0 / (every * dt)))  # hold the landing for about 1 s: ``_held``
-    indices = list(range(0, last + 1, every)) + [last]
+    indices = list(range(0, last + 1, every)) + [last]  # the landing, held by ``_held``
     fig, ax = plt.subplots(figsize=(6.4, 2.8), dpi=75)
     moving = _throw_frame(ax, throw, 0, target, wind)
     ax.set_xlim(-5, x_max)
@@ -165,7 +166,7 @@ def animate_throw(throw: Any, target: float, wind: float, path: str | Path, fps:
         ax.set_title(f"t = {times[i]:4.2f} s   x = {proj[i, 0]:6.2f} m", fontsize=9)
         frames.append(render(fig))
     plt.close(fig)
-    return _write_gif(frames, _held(len(frames), 1000.0 * every * dt, hold), path)
+    return _write_gif(frames, _held(len(frames), every, dt), path)
 
 
 def animate_swingup(recording: Any, path: str | Path, fps: int = 25) -> Path:
@@ -192,8 +193,7 @@ def animate_swingup(recording: Any, path: str | Path, fps: int = 25) -> Path:
     text = ax.text(x_lo + 0.05, 1.1, "", fontsize=8, family="monospace")
     peak = max(float(np.max(np.abs(force))), 1e-9)
     frames, render = [], _Frames().render
-    hold = int(round(1.0 / (every * dt)))  # hold the end for about 1 s: ``_held``
-    indices = list(range(0, len(t), every)) + [len(t) - 1]
+    indices = list(range(0, len(t), every)) + [len(t) - 1]  # the end, held by ``_held``
     for i in indices:
         x, theta = y[i, 0], y[i, 2]
         cart.set_x(x - 0.2)
@@ -204,4 +204,4 @@ def animate_swingup(recording: Any, path: str | Path, fps: int = 25) -> Path:
         text.set_text(f"t={t[i]:5.2f} s  F={force[i]:+7.2f} N")
         frames.append(render(fig))
     plt.close(fig)
-    return _write_gif(frames, _held(len(frames), 1000.0 * every * dt, hold), path)
+    return _write_gif(frames, _held(len(frames), every, dt), path)
