@@ -1,12 +1,13 @@
 """Start-up: the command line's help and the package's import do not import JAX, the public
-names are still there when used, and the start program's cheaper compilation keeps its bits."""
+names are still there when used, and the programs that run once compile faster and keep their
+results (the start's bits, the reference solve's loss and the drawn throw to rounding)."""
 
 from __future__ import annotations
 
-import os
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 HEAVY = ("jax", "equinox", "diffrax", "matplotlib", "imageio", "stable_baselines3", "torch")
@@ -159,11 +160,12 @@ def test_a_discrete_time_run_does_not_load_diffrax(tmp_path):
 @pytest.mark.parametrize("name", ["cartpole", "cartpole-swingup"])
 def test_the_start_program_at_its_level_gives_the_default_levels_bits(name):
     """``START_COMPILER_OPTIONS`` compiles the start faster with the same weights, resets and
-    keys as XLA's default level 3 (a discrete-time and a continuous-time trainer)."""
+    keys as XLA's defaults (a discrete-time and a continuous-time trainer)."""
     import jax
     import numpy as np
 
     import diffcontrol
+    from diffcontrol import _jax_setup
     from diffcontrol.training import _driver
     from diffcontrol.training._bptt import make_trainer
     from diffcontrol.training._ode import make_ode_trainer
@@ -183,12 +185,128 @@ def test_the_start_program_at_its_level_gives_the_default_levels_bits(name):
             for x in jax.tree.leaves(out)
         ]
 
-    # The users' compiler: XLA's default level (3) and, where the session chose the older CPU
-    # emitters (conftest.py), the default ones named
-    chosen = "xla_cpu_use_fusion_emitters" in os.environ.get("XLA_FLAGS", "")
-    emitters = {"xla_cpu_use_fusion_emitters": True} if chosen else {}
-    ours = leaves({**_driver.START_COMPILER_OPTIONS, **emitters})
-    default = leaves({"xla_backend_optimization_level": 3, **emitters})
+    # The users' compiler: XLA's defaults (level 3, the fusion emitters), named, since the
+    # session's XLA_FLAGS (conftest.py) choose others
+    fast = {n: _jax_setup.FAST_COMPILE[n] for n in _driver.START_COMPILER_OPTIONS}
+    ours = leaves(fast)
+    default = leaves({"xla_backend_optimization_level": 3, "xla_cpu_use_fusion_emitters": True})
     assert len(ours) == len(default) > 5
     for a, b in zip(ours, default):
         np.testing.assert_array_equal(a, b)
+
+
+class _Lowered:
+    """Records the options it is compiled with; ``refuse`` names an option it does not know."""
+
+    def __init__(self, refuse: str = ""):
+        self.refuse, self.calls = refuse, []
+
+    def compile(self, options=None):
+        import jax
+
+        self.calls.append(options)
+        if options and self.refuse in options:
+            raise jax.errors.JaxRuntimeError(
+                f"INVALID_ARGUMENT: No such compile option: '{self.refuse}'"
+            )
+        return "compiled"
+
+
+def test_compile_with_passes_the_named_fast_options_unless_xla_flags_name_them(monkeypatch):
+    from diffcontrol import _jax_setup
+
+    level, emitters = "xla_backend_optimization_level", "xla_cpu_use_fusion_emitters"
+    monkeypatch.setenv("XLA_FLAGS", "")
+    lowered = _Lowered()
+    assert _jax_setup.compile_with(lowered, level, emitters) == "compiled"
+    assert _jax_setup.compile_with(lowered, emitters) == "compiled"
+    monkeypatch.setenv("XLA_FLAGS", f"--{level}=0")
+    _jax_setup.compile_with(lowered, level, emitters)
+    _jax_setup.compile_with(lowered, level)
+    monkeypatch.setenv("XLA_FLAGS", "")
+    monkeypatch.setattr("jax.default_backend", lambda: "gpu")  # CPU options for CPUs only
+    _jax_setup.compile_with(lowered, level, emitters)
+    assert lowered.calls == [
+        {level: 1, emitters: False},
+        {emitters: False},
+        {emitters: False},
+        None,
+        {level: 1},
+    ]
+
+
+def test_compile_with_falls_back_to_xlas_defaults_where_jaxlib_lacks_an_option(monkeypatch):
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+
+    from diffcontrol import _jax_setup
+
+    monkeypatch.setenv("XLA_FLAGS", "")
+    monkeypatch.setitem(_jax_setup.FAST_COMPILE, "xla_no_such_option", 1)
+    lowered = _Lowered(refuse="xla_no_such_option")
+    _jax_setup.compile_with(lowered, "xla_no_such_option")
+    assert lowered.calls == [{"xla_no_such_option": 1}, None]
+    # jaxlib's own refusal is the one caught
+    real = jax.jit(lambda x: x + 1).lower(jnp.ones(2))
+    assert np.asarray(
+        _jax_setup.compile_with(real, "xla_no_such_option")(jnp.ones(2))
+    ).tolist() == [2, 2]
+
+
+_DEFAULTS = {"xla_backend_optimization_level": 3, "xla_cpu_use_fusion_emitters": True}
+"""XLA's defaults, as a user's process compiles (the session's XLA_FLAGS choose others)."""
+
+
+def _compiled_as_users(fast: bool, seen: list):
+    """A ``compile_with`` that compiles as a user's process would: with its options if
+    ``fast``, with XLA's defaults otherwise."""
+    from diffcontrol import _jax_setup
+
+    def compile_with(lowered, *names):
+        seen.append(names)
+        chosen = {n: _jax_setup.FAST_COMPILE[n] for n in names} if fast else {}
+        return lowered.compile({**_DEFAULTS, **chosen})
+
+    return compile_with
+
+
+@pytest.mark.slow  # the reference solve compiled twice: about 4 s on one core
+def test_the_reference_solve_compiled_for_speed_reports_the_defaults_loss(monkeypatch):
+    import jax
+
+    import diffcontrol
+    from diffcontrol import _jax_setup
+    from diffcontrol.controllers import MLPController
+    from diffcontrol.evaluation import simulate_continuous
+
+    task = diffcontrol.make("cartpole-swingup-friction")
+    controller = MLPController(jax.random.PRNGKey(1), **task.controller_kwargs(), hidden=(8,))
+    seen, recordings = [], []
+    for fast in (True, False):
+        monkeypatch.setattr(_jax_setup, "compile_with", _compiled_as_users(fast, seen))
+        recordings.append(simulate_continuous(task, controller))
+    assert seen == [("xla_cpu_use_fusion_emitters",)] * 2
+    fast, default = recordings
+    assert fast.loss == pytest.approx(default.loss, rel=1e-12, abs=0)
+    np.testing.assert_allclose(fast.y, default.y, rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.slow  # the throw compiled twice: about 2 s on one core
+def test_the_drawn_throw_compiled_for_speed_lands_where_the_defaults_do(monkeypatch):
+    import types
+
+    import diffcontrol
+    from diffcontrol.tasks import trebuchet
+
+    task = diffcontrol.make("trebuchet")
+    run = types.SimpleNamespace(policy=lambda target, wind: (44.0, 210.0), params=None, real=False)
+    seen, throws = [], []
+    for fast in (True, False):
+        monkeypatch.setattr(trebuchet, "_THROWS", {})
+        monkeypatch.setattr(trebuchet, "compile_with", _compiled_as_users(fast, seen))
+        throws.append(task.throw(run, *task.EXAMPLE_THROW))
+    assert seen == [("xla_cpu_use_fusion_emitters",)] * 2
+    fast, default = throws
+    assert float(fast.distance) == pytest.approx(float(default.distance), rel=1e-6, abs=0)
+    np.testing.assert_allclose(fast.projectile, default.projectile, rtol=1e-5, atol=1e-4)

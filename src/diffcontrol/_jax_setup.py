@@ -1,4 +1,5 @@
-"""Process-wide JAX settings for the command line: the persistent compilation cache.
+"""Process-wide JAX settings for the command line: the persistent compilation cache; and the
+compiler options of the programs that run once (``compile_with``).
 
 A second run of the same command loads its compiled programs from the cache instead of
 compiling them again. JAX stores no program that contains a host callback, and Equinox's
@@ -12,6 +13,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import Any
 
 _EVENTS = {"hits": 0, "misses": 0, "requests": 0}
 _LISTENING = False
@@ -74,3 +76,36 @@ def _on_event(event: str, **kwargs) -> None:
 def cache_events() -> dict[str, int]:
     """Counts of persistent-cache hits, misses and requests since the cache was enabled."""
     return dict(_EVENTS)
+
+
+FAST_COMPILE = {"xla_backend_optimization_level": 1, "xla_cpu_use_fusion_emitters": False}
+"""XLA's options that compile a CPU program faster: optimisation level 1 instead of 3, and the
+older CPU emitters instead of the fusion emitters (which compile every fusion as its own LLVM
+module). For programs that run once per run (a run's start, the reference solve a report
+quotes, the throw a figure draws), where compiling is most of their cost. Each caller names
+those that keep its results: the defaults' bits for a run's start, float rounding where a
+result is only reported or drawn (each caller says what it measured)."""
+
+
+def compile_with(lowered: Any, *names: str) -> Any:
+    """``lowered.compile`` with the ``FAST_COMPILE`` options in ``names``.
+
+    An option that ``XLA_FLAGS`` names is left to it (the test suite chooses its own), a CPU
+    option is left out where the default backend is not a CPU, and a jaxlib that does not know
+    an option compiles with XLA's defaults.
+    """
+    import jax
+
+    flags = os.environ.get("XLA_FLAGS", "")
+    cpu = jax.default_backend() == "cpu"
+    options = {
+        name: FAST_COMPILE[name]
+        for name in names
+        if name not in flags and (cpu or not name.startswith("xla_cpu_"))
+    }
+    try:
+        return lowered.compile(options or None)
+    except jax.errors.JaxRuntimeError as e:
+        if "No such compile option" not in str(e):
+            raise
+        return lowered.compile()
