@@ -249,3 +249,29 @@ def _window_loss(task, params, data, window=10):
         predict = jax.vmap(identify.steps.predict, in_axes=(None, None, 0, 0))
         pred = np.asarray(predict(task, params, states, np.stack(actions)))
     return float(np.mean((pred - np.stack(targets)) ** 2))
+
+
+def test_standard_errors_are_ordinary_least_squares_ones_and_inf_where_singular():
+    """``sigma^2 (X^T X)^-1`` for a linear model, with the padded residuals left out of the
+    degrees of freedom; ``inf`` for an unidentifiable parameter or a non-finite Jacobian."""
+    from diffcontrol.identify._shooting import standard_errors
+
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=(40, 3))
+    y = x @ np.array([1.0, -2.0, 0.5]) + 0.1 * rng.normal(size=40)
+    beta = np.linalg.lstsq(x, y, rcond=None)[0]
+    sigma2 = np.sum((x @ beta - y) ** 2) / (40 - 3)
+    expected = np.sqrt(np.diag(sigma2 * np.linalg.inv(x.T @ x)))
+    with jax.enable_x64(True):
+        got = standard_errors(lambda v, x, y: x @ v - y, jax.numpy.asarray(beta), x, y)
+        # 10 zero rows of padding: the same residuals and Jacobian, not counted
+        padded = np.vstack([x, np.zeros((10, 3))]), np.concatenate([y, np.zeros(10)])
+        got_padded = standard_errors(
+            lambda v, x, y: x @ v - y, jax.numpy.asarray(beta), *padded, size=40
+        )
+        twin = np.column_stack([x[:, 0], x[:, 0]])  # two columns that cannot be told apart
+        singular = standard_errors(lambda v: twin @ v - y, jax.numpy.zeros(2))
+        broken = standard_errors(lambda v: v * np.array([np.nan, 1.0]), jax.numpy.ones(2))
+    np.testing.assert_allclose(got, expected, rtol=1e-12)
+    np.testing.assert_allclose(got_padded, expected, rtol=1e-12)
+    assert np.all(np.isinf(singular)) and np.all(np.isinf(broken))

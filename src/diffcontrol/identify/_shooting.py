@@ -175,7 +175,8 @@ def adam_scan(loss: Any, z: Any, optimiser: Any, steps: int, batch: Any):
 
 
 def standard_errors(residual_fn, values: jax.Array, *args: Any, size: int | None = None):
-    """``sqrt(diag(sigma^2 (J^T J)^-1))`` at ``values``; ``inf`` where ``J^T J`` is singular.
+    """``sqrt(diag(sigma^2 (J^T J)^-1))`` at ``values`` (a float64 NumPy array); ``inf`` where
+    ``J^T J`` is singular.
 
     ``residual_fn(values, *args)`` gives the residuals; with ``args`` (a fit's data) they and
     their Jacobian are computed by one compiled program that takes the data as an argument, so
@@ -185,14 +186,19 @@ def standard_errors(residual_fn, values: jax.Array, *args: Any, size: int | None
         r, jac = _residuals_and_jacobian(residual_fn)(values, *args)
     else:
         r, jac = residual_fn(values), jax.jacfwd(residual_fn)(values)  # [R], [R, p]
+    # The rest in NumPy (float64): a few small matrices, where JAX would compile a program
+    # for each operation (about 0.4 s on one core, once per process).
+    r, jac = np.asarray(r, np.float64), np.asarray(jac, np.float64)
     dof = max((r.size if size is None else size) - values.size, 1)
-    sigma2 = jnp.sum(r**2) / dof
+    sigma2 = np.sum(r**2) / dof
     jtj = jac.T @ jac
-    eig = jnp.linalg.eigvalsh(jtj)
-    if not bool(jnp.all(jnp.isfinite(jtj))) or float(eig[0]) <= 1e-12 * float(eig[-1]):
-        return jnp.full(values.shape, jnp.inf)
-    cov = sigma2 * jnp.linalg.inv(jtj)
-    return jnp.sqrt(jnp.clip(jnp.diag(cov), 0.0))
+    if not np.all(np.isfinite(jtj)):
+        return np.full(values.shape, np.inf)
+    eig = np.linalg.eigvalsh(jtj)
+    if eig[0] <= 1e-12 * eig[-1]:
+        return np.full(values.shape, np.inf)
+    cov = sigma2 * np.linalg.inv(jtj)
+    return np.sqrt(np.clip(np.diag(cov), 0.0, None))
 
 
 def _residuals_and_jacobian(residual_fn):
