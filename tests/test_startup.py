@@ -310,3 +310,34 @@ def test_the_drawn_throw_compiled_for_speed_lands_where_the_defaults_do(monkeypa
     fast, default = throws
     assert float(fast.distance) == pytest.approx(float(default.distance), rel=1e-6, abs=0)
     np.testing.assert_allclose(fast.projectile, default.projectile, rtol=1e-5, atol=1e-4)
+
+
+@pytest.mark.parametrize("init", ["equinox", "glorot"])
+def test_a_network_made_outside_a_trace_is_one_kept_program_with_the_op_by_op_weights(init):
+    """A controller or a model's network made from a concrete key draws its weights in one
+    compiled program (``_jax_setup.built_once``), the same to the bit as Equinox's layers
+    drawn op by op (and as the same network made inside a ``jit``); the next network of that
+    shape compiles nothing. (Under XLA's defaults, as users compile, the same bits were
+    checked on 105 networks against the op-by-op code: docs/benchmarks.md.)"""
+    import equinox as eqx
+    import jax
+
+    from diffcontrol import _jax_setup
+    from diffcontrol.controllers import MLPController, _glorot
+
+    key, sizes = jax.random.PRNGKey(7), (5, 24, 24, 3)
+    made = MLPController(key, 5, 3, (24, 24), final_scale=0.5, init=init)
+    keys = jax.random.split(key, 3)
+    ref = [eqx.nn.Linear(a, b, key=k) for a, b, k in zip(sizes[:-1], sizes[1:], keys)]
+    if init == "glorot":
+        ref = [_glorot(l, k) for l, k in zip(ref, jax.random.split(keys[0], 3))]
+    expected = [(l.weight, l.bias) for l in ref[:-1]] + [(ref[-1].weight * 0.5, ref[-1].bias * 0)]
+    traced = jax.jit(lambda k: MLPController(k, 5, 3, (24, 24), final_scale=0.5, init=init))(key)
+    for net in (made, traced):
+        got = [(l.weight, l.bias) for l in net.layers]
+        assert [np.asarray(a).tobytes() for pair in got for a in pair] == [
+            np.asarray(a).tobytes() for pair in expected for a in pair
+        ]
+    kept = len(_jax_setup._BUILT)
+    MLPController(jax.random.PRNGKey(8), 5, 3, (24, 24), final_scale=0.5, init=init)
+    assert len(_jax_setup._BUILT) == kept

@@ -109,3 +109,28 @@ def compile_with(lowered: Any, *names: str) -> Any:
         if "No such compile option" not in str(e):
             raise
         return lowered.compile()
+
+
+_BUILT: dict[tuple, Any] = {}
+
+
+def built_once(make: Any, key: Any, statics: tuple) -> Any:
+    """``make(key)``, a network's random weights from a concrete PRNG key, as one compiled
+    program kept for the process by its text and ``statics`` (the arguments beside the key
+    that fix the result's structure: sizes, initialisation).
+
+    Drawn op by op, they take one program per layer's weight and bias, about 0.13 s of
+    compiling each on one core and shape; as one program compiled with ``FAST_COMPILE``'s
+    options, about 0.3 s in all, with the same bits (``tests/test_startup.py``),
+    and the next network of the same shape (another seed, another round, a loaded file)
+    compiles nothing.
+    """
+    import hashlib
+
+    import equinox as eqx
+
+    lowered = eqx.filter_jit(make).lower(key)
+    cache_key = (hashlib.sha256(lowered.as_text().encode()).hexdigest(), statics)
+    if cache_key not in _BUILT:
+        _BUILT[cache_key] = compile_with(lowered, *FAST_COMPILE)
+    return _BUILT[cache_key](key)

@@ -32,6 +32,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, PRNGKeyArray
 
+from ._jax_setup import built_once
+
 ACTIVATIONS = {"tanh": jnp.tanh, "relu": jax.nn.relu, "sigmoid": jax.nn.sigmoid, "elu": jax.nn.elu}
 HEADS = ("linear", "tanh", "sigmoid", "sign", "argmax")
 ARGMAX_TEMPERATURE = 1.0
@@ -180,16 +182,9 @@ class MLPController(eqx.Module):
             raise ValueError(
                 f"the argmax head chooses among action_size options; got {action_size}, use >= 2"
             )
-        sizes = [obs_size, *hidden, action_size]
-        keys = jax.random.split(key, len(sizes) - 1)
-        layers = [eqx.nn.Linear(a, b, key=k) for a, b, k in zip(sizes[:-1], sizes[1:], keys)]
-        if init == "glorot":
-            layers = [_glorot(l, k) for l, k in zip(layers, jax.random.split(keys[0], len(layers)))]
-        last = layers[-1]
-        last = eqx.tree_at(
-            lambda l: (l.weight, l.bias), last, (last.weight * final_scale, last.bias * 0)
+        self.layers = _initial_layers(
+            key, (obs_size, *hidden, action_size), init, float(final_scale)
         )
-        self.layers = (*layers[:-1], last)
         self.obs_offset = _vector(obs_offset, obs_size, 0.0)
         self.obs_scale = _vector(obs_scale, obs_size, 1.0)
         self.action_low = _vector(action_low, action_size, -1.0)
@@ -215,6 +210,33 @@ class MLPController(eqx.Module):
     def num_parameters(self) -> int:
         """Number of trainable weights and biases."""
         return sum(l.weight.size + l.bias.size for l in self.layers)
+
+
+def _initial_layers(
+    key: PRNGKeyArray, sizes: tuple[int, ...], init: str, final_scale: float
+) -> tuple[eqx.nn.Linear, ...]:
+    """The layers' random weights (Equinox's, or Glorot's), the last layer's scaled.
+
+    Drawn from a concrete key (a network made outside any ``jit``: a model to fit, a loaded
+    one's skeleton), they are one compiled program kept for the process
+    (``_jax_setup.built_once``), not one per layer's weight and bias; inside a trace (a
+    training's start program, a ``vmap``), they are part of it.
+    """
+
+    def draw(key):
+        keys = jax.random.split(key, len(sizes) - 1)
+        layers = [eqx.nn.Linear(a, b, key=k) for a, b, k in zip(sizes[:-1], sizes[1:], keys)]
+        if init == "glorot":
+            layers = [_glorot(l, k) for l, k in zip(layers, jax.random.split(keys[0], len(layers)))]
+        last = layers[-1]
+        last = eqx.tree_at(
+            lambda l: (l.weight, l.bias), last, (last.weight * final_scale, last.bias * 0)
+        )
+        return (*layers[:-1], last)
+
+    if isinstance(key, jax.core.Tracer):
+        return draw(key)
+    return built_once(draw, key, ("layers", sizes, init, final_scale))
 
 
 def _glorot(layer: eqx.nn.Linear, key: PRNGKeyArray) -> eqx.nn.Linear:
