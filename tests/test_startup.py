@@ -296,18 +296,27 @@ def test_the_reference_solve_compiled_for_speed_reports_the_defaults_loss(monkey
 def test_the_drawn_throw_compiled_for_speed_lands_where_the_defaults_do(monkeypatch):
     import types
 
+    import jax
+
     import diffcontrol
+    from diffcontrol import _jax_setup
+    from diffcontrol.systems import trebuchet as tb
     from diffcontrol.tasks import trebuchet
 
+    seen = []
+
+    def as_users(*names):  # the options a user's process gets (the session names its own)
+        seen.append(names)
+        return {**_DEFAULTS, **{n: _jax_setup.FAST_COMPILE[n] for n in names}}
+
+    monkeypatch.setattr(_jax_setup, "fast_options", as_users)
+    monkeypatch.setattr(trebuchet, "_SIMULATE", _jax_setup.FastJit(*trebuchet._SIMULATE.args))
     task = diffcontrol.make("trebuchet")
     run = types.SimpleNamespace(policy=lambda target, wind: (44.0, 210.0), params=None, real=False)
-    seen, throws = [], []
-    for fast in (True, False):
-        monkeypatch.setattr(trebuchet, "_THROWS", {})
-        monkeypatch.setattr(trebuchet, "compile_with", _compiled_as_users(fast, seen))
-        throws.append(task.throw(run, *task.EXAMPLE_THROW))
-    assert seen == [("xla_cpu_use_fusion_emitters",)] * 2
-    fast, default = throws
+    fast = task.throw(run, *task.EXAMPLE_THROW)
+    args = (task.EXAMPLE_THROW[1], 44.0, 210.0, None)
+    default = jax.jit(tb.simulate).lower(*args).compile(_DEFAULTS)(*args)
+    assert seen == [("xla_cpu_use_fusion_emitters",)]
     assert float(fast.distance) == pytest.approx(float(default.distance), rel=1e-6, abs=0)
     np.testing.assert_allclose(fast.projectile, default.projectile, rtol=1e-5, atol=1e-4)
 
@@ -315,29 +324,44 @@ def test_the_drawn_throw_compiled_for_speed_lands_where_the_defaults_do(monkeypa
 @pytest.mark.parametrize("init", ["equinox", "glorot"])
 def test_a_network_made_outside_a_trace_is_one_kept_program_with_the_op_by_op_weights(init):
     """A controller or a model's network made from a concrete key draws its weights in one
-    compiled program (``_jax_setup.built_once``), the same to the bit as Equinox's layers
-    drawn op by op (and as the same network made inside a ``jit``); the next network of that
-    shape compiles nothing. (Under XLA's defaults, as users compile, the same bits were
-    checked on 105 networks against the op-by-op code: docs/benchmarks.md.)"""
+    compiled program (``controllers._DRAW_LAYERS``) that the next network of that shape
+    reuses, the same to the bit as Equinox's layers drawn op by op and as the same network
+    made inside a ``jit`` (with a traced final scale too); under ``jax.disable_jit`` it is
+    still made. (Under
+    XLA's defaults, as users compile, 105 networks were compared with the op-by-op code:
+    docs/benchmarks.md.)"""
     import equinox as eqx
     import jax
 
-    from diffcontrol import _jax_setup
+    from diffcontrol import controllers
     from diffcontrol.controllers import MLPController, _glorot
 
-    key, sizes = jax.random.PRNGKey(7), (5, 24, 24, 3)
-    made = MLPController(key, 5, 3, (24, 24), final_scale=0.5, init=init)
+    key, sizes = jax.random.PRNGKey(7), (5, 23, 19, 3)  # a shape no other test draws
+
+    def make(k, scale=0.3):
+        return MLPController(k, 5, 3, (23, 19), final_scale=scale, init=init)
+
+    def programs():
+        jitted = controllers._DRAW_LAYERS.jitted
+        return 0 if jitted is None else jitted._cache_size()
+
+    before = programs()
+    made = make(key)
+    assert programs() == before + 1  # one program for the shape...
+    make(jax.random.PRNGKey(8))
+    assert programs() == before + 1  # ...kept for the next key
     keys = jax.random.split(key, 3)
     ref = [eqx.nn.Linear(a, b, key=k) for a, b, k in zip(sizes[:-1], sizes[1:], keys)]
     if init == "glorot":
         ref = [_glorot(l, k) for l, k in zip(ref, jax.random.split(keys[0], 3))]
-    expected = [(l.weight, l.bias) for l in ref[:-1]] + [(ref[-1].weight * 0.5, ref[-1].bias * 0)]
-    traced = jax.jit(lambda k: MLPController(k, 5, 3, (24, 24), final_scale=0.5, init=init))(key)
-    for net in (made, traced):
+    expected = [(l.weight, l.bias) for l in ref[:-1]] + [(ref[-1].weight * 0.3, ref[-1].bias * 0)]
+    for net in (made, jax.jit(make)(key), jax.jit(lambda s: make(key, s))(0.3)):
         got = [(l.weight, l.bias) for l in net.layers]
         assert [np.asarray(a).tobytes() for pair in got for a in pair] == [
             np.asarray(a).tobytes() for pair in expected for a in pair
         ]
-    kept = len(_jax_setup._BUILT)
-    MLPController(jax.random.PRNGKey(8), 5, 3, (24, 24), final_scale=0.5, init=init)
-    assert len(_jax_setup._BUILT) == kept
+    with jax.disable_jit():  # op by op, primitive by primitive: to float32 rounding
+        unjitted = make(key)
+    for layer, (weight, bias) in zip(unjitted.layers, expected):
+        np.testing.assert_allclose(layer.weight, weight, rtol=1e-6, atol=1e-7)
+        np.testing.assert_allclose(layer.bias, bias, rtol=1e-6, atol=1e-7)

@@ -1,5 +1,5 @@
 """Process-wide JAX settings for the command line: the persistent compilation cache; and the
-compiler options of the programs that run once (``compile_with``).
+compiler options of the programs that run once (``compile_with``, ``FastJit``).
 
 A second run of the same command loads its compiled programs from the cache instead of
 compiling them again. JAX stores no program that contains a host callback, and Equinox's
@@ -87,13 +87,9 @@ those that keep its results: the defaults' bits for a run's start, float roundin
 result is only reported or drawn (each caller says what it measured)."""
 
 
-def compile_with(lowered: Any, *names: str) -> Any:
-    """``lowered.compile`` with the ``FAST_COMPILE`` options in ``names``.
-
-    An option that ``XLA_FLAGS`` names is left to it (the test suite chooses its own), a CPU
-    option is left out where the default backend is not a CPU, and a jaxlib that does not know
-    an option compiles with XLA's defaults.
-    """
+def fast_options(*names: str) -> dict[str, Any] | None:
+    """The ``FAST_COMPILE`` options in ``names``, less those that ``XLA_FLAGS`` names (the test
+    suite chooses its own) and, where the default backend is not a CPU, the CPU options."""
     import jax
 
     flags = os.environ.get("XLA_FLAGS", "")
@@ -103,34 +99,47 @@ def compile_with(lowered: Any, *names: str) -> Any:
         for name in names
         if name not in flags and (cpu or not name.startswith("xla_cpu_"))
     }
+    return options or None
+
+
+def _unknown_option(error: Exception) -> bool:
+    return "No such compile option" in str(error)
+
+
+def compile_with(lowered: Any, *names: str) -> Any:
+    """``lowered.compile`` with ``fast_options(*names)``; a jaxlib that does not know an option
+    compiles with XLA's defaults."""
+    import jax
+
     try:
-        return lowered.compile(options or None)
+        return lowered.compile(fast_options(*names))
     except jax.errors.JaxRuntimeError as e:
-        if "No such compile option" not in str(e):
+        if not _unknown_option(e):
             raise
         return lowered.compile()
 
 
-_BUILT: dict[tuple, Any] = {}
+class FastJit:
+    """``jax.jit(fn, **jit_kwargs)`` whose programs compile with ``fast_options(*names)``: for a
+    function called once or a few times per run with the same shapes. JAX's own cache keeps
+    each program (by shapes, static arguments and device); the options are chosen at the first
+    call, not at import; a jaxlib that does not know one falls back to XLA's defaults."""
 
+    def __init__(self, fn: Any, *names: str, **jit_kwargs: Any):
+        self.fn, self.names, self.jit_kwargs = fn, names, jit_kwargs
+        self.args = (fn, *names)  # a fresh one: FastJit(*old.args, **old.jit_kwargs)
+        self.jitted: Any = None
 
-def built_once(make: Any, key: Any, statics: tuple) -> Any:
-    """``make(key)``, a network's random weights from a concrete PRNG key, as one compiled
-    program kept for the process by its text and ``statics`` (the arguments beside the key
-    that fix the result's structure: sizes, initialisation).
+    def __call__(self, *args: Any, **kwargs: Any) -> Any:
+        import jax
 
-    Drawn op by op, they take one program per layer's weight and bias, about 0.13 s of
-    compiling each on one core and shape; as one program compiled with ``FAST_COMPILE``'s
-    options, about 0.3 s in all, with the same bits (``tests/test_startup.py``),
-    and the next network of the same shape (another seed, another round, a loaded file)
-    compiles nothing.
-    """
-    import hashlib
-
-    import equinox as eqx
-
-    lowered = eqx.filter_jit(make).lower(key)
-    cache_key = (hashlib.sha256(lowered.as_text().encode()).hexdigest(), statics)
-    if cache_key not in _BUILT:
-        _BUILT[cache_key] = compile_with(lowered, *FAST_COMPILE)
-    return _BUILT[cache_key](key)
+        if self.jitted is None:
+            options = fast_options(*self.names)
+            self.jitted = jax.jit(self.fn, compiler_options=options, **self.jit_kwargs)
+        try:
+            return self.jitted(*args, **kwargs)
+        except jax.errors.JaxRuntimeError as e:
+            if not _unknown_option(e):
+                raise
+            self.jitted = jax.jit(self.fn, **self.jit_kwargs)
+            return self.jitted(*args, **kwargs)

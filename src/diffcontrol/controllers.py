@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Sequence
+from typing import Any
 
 import equinox as eqx
 import jax
@@ -32,7 +33,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, PRNGKeyArray
 
-from ._jax_setup import built_once
+from ._jax_setup import FAST_COMPILE, FastJit
 
 ACTIVATIONS = {"tanh": jnp.tanh, "relu": jax.nn.relu, "sigmoid": jax.nn.sigmoid, "elu": jax.nn.elu}
 HEADS = ("linear", "tanh", "sigmoid", "sign", "argmax")
@@ -182,9 +183,7 @@ class MLPController(eqx.Module):
             raise ValueError(
                 f"the argmax head chooses among action_size options; got {action_size}, use >= 2"
             )
-        self.layers = _initial_layers(
-            key, (obs_size, *hidden, action_size), init, float(final_scale)
-        )
+        self.layers = _initial_layers(key, (obs_size, *hidden, action_size), init, final_scale)
         self.obs_offset = _vector(obs_offset, obs_size, 0.0)
         self.obs_scale = _vector(obs_scale, obs_size, 1.0)
         self.action_low = _vector(action_low, action_size, -1.0)
@@ -212,31 +211,41 @@ class MLPController(eqx.Module):
         return sum(l.weight.size + l.bias.size for l in self.layers)
 
 
-def _initial_layers(
-    key: PRNGKeyArray, sizes: tuple[int, ...], init: str, final_scale: float
+def _draw_layers(
+    key: PRNGKeyArray, sizes: tuple[int, ...], init: str, final_scale: Any
 ) -> tuple[eqx.nn.Linear, ...]:
-    """The layers' random weights (Equinox's, or Glorot's), the last layer's scaled.
+    """The layers' random weights (Equinox's, or Glorot's), the last layer's scaled."""
+    keys = jax.random.split(key, len(sizes) - 1)
+    layers = [eqx.nn.Linear(a, b, key=k) for a, b, k in zip(sizes[:-1], sizes[1:], keys)]
+    if init == "glorot":
+        layers = [_glorot(l, k) for l, k in zip(layers, jax.random.split(keys[0], len(layers)))]
+    last = layers[-1]
+    last = eqx.tree_at(
+        lambda l: (l.weight, l.bias), last, (last.weight * final_scale, last.bias * 0)
+    )
+    return (*layers[:-1], last)
 
-    Drawn from a concrete key (a network made outside any ``jit``: a model to fit, a loaded
-    one's skeleton), they are one compiled program kept for the process
-    (``_jax_setup.built_once``), not one per layer's weight and bias; inside a trace (a
-    training's start program, a ``vmap``), they are part of it.
-    """
 
-    def draw(key):
-        keys = jax.random.split(key, len(sizes) - 1)
-        layers = [eqx.nn.Linear(a, b, key=k) for a, b, k in zip(sizes[:-1], sizes[1:], keys)]
-        if init == "glorot":
-            layers = [_glorot(l, k) for l, k in zip(layers, jax.random.split(keys[0], len(layers)))]
-        last = layers[-1]
-        last = eqx.tree_at(
-            lambda l: (l.weight, l.bias), last, (last.weight * final_scale, last.bias * 0)
-        )
-        return (*layers[:-1], last)
+_DRAW_LAYERS = FastJit(_draw_layers, *FAST_COMPILE, static_argnums=(1, 2, 3))
+"""``_draw_layers`` as one compiled program per shape, for a network made outside any trace (a
+model to fit, a loaded file's skeleton): drawn op by op, its weights took one program per
+layer's weight and bias, about 0.13 s of compiling each on one core. The same bits (checked
+against the op-by-op code under XLA's defaults, docs/benchmarks.md)."""
 
-    if isinstance(key, jax.core.Tracer):
-        return draw(key)
-    return built_once(draw, key, ("layers", sizes, init, final_scale))
+
+def _initial_layers(
+    key: PRNGKeyArray, sizes: tuple[int, ...], init: str, final_scale: Any
+) -> tuple[eqx.nn.Linear, ...]:
+    """``_draw_layers``: compiled once per shape (``_DRAW_LAYERS``) from a concrete key and
+    scale, part of the program being traced otherwise (a training's start, a ``vmap``)."""
+    if not isinstance(key, jax.core.Tracer):
+        try:
+            scale = float(final_scale)
+        except (TypeError, jax.errors.ConcretizationTypeError):
+            pass  # an array of scales, or a traced one
+        else:
+            return _DRAW_LAYERS(key, sizes, init, scale)
+    return _draw_layers(key, sizes, init, final_scale)
 
 
 def _glorot(layer: eqx.nn.Linear, key: PRNGKeyArray) -> eqx.nn.Linear:

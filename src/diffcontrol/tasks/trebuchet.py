@@ -11,7 +11,6 @@ through the simulator over random situations, the original's recipe with a batch
 
 from __future__ import annotations
 
-import hashlib
 import math
 from typing import Any
 
@@ -19,7 +18,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._jax_setup import compile_with
+from .._jax_setup import FastJit
 from ..config import TrainConfig
 from ..errors import ConfigError
 from ..systems import trebuchet as tb
@@ -194,12 +193,7 @@ class TrebuchetAiming(Task):
         """Simulate the throw that the run's controller aims at one target."""
         check_target(target_m, wind_mps)
         angle, weight = run.policy(target_m, wind_mps)
-        args = (wind_mps, angle, weight, run.params if run.real else None)
-        lowered = _SIMULATE.lower(*args)
-        key = hashlib.sha256(lowered.as_text().encode()).hexdigest()  # nominal or real, types
-        if key not in _THROWS:
-            _THROWS[key] = compile_with(lowered, "xla_cpu_use_fusion_emitters")
-        return _THROWS[key](*args)
+        return _SIMULATE(wind_mps, angle, weight, run.params if run.real else None)
 
     def write_figures(self, run, out, animation=True):
         """``rollout.png`` (and ``rollout.gif``): the throw at ``EXAMPLE_THROW``."""
@@ -301,12 +295,11 @@ targets are one call, and the reachability searches and ``diffcontrol aim`` run 
 program, so an evaluation compiles the throw once (about 2.5 s) rather than once per caller."""
 
 _SHOOT = jax.jit(tb.shoot)
-_SIMULATE = jax.jit(tb.simulate)
-_THROWS: dict[str, Any] = {}
-"""``TrebuchetTask.throw``'s compiled programs, by their text's hash. The throw is only drawn (the
-run's figure and GIF), so it is compiled with the older CPU emitters: 0.6 s instead of 1.4 s
-on one core, the same throw to float32 rounding (the example throw's distance moved by
-1.5e-5 m). Level 1 would save 0.06 s more."""
+_SIMULATE = FastJit(tb.simulate, "xla_cpu_use_fusion_emitters")
+"""``TrebuchetTask.throw``'s program. The throw is only drawn (the run's figure and GIF), so
+it is compiled with the older CPU emitters: 0.6 s instead of 1.4 s on one core, the same throw
+to float32 rounding (the example throw's distance moved by 1.5e-5 m). Level 1 would save
+0.06 s more."""
 _PADDING = (0.0, 45.0, 200.0)
 """The wind, angle and weight of the padding throws: an ordinary throw, quick to land."""
 
