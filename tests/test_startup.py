@@ -247,7 +247,10 @@ def test_compile_with_falls_back_to_xlas_defaults_where_jaxlib_lacks_an_option(m
     lowered = _Lowered(refuse="xla_no_such_option")
     _jax_setup.compile_with(lowered, "xla_no_such_option")
     assert lowered.calls == [{"xla_no_such_option": 1}, None]
-    # jaxlib's own refusal is the one caught
+    # jaxlib's own refusal is the one caught, by compile_with and by FastJit
+    plus_two = _jax_setup.FastJit(lambda x: x + 2, "xla_no_such_option")
+    assert np.asarray(plus_two(jnp.ones(2))).tolist() == [3, 3]
+    assert plus_two.jitted is not None and plus_two(jnp.ones(2)).shape == (2,)
     real = jax.jit(lambda x: x + 1).lower(jnp.ones(2))
     assert np.asarray(
         _jax_setup.compile_with(real, "xla_no_such_option")(jnp.ones(2))
