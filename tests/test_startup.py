@@ -156,6 +156,10 @@ def test_a_discrete_time_run_does_not_load_diffrax(tmp_path):
     assert "jax" in imported and "diffrax" not in imported, imported
 
 
+_DEFAULTS = {"xla_backend_optimization_level": 3, "xla_cpu_use_fusion_emitters": True}
+"""XLA's defaults, as a user's process compiles (the session's XLA_FLAGS choose others)."""
+
+
 @pytest.mark.slow  # the start compiled at two levels: 2.5 s (cartpole) on one core
 @pytest.mark.parametrize("name", ["cartpole", "cartpole-swingup"])
 def test_the_start_program_at_its_level_gives_the_default_levels_bits(name):
@@ -189,7 +193,7 @@ def test_the_start_program_at_its_level_gives_the_default_levels_bits(name):
     # session's XLA_FLAGS (conftest.py) choose others
     fast = {n: _jax_setup.FAST_COMPILE[n] for n in _driver.START_COMPILER_OPTIONS}
     ours = leaves(fast)
-    default = leaves({"xla_backend_optimization_level": 3, "xla_cpu_use_fusion_emitters": True})
+    default = leaves(_DEFAULTS)
     assert len(ours) == len(default) > 5
     for a, b in zip(ours, default):
         np.testing.assert_array_equal(a, b)
@@ -257,10 +261,6 @@ def test_compile_with_falls_back_to_xlas_defaults_where_jaxlib_lacks_an_option(m
     ).tolist() == [2, 2]
 
 
-_DEFAULTS = {"xla_backend_optimization_level": 3, "xla_cpu_use_fusion_emitters": True}
-"""XLA's defaults, as a user's process compiles (the session's XLA_FLAGS choose others)."""
-
-
 def _compiled_as_users(fast: bool, seen: list):
     """A ``compile_with`` that compiles as a user's process would: with its options if
     ``fast``, with XLA's defaults otherwise."""
@@ -313,7 +313,8 @@ def test_the_drawn_throw_compiled_for_speed_lands_where_the_defaults_do(monkeypa
         return {**_DEFAULTS, **{n: _jax_setup.FAST_COMPILE[n] for n in names}}
 
     monkeypatch.setattr(_jax_setup, "fast_options", as_users)
-    monkeypatch.setattr(trebuchet, "_SIMULATE", _jax_setup.FastJit(*trebuchet._SIMULATE.args))
+    old = trebuchet._SIMULATE
+    monkeypatch.setattr(trebuchet, "_SIMULATE", _jax_setup.FastJit(old.fn, *old.names))
     task = diffcontrol.make("trebuchet")
     run = types.SimpleNamespace(policy=lambda target, wind: (44.0, 210.0), params=None, real=False)
     fast = task.throw(run, *task.EXAMPLE_THROW)

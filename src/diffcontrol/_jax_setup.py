@@ -127,7 +127,6 @@ class FastJit:
 
     def __init__(self, fn: Any, *names: str, **jit_kwargs: Any):
         self.fn, self.names, self.jit_kwargs = fn, names, jit_kwargs
-        self.args = (fn, *names)  # a fresh one: FastJit(*old.args, **old.jit_kwargs)
         self.jitted: Any = None
 
     def __call__(self, *args: Any, **kwargs: Any) -> Any:
