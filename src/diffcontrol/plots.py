@@ -21,6 +21,23 @@ def _save(fig: Any, path: str | Path) -> Path:
     return write_figure(fig, path)
 
 
+def _column_layout(fig: Any, rows: int) -> None:
+    """Fixed margins (inches) for a column of ``rows`` axes sharing their x axis: room for
+    a title, y labels with ticks of up to about six characters, the x label and ticks. Used
+    instead of ``tight_layout`` for the pictures of every run: it measures every label by
+    drawing the figure once more before it is saved (about 0.08 s a figure, one core)."""
+    width, height = fig.get_size_inches()
+    top, bottom, left, right, gap = 0.4, 0.6, 0.95, 0.2, 0.2
+    axes_height = (height - top - bottom - (rows - 1) * gap) / rows
+    fig.subplots_adjust(
+        left=left / width,
+        right=1 - right / width,
+        top=1 - top / height,
+        bottom=bottom / height,
+        hspace=gap / axes_height,
+    )
+
+
 def learning_curve(
     metrics: dict[str, Any], path: str | Path, threshold: float | None = None
 ) -> Path:
@@ -59,7 +76,7 @@ def learning_curve(
     ax2.set_xlabel("simulated episodes (standard length)")
     for ax in (ax1, ax2):
         ax.grid(alpha=0.3)
-    fig.tight_layout()
+    _column_layout(fig, 2)
     return _save(fig, path)
 
 
@@ -85,7 +102,7 @@ def rollout(recording: Recording, task: Task, path: str | Path) -> Path:
     axes[0].set_title(
         f"{recording.env_id} (Gymnasium), one episode: return {recording.total_return:.1f}"
     )
-    fig.tight_layout()
+    _column_layout(fig, n)
     return _save(fig, path)
 
 
@@ -169,7 +186,7 @@ def swingup(recording: Any, path: str | Path, title: str = "") -> Path:
     axes[0].set_title(
         title or f"{recording.task}: peak |F| {peak:.1f} N, loss {recording.loss:.3f}"
     )
-    fig.tight_layout()
+    _column_layout(fig, 3)
     return _save(fig, path)
 
 
