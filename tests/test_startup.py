@@ -199,6 +199,52 @@ def test_the_start_program_at_its_level_gives_the_default_levels_bits(name):
         np.testing.assert_array_equal(a, b)
 
 
+@pytest.mark.slow  # the evaluation program compiled twice: about 2.5 s on one core
+def test_a_tasks_fast_compile_options_give_the_defaults_bits():
+    """A built-in task's declared ``fast_compile`` options give XLA's defaults' bits: the
+    limited swing-up's evaluation of its untrained controller, a float loss that level 1
+    changes (benchmarks/compile_options.py checks every task's programs; a small chunk, or
+    CartPole's and the Acrobot's step-count returns, come out the same under any option)."""
+    import jax
+    import numpy as np
+
+    import diffcontrol
+    from diffcontrol import _jax_setup
+    from diffcontrol.training import _driver
+
+    task = diffcontrol.make("cartpole-swingup-limited")
+    config = task.default_config()
+    params = _driver.task_params(task, config.params)
+    kept = _driver._kept_trainer(task, config, None, None, params, lambda line: None)
+    ts, k_eval = _driver._first_state(kept, config.seed, params)
+    args = (ts.controller, params, k_eval)
+    lowered = jax.jit(kept.trainer.evaluate).lower(*args)
+    declared = task.compile_options("evaluate")
+    fast = {**_DEFAULTS, **{n: _jax_setup.FAST_COMPILE[n] for n in declared}}
+    ours, default = (np.asarray(lowered.compile(o)(*args)) for o in (fast, _DEFAULTS))
+    assert declared and ours.size > 0 and np.isfinite(ours).all()
+    np.testing.assert_array_equal(ours, default)
+
+
+def test_fast_compile_options_are_read_from_the_tasks_own_class_and_kept_apart():
+    """A subclass (another system, a fitted model) compiles with XLA's defaults unless it
+    declares its own; a program kept by ``compiled_once`` is kept per set of options."""
+    import jax
+    import jax.numpy as jnp
+
+    import diffcontrol
+    from diffcontrol.training import _driver
+
+    cartpole = diffcontrol.make("cartpole")
+    assert cartpole.compile_options("chunk") and cartpole.compile_options("evaluate")
+    assert type("Heavier", (type(cartpole),), {})().compile_options("chunk") == ()
+    assert diffcontrol.make("mountain-car-continuous").compile_options("chunk") == ()
+    lowered = jax.jit(lambda x: x * 3).lower(jnp.ones(2))
+    level = ("xla_backend_optimization_level",)
+    assert _driver.compiled_once(lowered, *level) is _driver.compiled_once(lowered, *level)
+    assert _driver.compiled_once(lowered) is not _driver.compiled_once(lowered, *level)
+
+
 class _Lowered:
     """Records the options it is compiled with; ``refuse`` names an option it does not know."""
 

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import abc
 import dataclasses
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
+from types import MappingProxyType
 from typing import Any, ClassVar
 
 import equinox as eqx
@@ -75,6 +76,20 @@ class _TaskBase(abc.ABC):
     final_eval_skippable: ClassVar[bool] = True
     """Whether ``--final-eval 0`` skips the final evaluation; ``False`` where it is part of
     what a run reports and its pictures are drawn from it anyway (a reference solve)."""
+
+    fast_compile: ClassVar[Mapping[str, tuple[str, ...]]] = MappingProxyType({})
+    """Options of ``_jax_setup.FAST_COMPILE`` (XLA's level 1, the older CPU emitters) that
+    the programs of ``diffcontrol.train`` compile with, by program: ``"chunk"`` (the training
+    updates) and ``"evaluate"`` (an evaluation point). Default: none, XLA's defaults. A built-in
+    task names those under which its programs gave the defaults' bits, or, where they did not
+    (CartPole's chunk), whole runs gave the same documented results
+    (``benchmarks/compile_options.py``). Read from the task's own class only: a subclass
+    (another system, a fitted model) compiles with XLA's defaults unless it names its own."""
+
+    def compile_options(self, program: str) -> tuple[str, ...]:
+        """The ``fast_compile`` options of ``program`` (``"chunk"`` or ``"evaluate"``) that
+        this task's own class declares."""
+        return tuple(vars(type(self)).get("fast_compile", {}).get(program, ()))
 
     positive_params: ClassVar[tuple[str, ...]] = ()
     """Physical parameters that must be > 0 (masses, lengths, time steps)."""

@@ -162,6 +162,9 @@ class CartPoleSwingUp(ContinuousTask):
     """Swing the post's cart-pole up from hanging down in 1 s, and stop (the post's loss)."""
 
     name = "cartpole-swingup"
+    # benchmarks/compile_options.py: either option changes the chunk's bits; level 1 the
+    # evaluation's of the limited and friction swing-ups (each class declares its own)
+    fast_compile = {"evaluate": ("xla_cpu_use_fusion_emitters",)}
     env_name = "CartPoleSwingUp"
     summary = "neural-ODE cart-pole swing-up of the 2020 post: 1 s, unbounded force"
     observation_size = 3
@@ -365,6 +368,7 @@ class CartPoleSwingUpLimited(CartPoleSwingUp):
     """
 
     name = "cartpole-swingup-limited"
+    fast_compile = {"evaluate": ("xla_cpu_use_fusion_emitters",)}
     env_name = "CartPoleSwingUpLimited"
     summary = "the post's 'motor can't give 60 N' swing-up: 10 s, x and peak-force penalties"
     losses = ("limited_hold", "limited", "swingup", "energy")
@@ -403,6 +407,7 @@ class CartPoleSwingUpFriction(CartPoleSwingUp):
     """
 
     name = "cartpole-swingup-friction"
+    fast_compile = {"evaluate": ("xla_cpu_use_fusion_emitters",)}
     env_name = "CartPoleSwingUpFriction"
     summary = "3 s swing-up with cart and joint friction; the loss adds the dissipated energy"
     losses = ("energy", "swingup", "limited", "limited_hold")

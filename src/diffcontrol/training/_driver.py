@@ -239,7 +239,8 @@ def train(
     # reported before the (longer) compilation of the training chunk.
     with interrupts_deferred():
         evaluate = kept.jitted("evaluate", trainer, whole)
-        evaluate = compiled_once(evaluate.lower(ts.controller, params, k_eval))
+        lowered = evaluate.lower(ts.controller, params, k_eval)
+        evaluate = compiled_once(lowered, *task.compile_options("evaluate"))
 
     curve: list[dict[str, Any]] = list(meta["curve"])
     seconds_before = float(meta["seconds_before"])
@@ -298,7 +299,8 @@ def train(
         for i, (end, stage) in enumerate(kept.stages):
             if end > int(ts.update):
                 chunk = kept.jitted(f"chunk {i}", stage, ts_sharding and (ts_sharding, whole))
-                chunks.append((end, compiled_once(chunk.lower(ts, params, total))))
+                lowered = chunk.lower(ts, params, total)
+                chunks.append((end, compiled_once(lowered, *task.compile_options("chunk"))))
 
     stopped_early = False
     target = config.target_return
@@ -598,8 +600,9 @@ EXECUTABLES_KEPT = 16
 """Compiled programs kept in the process by ``compiled_once`` (the most recently used)."""
 
 
-def compiled_once(lowered: jax.stages.Lowered) -> jax.stages.Compiled:
-    """``lowered.compile()``, reused within the process for the same program.
+def compiled_once(lowered: jax.stages.Lowered, *options: str) -> jax.stages.Compiled:
+    """``lowered.compile()`` (with ``_jax_setup.compile_with``'s ``options``, where named),
+    reused within the process for the same program.
 
     Each run traces its own functions, so JAX's in-memory caches do not see that the next
     seed of a comparison or a sweep's next call lowers the same program again; the persistent
@@ -615,19 +618,19 @@ def compiled_once(lowered: jax.stages.Lowered) -> jax.stages.Compiled:
         lowering = lowered._lowering  # JAX's own record of the lowering (not public API)
         args = lowering.compile_args
         if args["host_callbacks"] or args["keepalive"]:
-            return lowered.compile()
+            return compile_with(lowered, *options)
         placement = (
             tuple(d.id for d in lowering._device_list),
             str(args["in_shardings"]),
             str(args["out_shardings"]),
         )
     except (AttributeError, KeyError, TypeError):
-        return lowered.compile()
+        return compile_with(lowered, *options)
     text = hashlib.sha256(lowered.as_text().encode()).hexdigest()
-    key = (text, placement, lowered.in_tree, lowered.out_tree)
+    key = (text, placement, lowered.in_tree, lowered.out_tree, options)
     hit = _EXECUTABLES.pop(key, None)
     if hit is None:
-        hit = lowered.compile()
+        hit = compile_with(lowered, *options)
     _EXECUTABLES[key] = hit
     while len(_EXECUTABLES) > EXECUTABLES_KEPT:
         _EXECUTABLES.popitem(last=False)
