@@ -2,12 +2,14 @@
 
 For each task (and recipe) given, the run's training chunks (every stage) and its evaluation
 program are lowered once, as `diffcontrol train` lowers them, then compiled four ways: XLA's
-defaults, optimisation level 1, the older CPU emitters, and both (`_jax_setup.FAST_COMPILE`).
-Each compiled chunk runs `--updates` updates from the run's start and each evaluation
-program evaluates the start's controller; the outputs are compared leaf by leaf, to the bit,
-with the defaults'. Printed per program: the compile seconds and the run seconds of each
-way, `=` where the bits are the defaults' and `x` where they are not, and the options the
-task declares (`Task.fast_compile`), which must be among the `=` ones.
+defaults, optimisation level 1, the older CPU emitters, and both (`_jax_setup.FAST_COMPILE`),
+and, where the task declares the older emitters (`Task.fast_compile`), a fifth: the declared
+options with `_jax_setup.ONE_CORE`, as a process on one core compiles them. Each compiled
+chunk runs `--updates` updates from the run's start and each evaluation program evaluates the
+start's controller; the outputs are compared leaf by leaf, to the bit, with the defaults'. Printed per program: the compile
+seconds and the run seconds of each way, `=` where the bits are the defaults' and `x` where
+they are not, and the declared options, which must be among the `=` ones (the fifth way must
+give the declared way's bits).
 
 Where a task declares options that change a program's bits (`OTHER_BITS`: CartPole's chunk),
 `--runs` trains whole runs both ways, in this process, and compares what the docs quote: the
@@ -107,14 +109,18 @@ def programs(spec: str, updates: int):
 def measure(spec: str, updates: int) -> list[dict]:
     import jax
 
-    from diffcontrol._jax_setup import compile_with
+    from diffcontrol._jax_setup import FAST_COMPILE, ONE_CORE
 
     rows = []
     for task, program, lowered, args in programs(spec, updates):
+        declared = task.compile_options(program.split()[0])
+        options = {w: {n: FAST_COMPILE[n] for n in names} for w, names in WAYS.items()}
+        if "xla_cpu_use_fusion_emitters" in declared:  # as a one-core process compiles it
+            options["declared, one core"] = {**{n: FAST_COMPILE[n] for n in declared}, **ONE_CORE}
         ways = {}
-        for way, names in WAYS.items():
+        for way, chosen in options.items():
             t0 = time.perf_counter()
-            compiled = compile_with(lowered, *names)
+            compiled = lowered.compile(chosen)  # named in full: not the process's own choice
             compile_s = time.perf_counter() - t0
             jax.block_until_ready(compiled(*args))  # the first call may set things up
             t0 = time.perf_counter()
@@ -122,9 +128,10 @@ def measure(spec: str, updates: int) -> list[dict]:
             ways[way] = {"compile_s": compile_s, "run_s": time.perf_counter() - t0}
             ways[way]["digest"] = _digest(out)
         same = {w: v["digest"] == ways["default"]["digest"] for w, v in ways.items()}
-        declared = task.compile_options(program.split()[0])
         other_bits = (task.name, program.split()[0]) in OTHER_BITS
         as_declared = next((w for w, names in WAYS.items() if set(names) == set(declared)), None)
+        one_core = ways.get("declared, one core", ways[as_declared])
+        one_core_same = one_core["digest"] == ways[as_declared]["digest"]
         rows.append(
             {
                 "task": spec,
@@ -134,26 +141,27 @@ def measure(spec: str, updates: int) -> list[dict]:
                 "declared": list(declared),
                 "declared_keeps_bits": bool(as_declared and same[as_declared]),
                 "declared_other_bits_by_choice": other_bits,
+                "one_core_keeps_declared_bits": one_core_same,
             }
         )
         cells = "  ".join(
             f"{v['compile_s']:5.2f}/{v['run_s']:6.3f}{'=' if same[w] else 'x'}"
             for w, v in ways.items()
-        )
-        print(
-            f"{spec:36s} {program:9s} {cells}  {as_declared or '?'}{' (other bits: --runs)' if other_bits else ''}",
-            flush=True,
-        )
+        ) + ("" if "declared, one core" in ways else " " * 16)
+        note = " (other bits: --runs)" if other_bits else ""
+        print(f"{spec:36s} {program:9s} {cells}  {as_declared or '?'}{note}", flush=True)
     return rows
 
 
 def whole_runs(spec: str, seeds: int) -> list[dict]:
     """``diffcontrol.train`` of ``TASK[:RECIPE]`` for seeds 0..seeds-1, with the task's
-    declared options and with XLA's defaults for every program of the run but its start."""
+    declared options (and ``ONE_CORE`` on one core) and with XLA's defaults for every program
+    of the run but its start."""
     import jax
     import numpy as np
 
     import diffcontrol
+    from diffcontrol import _jax_setup
     from diffcontrol.evaluation import evaluate
     from diffcontrol.io import NumpyPolicy, model_document
 
@@ -166,13 +174,16 @@ def whole_runs(spec: str, seeds: int) -> list[dict]:
         weights = {}
         for way, options in (("declared", declared), ("default", {})):
             type(task).fast_compile = options
+            one_core = _jax_setup.ONE_CORE
+            if way == "default":  # XLA's defaults on any number of cores
+                _jax_setup.ONE_CORE = {}
             try:
                 config = diffcontrol.training.resolve_config(task, recipe or None, seed=seed)
                 t0 = time.perf_counter()
                 result = diffcontrol.train(task, config, progress=lambda line: None)
                 seconds = time.perf_counter() - t0
             finally:
-                type(task).fast_compile = declared
+                type(task).fast_compile, _jax_setup.ONE_CORE = declared, one_core
             doc = model_document(task, result.controller, result.config, result.metrics)
             ev = evaluate(NumpyPolicy(doc), task, episodes=100, seed=0)
             threshold = task.reward_threshold
@@ -219,14 +230,17 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=5, help="training seeds of --runs")
     parser.add_argument("--out", type=Path, default=HERE / "results" / "compile_options.json")
     args = parser.parse_args()
-    print(f"{'task':36s} {'program':9s} " + "  ".join(f"{w:>14s}" for w in WAYS) + "  declared")
-    print("  (each cell: compile s / run s, '=' the defaults' bits, 'x' other bits)")
+    heads = [*WAYS, "declared+1 core"]
+    print(f"{'task':36s} {'program':9s} " + "  ".join(f"{w:>14s}" for w in heads) + "  declared")
+    print("  (each cell: compile s / run s, '=' the defaults' bits, 'x' other bits;")
+    print("   'declared+1 core': the declared older emitters with _jax_setup.ONE_CORE)")
     specs = [] if args.tasks == "none" else args.tasks.split(",")
     rows = [r for spec in specs for r in measure(spec, args.updates)]
     bad = [
         f"{r['task']} {r['program']}"
         for r in rows
-        if not r["declared_keeps_bits"] and not r["declared_other_bits_by_choice"]
+        if not (r["declared_keeps_bits"] or r["declared_other_bits_by_choice"])
+        or not r["one_core_keeps_declared_bits"]
     ]
     print("declared options keep the bits everywhere" if not bad else f"NOT KEPT: {bad}")
     args.out.parent.mkdir(parents=True, exist_ok=True)

@@ -267,6 +267,7 @@ def test_compile_with_passes_the_named_fast_options_unless_xla_flags_name_them(m
 
     level, emitters = "xla_backend_optimization_level", "xla_cpu_use_fusion_emitters"
     monkeypatch.setenv("XLA_FLAGS", "")
+    monkeypatch.setattr(_jax_setup, "_one_core", lambda: False)
     lowered = _Lowered()
     assert _jax_setup.compile_with(lowered, level, emitters) == "compiled"
     assert _jax_setup.compile_with(lowered, emitters) == "compiled"
@@ -283,6 +284,27 @@ def test_compile_with_passes_the_named_fast_options_unless_xla_flags_name_them(m
         None,
         {level: 1},
     ]
+
+
+def test_on_one_core_the_older_emitters_compile_unsplit(monkeypatch):
+    """With one core, a program with the older emitters gets ``ONE_CORE`` (XLA's parallel
+    codegen split has no second core to run on); one with the fusion emitters does not, nor
+    does any program where ``XLA_FLAGS`` names the split."""
+    from diffcontrol import _jax_setup
+
+    level, emitters = "xla_backend_optimization_level", "xla_cpu_use_fusion_emitters"
+    split = "xla_cpu_parallel_codegen_split_count"
+    monkeypatch.setenv("XLA_FLAGS", "")
+    monkeypatch.setattr(_jax_setup, "_one_core", lambda: True)
+    assert _jax_setup.fast_options(level, emitters) == {level: 1, emitters: False, split: 1}
+    assert _jax_setup.fast_options(emitters) == {emitters: False, split: 1}
+    assert _jax_setup.fast_options(level) == {level: 1}
+    assert _jax_setup.fast_options() is None
+    monkeypatch.setenv("XLA_FLAGS", f"--{split}=4")
+    assert _jax_setup.fast_options(emitters) == {emitters: False}
+    monkeypatch.setattr(_jax_setup, "_one_core", lambda: False)
+    monkeypatch.setenv("XLA_FLAGS", "")
+    assert _jax_setup.fast_options(emitters) == {emitters: False}
 
 
 def test_compile_with_falls_back_to_xlas_defaults_where_jaxlib_lacks_an_option(monkeypatch):
