@@ -47,6 +47,8 @@ WAYS = {
     "older emitters": ("xla_cpu_use_fusion_emitters",),
     "both": ("xla_backend_optimization_level", "xla_cpu_use_fusion_emitters"),
 }
+XLA_DEFAULTS = {"xla_backend_optimization_level": 3, "xla_cpu_use_fusion_emitters": True}
+"""XLA's own defaults, named: an ``XLA_FLAGS`` in the environment does not choose for them."""
 OTHER_BITS = {("cartpole", "chunk")}
 """Declared options that give other bits than XLA's defaults, chosen all the same: the whole
 runs (``--runs``) gave the same documented results (docs/benchmarks.md)."""
@@ -114,9 +116,12 @@ def measure(spec: str, updates: int) -> list[dict]:
     rows = []
     for task, program, lowered, args in programs(spec, updates):
         declared = task.compile_options(program.split()[0])
-        options = {w: {n: FAST_COMPILE[n] for n in names} for w, names in WAYS.items()}
+        options = {
+            w: {**XLA_DEFAULTS, **{n: FAST_COMPILE[n] for n in names}} for w, names in WAYS.items()
+        }
         if "xla_cpu_use_fusion_emitters" in declared:  # as a one-core process compiles it
-            options["declared, one core"] = {**{n: FAST_COMPILE[n] for n in declared}, **ONE_CORE}
+            declared_options = {n: FAST_COMPILE[n] for n in declared}
+            options["declared, one core"] = {**XLA_DEFAULTS, **declared_options, **ONE_CORE}
         ways = {}
         for way, chosen in options.items():
             t0 = time.perf_counter()

@@ -21,7 +21,7 @@ def _outside(fig) -> list[tuple[float, ...]]:
 
 
 def test_a_rollout_and_a_learning_curve_keep_wide_labels_inside(monkeypatch, tmp_path):
-    """Ticks of six characters (−12500), a long state label and a title: all inside the
+    """Ticks of seven characters (−250000), a long state label and a title: all inside the
     figure, as ``tight_layout`` would have placed them."""
     from diffcontrol import io, plots
 
@@ -33,7 +33,7 @@ def test_a_rollout_and_a_learning_curve_keep_wide_labels_inside(monkeypatch, tmp
     )
     steps = 200
     recording = types.SimpleNamespace(
-        states=np.stack([np.linspace(0, -12500, steps + 1), np.sin(np.arange(steps + 1))], 1),
+        states=np.stack([np.linspace(0, -250000, steps + 1), np.sin(np.arange(steps + 1))], 1),
         actions=np.sign(np.sin(np.arange(steps)))[:, None],
         dt=0.02,
         env_id="Some-v0",
@@ -44,9 +44,9 @@ def test_a_rollout_and_a_learning_curve_keep_wide_labels_inside(monkeypatch, tmp
         {
             "update": u,
             "simulated_episodes": u / 10,
-            "eval_return": -12500 + u,
+            "eval_return": -200.0 + u,
             "eval_return_std": 10.0,
-            "loss": 1e-3 * (1 + u),
+            "loss": -250000.0 + 1250.0 * u,  # negative: a linear axis
         }
         for u in range(0, 200, 20)
     ]

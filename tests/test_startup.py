@@ -239,6 +239,10 @@ def test_fast_compile_options_are_read_from_the_tasks_own_class_and_kept_apart()
     assert cartpole.compile_options("chunk") and cartpole.compile_options("evaluate")
     assert type("Heavier", (type(cartpole),), {})().compile_options("chunk") == ()
     assert diffcontrol.make("mountain-car-continuous").compile_options("chunk") == ()
+    for wrong in ({"evaluate": "xla_backend_optimization_level"}, {"chunks": ()}):
+        typo = type("Typo", (type(cartpole),), {"fast_compile": wrong})()
+        with pytest.raises(diffcontrol.ConfigError, match="declares fast_compile"):
+            typo.compile_options("chunk")
     lowered = jax.jit(lambda x: x * 3).lower(jnp.ones(2))
     level = ("xla_backend_optimization_level",)
     assert _driver.compiled_once(lowered, *level) is _driver.compiled_once(lowered, *level)

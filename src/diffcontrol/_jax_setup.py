@@ -90,8 +90,8 @@ result is only reported or drawn (each caller says what it measured)."""
 ONE_CORE = {"xla_cpu_parallel_codegen_split_count": 1}
 """For a program compiled with the older CPU emitters by a process that may run on one core
 only: XLA splits a CPU program into modules that LLVM compiles in parallel, which on one core
-only adds work. On one core it compiles such programs 10-30 % faster (CartPole's chunk 1.06 ->
-0.77 s, its start 0.46 -> 0.37 s, the swing-ups' evaluations 0.1 s less) with the same bits
+only adds work. On one core it compiles such programs 10-30 % faster (CartPole's chunk 0.75 ->
+0.63 s, its start 0.46 -> 0.37 s, the swing-ups' evaluations 0.1 s less) with the same bits
 on every program compared (``benchmarks/compile_options.py``); on two cores the split is
 faster, and for programs with the fusion emitters it gains nothing on one core either, so it
 is left there. ``fast_options`` adds it."""

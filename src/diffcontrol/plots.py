@@ -23,11 +23,11 @@ def _save(fig: Any, path: str | Path) -> Path:
 
 def _column_layout(fig: Any, rows: int) -> None:
     """Fixed margins (inches) for a column of ``rows`` axes sharing their x axis: room for
-    a title, y labels with ticks of up to about six characters, the x label and ticks. Used
+    a title, y labels with ticks of up to seven characters (−250000), the x label and ticks. Used
     instead of ``tight_layout`` for the pictures of every run: it measures every label by
     drawing the figure once more before it is saved (about 0.08 s a figure, one core)."""
     width, height = fig.get_size_inches()
-    top, bottom, left, right, gap = 0.4, 0.6, 0.95, 0.2, 0.2
+    top, bottom, left, right, gap = 0.4, 0.6, 1.05, 0.2, 0.2
     axes_height = (height - top - bottom - (rows - 1) * gap) / rows
     fig.subplots_adjust(
         left=left / width,

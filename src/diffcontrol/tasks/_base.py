@@ -81,15 +81,36 @@ class _TaskBase(abc.ABC):
     """Options of ``_jax_setup.FAST_COMPILE`` (XLA's level 1, the older CPU emitters) that
     the programs of ``diffcontrol.train`` compile with, by program: ``"chunk"`` (the training
     updates) and ``"evaluate"`` (an evaluation point). Default: none, XLA's defaults. A built-in
-    task names those under which its programs gave the defaults' bits, or, where they did not
-    (CartPole's chunk), whole runs gave the same documented results
-    (``benchmarks/compile_options.py``). Read from the task's own class only: a subclass
-    (another system, a fitted model) compiles with XLA's defaults unless it names its own."""
+    task names those under which its programs gave the defaults' bits in its default settings
+    and every recipe, or, where they did not (CartPole's chunk), whole runs gave the same
+    documented results (``benchmarks/compile_options.py``). Other settings (another ODE
+    solver, loss or network) may round differently in the last bits: the options compile
+    faster, they do not promise the defaults' bits. Read from the task's own class only: a
+    subclass (another system, a fitted model) compiles with XLA's defaults unless it names
+    its own."""
 
     def compile_options(self, program: str) -> tuple[str, ...]:
         """The ``fast_compile`` options of ``program`` (``"chunk"`` or ``"evaluate"``) that
-        this task's own class declares."""
-        return tuple(vars(type(self)).get("fast_compile", {}).get(program, ()))
+        this task's own class declares.
+
+        Raises:
+            ConfigError: the declaration names another program, or an option that is not in
+                ``_jax_setup.FAST_COMPILE``.
+        """
+        from .._jax_setup import FAST_COMPILE
+
+        own = vars(type(self)).get("fast_compile", {})
+        for key, names in own.items():
+            if (
+                key not in ("chunk", "evaluate")
+                or isinstance(names, str)
+                or any(n not in FAST_COMPILE for n in names)
+            ):
+                raise ConfigError(
+                    f"task {self.name!r} declares fast_compile[{key!r}] = {names!r}; use "
+                    f"'chunk' or 'evaluate' with a tuple of {', '.join(sorted(FAST_COMPILE))}"
+                )
+        return tuple(own.get(program, ()))
 
     positive_params: ClassVar[tuple[str, ...]] = ()
     """Physical parameters that must be > 0 (masses, lengths, time steps)."""
