@@ -86,7 +86,7 @@ def _digest(tree) -> str:
 
 
 def programs(spec: str, updates: int):
-    """``(name, lowered, args)`` for the evaluation program and every stage's chunk of
+    """``(task, program, lowered, args)`` for the evaluation program and every stage's chunk of
     ``diffcontrol train TASK[ --recipe R]`` with its defaults."""
     import jax
     import numpy as np

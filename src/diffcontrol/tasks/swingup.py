@@ -162,8 +162,8 @@ class CartPoleSwingUp(ContinuousTask):
     """Swing the post's cart-pole up from hanging down in 1 s, and stop (the post's loss)."""
 
     name = "cartpole-swingup"
-    # benchmarks/compile_options.py: either option changes the chunk's bits; level 1 the
-    # evaluation's of the limited and friction swing-ups (each class declares its own)
+    # benchmarks/compile_options.py: either option changes the chunk's bits, and level 1
+    # changes the limited and friction swing-ups' evaluations (each class declares its own)
     fast_compile = {"evaluate": ("xla_cpu_use_fusion_emitters",)}
     env_name = "CartPoleSwingUp"
     summary = "neural-ODE cart-pole swing-up of the 2020 post: 1 s, unbounded force"
