@@ -54,13 +54,26 @@ if "xla_backend_optimization_level" not in _given and "xla_cpu_use_fusion_emitte
 # so the ODE tasks' programs go into the session's cache too.
 os.environ.setdefault("EQX_ON_ERROR", "nan")
 
+import gc  # noqa: E402
+
 import pytest  # noqa: E402
 
-from diffcontrol._jax_setup import enable_compile_cache  # noqa: E402
+from diffcontrol._jax_setup import GC_THRESHOLDS, enable_compile_cache  # noqa: E402
 from diffcontrol.cli import main  # noqa: E402
 
 # Tests that train the same small configurations share compiled programs through the cache.
 enable_compile_cache()
+# The collector as the console script sets it (_jax_setup.GC_THRESHOLDS): fewer collections
+# while the tests trace their programs, each walking every object the session has made so far.
+gc.set_threshold(*GC_THRESHOLDS)
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_sessionfinish(session):
+    """The session's objects frozen out of the collector, as the console script freezes a
+    command's (``cli.run``): pytest ends a session with five full collections, each of a
+    worker's millions of objects (about a second each after one test file)."""
+    gc.freeze()
 
 
 def pytest_report_header(config):

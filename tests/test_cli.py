@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 import diffcontrol
+from diffcontrol._jax_setup import GC_THRESHOLDS
 from diffcontrol.cli import main
 
 from .conftest import TINY_CARTPOLE
@@ -247,9 +248,10 @@ def test_files_are_written_with_normal_permissions(cartpole_run):
 
 @pytest.mark.slow  # three fresh interpreters that import diffcontrol: 1.3 s on one core
 def test_the_console_script_freezes_the_collector_then_exits_normally(tmp_path):
-    """``cli.run`` (the console script) freezes the objects made so far out of the garbage
-    collector, so that the shutdown's last collections skip them, and leaves the exit itself
-    to Python: the status, the output and a failed write of it are as before."""
+    """``cli.run`` (the console script) runs the command with the collector at
+    ``GC_THRESHOLDS``, freezes the objects made so far out of it, so that the shutdown's last
+    collections skip them, and leaves the exit itself to Python: the status, the output and a
+    failed write of it are as before."""
     import resource
     import signal
     import subprocess
@@ -260,13 +262,16 @@ def test_the_console_script_freezes_the_collector_then_exits_normally(tmp_path):
         "import atexit, gc, sys\n"
         "from diffcontrol import cli\n"
         "atexit.register(lambda: print('frozen:', gc.get_freeze_count() > 0))\n"
+        "atexit.register(lambda: print('thresholds:', *gc.get_threshold()))\n"
         "sys.argv = ['diffcontrol', 'list']\n"
         "sys.exit(cli.run())\n"
     )
     done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
     assert done.stdout.split()[0] == diffcontrol.list_tasks()[0]
-    assert done.stdout.endswith("frozen: True\n")
+    # the thresholds it ran under (the atexit functions run last registered, first)
+    thresholds = " ".join(map(str, GC_THRESHOLDS))
+    assert done.stdout.endswith(f"thresholds: {thresholds}\nfrozen: True\n")
     cmd = [sys.executable, "-m", "diffcontrol.cli"]
     bad = subprocess.run([*cmd, "train", "no-such-task", "--out", str(tmp_path / "r")],
                          capture_output=True, text=True)  # fmt: skip

@@ -78,6 +78,16 @@ def cache_events() -> dict[str, int]:
     return dict(_EVENTS)
 
 
+GC_THRESHOLDS = (10_000, 50, 50)
+"""The garbage collector's thresholds in the console script (``cli.run``; Python's are 2,000 or
+700 allocations, then 10 and 10). Tracing a JAX program makes hundreds of thousands of
+objects, and at Python's thresholds the collector ran hundreds of times while a swing-up's
+programs were traced, four of them full collections walking everything JAX had made: about
+0.7 s of its 3.3 s of tracing (docs/benchmarks.md, "Fewer garbage collections"). Collections
+are rarer, not gone: cyclic garbage is still freed, later. Not set by the library itself: a
+Python caller's collector is its own."""
+
+
 FAST_COMPILE = {"xla_backend_optimization_level": 1, "xla_cpu_use_fusion_emitters": False}
 """XLA's options that compile a CPU program faster: optimisation level 1 instead of 3, and the
 older CPU emitters instead of the fusion emitters (which compile every fusion as its own LLVM

@@ -10,7 +10,7 @@ import os
 import sys
 
 from .._interrupts import terminate_as_interrupt
-from .._jax_setup import checks_as_nan
+from .._jax_setup import GC_THRESHOLDS, checks_as_nan
 from ..errors import DiffcontrolError, Interrupted
 from . import _compare, _identify, _runs, _train
 from ._args import EXIT_USAGE, Parser
@@ -70,7 +70,8 @@ def main(argv: list[str] | None = None) -> int:
 
 def run() -> int:
     """The ``diffcontrol`` console script: :func:`main`, whose status it returns for a normal
-    exit, with the objects made so far frozen out of the garbage collector first.
+    exit, with the garbage collector at ``GC_THRESHOLDS`` while it runs and the objects made
+    so far frozen out of it at the end.
 
     After a JAX run the interpreter's shutdown spent most of its time in its last full
     collections, each walking every object that JAX, Equinox and the run had made (measured
@@ -80,6 +81,7 @@ def run() -> int:
     objects in reference cycles are no longer collected at the very end, which Python never
     promised either. :func:`main` itself leaves the collector alone, for callers in Python.
     """
+    gc.set_threshold(*GC_THRESHOLDS)
     status = main()
     gc.freeze()
     return status
