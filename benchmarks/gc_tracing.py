@@ -10,8 +10,16 @@ resident memory.
 
     python benchmarks/gc_tracing.py                      # cartpole-swingup, three rounds
     python benchmarks/gc_tracing.py --task cartpole --rounds 2
+    python benchmarks/gc_tracing.py --memory 12          # 12 trainings in one process
 
-Prints a table and writes benchmarks/results/gc_tracing.json (machine, date, every figure).
+With ``--memory N``, each setting (and the thresholds ``10000, 50, 50``, tried first) instead
+runs N CartPole trainings of 30 updates in one process through ``cli.main``, the network one
+width larger each time (new programs every run, as a long loop or sweep makes them), and
+reports the resident memory after the last, the full collections and the unreachable objects
+one more full collection then finds.
+
+Prints a table and writes benchmarks/results/gc_tracing.json (``--memory``: gc_memory.json;
+machine, date, every figure).
 """
 
 from __future__ import annotations
@@ -48,8 +56,8 @@ gc.callbacks.append(lambda phase, info: events.append((phase, info["generation"]
 task = diffcontrol.make(name)
 config = task.default_config()
 params = _driver.task_params(task, config.params)
-t0 = time.perf_counter()
 kept = _driver._kept_trainer(task, config, None, None, params, lambda line: None)
+t0 = time.perf_counter()
 _driver._START.lower(kept.trainer, np.int32(config.seed), params)
 t1 = time.perf_counter()
 ts, k_eval = _driver._first_state(kept, config.seed, params)
@@ -78,13 +86,65 @@ print(json.dumps({
 """
 
 
+MEMORY_CHILD = r"""
+import contextlib, gc, io, json, os, sys, tempfile, time
+os.environ["DIFFCONTROL_NO_COMPILE_CACHE"] = "1"
+from diffcontrol._jax_setup import GC_THRESHOLDS
+from diffcontrol.cli import main
+setting, n = sys.argv[1], int(sys.argv[2])
+if setting == "console script":
+    gc.set_threshold(*GC_THRESHOLDS)
+elif setting == "10000, 50, 50":
+    gc.set_threshold(10_000, 50, 50)
+full = []
+gc.callbacks.append(lambda p, i: full.append(1) if p == "start" and i["generation"] == 2 else None)
+out, t0 = tempfile.mkdtemp(), time.perf_counter()
+for i in range(n):
+    h = 8 + 4 * i
+    args = ["train", "cartpole", "--updates", "30", "--hidden", f"{h},{h}", "--quiet",
+            "--eval-episodes", "10", "--final-eval", "0", "--no-animation", "--out", f"{out}/{i}"]
+    with contextlib.redirect_stdout(io.StringIO()):
+        assert main(args) == 0
+seconds = time.perf_counter() - t0
+with open("/proc/self/statm") as f:
+    rss = int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+print(json.dumps({"rss_mb": rss, "full_collections": len(full), "seconds": seconds,
+                  "unreachable_at_end": gc.collect()}))
+"""
+
+
+def memory(runs: int, pin: list[str]) -> list[dict]:
+    rows = []
+    print(f"{'setting':16s} {'rss MB':>7s} {'full':>5s} {'unreachable':>11s} {'seconds':>8s}")
+    for setting in (*SETTINGS[:2], "10000, 50, 50"):
+        cmd = [*pin, sys.executable, "-c", MEMORY_CHILD, setting, str(runs)]
+        done = subprocess.run(cmd, capture_output=True, text=True, check=True)
+        row = {"setting": setting, "runs": runs, **json.loads(done.stdout.strip().splitlines()[-1])}
+        rows.append(row)
+        print(
+            f"{setting:16s} {row['rss_mb']:7.0f} {row['full_collections']:5d} "
+            f"{row['unreachable_at_end']:11d} {row['seconds']:8.1f}",
+            flush=True,
+        )
+    return rows
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--task", default="cartpole-swingup")
     parser.add_argument("--rounds", type=int, default=3, help="each setting this many times")
-    parser.add_argument("--out", type=Path, default=HERE / "results" / "gc_tracing.json")
+    parser.add_argument("--memory", type=int, default=0, help="N trainings in one process")
+    parser.add_argument("--out", type=Path, default=None)
     args = parser.parse_args()
     pin = ["taskset", "-c", "0"] if shutil.which("taskset") else []
+    if args.memory:
+        rows = memory(args.memory, pin)
+        out = args.out or HERE / "results" / "gc_memory.json"
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(json.dumps({"machine": machine(), "runs": rows}, indent=1) + "\n")
+        print(f"wrote {out}")
+        return
+    args.out = args.out or HERE / "results" / "gc_tracing.json"
     rows = []
     print(f"{'setting':16s} {'start':>6s} {'eval':>6s} {'chunk':>6s} {'traced':>7s} "
           f"{'gc runs':>7s} {'gc s':>6s} {'full':>4s} {'full s':>6s} {'rss MB':>7s}")  # fmt: skip

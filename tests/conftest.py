@@ -68,11 +68,14 @@ enable_compile_cache()
 gc.set_threshold(*GC_THRESHOLDS)
 
 
-@pytest.hookimpl(tryfirst=True)
+@pytest.hookimpl(trylast=True)
 def pytest_sessionfinish(session):
-    """The session's objects frozen out of the collector, as the console script freezes a
-    command's (``cli.run``): pytest ends a session with five full collections, each of a
-    worker's millions of objects (about a second each after one test file)."""
+    """After the session's fixtures are torn down: one full collection, whose garbage's
+    ``__del__`` errors reach pytest's report of unraisable exceptions, then the session's
+    objects frozen out of the collector, as the console script freezes a command's
+    (``cli.run``). pytest ends a session with five full collections, each of a worker's
+    millions of objects (about a second each after one test file); four are spared."""
+    gc.collect()
     gc.freeze()
 
 

@@ -78,14 +78,16 @@ def cache_events() -> dict[str, int]:
     return dict(_EVENTS)
 
 
-GC_THRESHOLDS = (10_000, 50, 50)
-"""The garbage collector's thresholds in the console script (``cli.run``; Python's are 2,000 or
-700 allocations, then 10 and 10). Tracing a JAX program makes hundreds of thousands of
-objects, and at Python's thresholds the collector ran hundreds of times while a swing-up's
-programs were traced, four of them full collections walking everything JAX had made: about
-0.7 s of its 3.3 s of tracing (docs/benchmarks.md, "Fewer garbage collections"). Collections
-are rarer, not gone: cyclic garbage is still freed, later. Not set by the library itself: a
-Python caller's collector is its own."""
+GC_THRESHOLDS = (10_000, 10, 10)
+"""The garbage collector's thresholds in the console script (``cli.run``): a collection of the
+youngest objects every 10,000 net allocations instead of Python's 700 (2,000 from 3.13), the
+older generations' ratios Python's own. Tracing a JAX program makes hundreds of thousands of
+objects, and at Python's thresholds the collector runs hundreds of times while a program is
+traced, the full collections among them walking everything JAX has made; here it runs a
+twentieth as often, and a full collection still comes every million or so net allocations,
+so a long command's cyclic garbage is freed as it runs (docs/benchmarks.md, "Fewer garbage
+collections", has the figures, and those of older generations at 50 and 50, tried first).
+Not set by the library itself: a Python caller's collector is its own."""
 
 
 FAST_COMPILE = {"xla_backend_optimization_level": 1, "xla_cpu_use_fusion_emitters": False}
@@ -102,7 +104,9 @@ ONE_CORE = {"xla_cpu_parallel_codegen_split_count": 1}
 only: XLA splits a CPU program into modules that LLVM compiles in parallel, which on one core
 only adds work. On one core it compiles such programs 10-30 % faster (CartPole's chunk 0.75 ->
 0.63 s, its start 0.46 -> 0.37 s, the swing-ups' evaluations 0.1 s less) with the same bits
-on every program compared (``benchmarks/compile_options.py``); on two cores the split is
+on every program compared (``benchmarks/compile_options.py``) but the trebuchet's evaluation,
+declared with other bits anyway, whose throws round differently again by about 1e-7 (whole
+runs on one core and on two return the same controllers); on two cores the split is
 faster, and for programs with the fusion emitters it gains nothing on one core either, so it
 is left there. ``fast_options`` adds it."""
 

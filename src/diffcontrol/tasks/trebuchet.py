@@ -62,8 +62,9 @@ class TrebuchetAiming(Task):
 
     name = "trebuchet"
     # benchmarks/compile_options.py: the evaluation program compiles in about half the time
-    # with both options; its returns move by float32 rounding, but whole runs (--runs) return
-    # the same update with the same weights, so every figure of the run is the defaults'. The
+    # with both options; its returns move by float32 rounding (the curve's simulated
+    # evaluations in their 5th-6th digit), but whole runs (--runs) return the same update with
+    # the same weights: the returned controller and every figure of it are the defaults'. The
     # chunk keeps XLA's defaults (either option moves the trained weights and the mean miss).
     fast_compile = {"evaluate": ("xla_backend_optimization_level", "xla_cpu_use_fusion_emitters")}
     summary = "aim the 2019 post's differentiable trebuchet: (target, wind) -> (angle, weight)"
