@@ -80,14 +80,14 @@ def cache_events() -> dict[str, int]:
 
 GC_THRESHOLDS = (10_000, 10, 10)
 """The garbage collector's thresholds in the console script (``cli.run``): a collection of the
-youngest objects every 10,000 net allocations instead of Python's 700 (2,000 from 3.13), the
-older generations' ratios Python's own. Tracing a JAX program makes hundreds of thousands of
-objects, and at Python's thresholds the collector runs hundreds of times while a program is
-traced, the full collections among them walking everything JAX has made; here it runs a
-twentieth as often, and a full collection still comes every million or so net allocations,
-so a long command's cyclic garbage is freed as it runs (docs/benchmarks.md, "Fewer garbage
-collections", has the figures, and those of older generations at 50 and 50, tried first).
-Not set by the library itself: a Python caller's collector is its own."""
+youngest objects every 10,000 net allocations instead of Python's 700 (3.11, 3.12; 2,000 in
+3.13), the older generations' ratios Python's own. Tracing a JAX program makes hundreds of
+thousands of objects, and at Python's thresholds the collector runs hundreds of times while
+a program is traced, the full collections among them walking everything JAX has made; here
+it runs a twentieth as often, and a full collection still comes every million or so net
+allocations, so a long command's cyclic garbage is freed as it runs (docs/benchmarks.md,
+"Fewer garbage collections", has the figures, and those of older generations at 50 and 50,
+tried first). Not set by the library itself: a Python caller's collector is its own."""
 
 
 FAST_COMPILE = {"xla_backend_optimization_level": 1, "xla_cpu_use_fusion_emitters": False}

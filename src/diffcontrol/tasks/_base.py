@@ -83,11 +83,11 @@ class _TaskBase(abc.ABC):
     updates) and ``"evaluate"`` (an evaluation point). Default: none, XLA's defaults. A built-in
     task names those under which its programs gave the defaults' bits in its default settings
     and every recipe, or, where they did not (CartPole's chunk, the trebuchet's evaluation),
-    whole runs gave the same documented results (``benchmarks/compile_options.py``). Other settings (another ODE
-    solver, loss or network) may round differently in the last bits: the options compile
-    faster, they do not promise the defaults' bits. Read from the task's own class only: a
-    subclass (another system, a fitted model) compiles with XLA's defaults unless it names
-    its own."""
+    whole runs gave the same documented results (``benchmarks/compile_options.py``). Other
+    settings (another ODE solver, loss or network) may round differently in the last bits: the
+    options compile faster, they do not promise the defaults' bits. Read from the task's own
+    class only: a subclass (another system, a fitted model) compiles with XLA's defaults
+    unless it names its own."""
 
     def compile_options(self, program: str) -> tuple[str, ...]:
         """The ``fast_compile`` options of ``program`` (``"chunk"`` or ``"evaluate"``) that
