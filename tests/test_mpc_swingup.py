@@ -16,7 +16,7 @@ from diffcontrol import mpc
 from diffcontrol.errors import ConfigError
 from diffcontrol.rollout import solve_closed_loop
 from diffcontrol.systems.cartpole_swingup import SwingUpParams, wrap_angle
-from diffcontrol.tasks.swingup import limited_hold_end
+from diffcontrol.tasks.swingup import ENERGY_WEIGHT, energy_end, energy_rate, limited_hold_end
 
 STATES = [
     [0.0, 0.0, math.pi, 0.0, 0.0, 0.0],  # hanging at rest
@@ -82,6 +82,36 @@ def test_end_cost_is_zero_upright_at_rest_and_high_hanging():
     down = jnp.array(STATES[0])
     assert float(limited_hold_end(p, up)) == pytest.approx(0.0, abs=1e-6)
     assert float(limited_hold_end(p, down)) > 10.0
+
+
+def test_energy_planning_costs_are_the_losss_terms():
+    """The planning form of ``energy``: zero cost per second upright, 4 per second hanging
+    (``2 (1 - cos theta)``, the force free), and the end cost the loss's end terms plus the
+    dissipated energy (the ODE's last state) at its weight."""
+    p = SwingUpParams()
+    up = jnp.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    assert float(energy_rate(p, up, jnp.array([30.0]))) == pytest.approx(0.0, abs=1e-6)
+    assert float(energy_rate(p, jnp.array(STATES[0]), jnp.array([0.0]))) == pytest.approx(4.0)
+    moving = jnp.array([0.0, 2.0, 0.0, 0.0, 0.0, 5.0])  # upright, the cart at 2 m/s, 5 J lost
+    assert float(energy_end(p, moving)) == pytest.approx(4.0 + ENERGY_WEIGHT * 5.0)
+
+
+def test_the_friction_swingup_plans_its_own_loss_and_a_fitted_model_plans_like_it():
+    """``cartpole-swingup-friction`` plans with ``energy`` by default (its first planning
+    loss), within 40 N; a swing-up through a fitted model takes the wrapped task's planning
+    losses and planner settings (``diffcontrol plan TASK --model DIR``)."""
+    from diffcontrol.tasks.fitted_swingup import FittedSwingUp, nominal_model
+
+    task = diffcontrol.make("cartpole-swingup-friction")
+    config = task.default_plan_config()
+    assert task.planning_losses[0] == "energy" and config.loss is None
+    assert config.action_bound == 40.0 and config.iterations == 10 and config.dt == 0.05
+    fitted = FittedSwingUp(task, nominal_model(task.default_params()))
+    assert fitted.planning_losses == task.planning_losses
+    assert fitted.default_plan_config() == config
+    assert mpc.discretise(fitted, 0.05).losses[0] == "energy"
+    assert fitted.running_cost("energy") is energy_rate
+    assert diffcontrol.make("cartpole-swingup").planning_losses[0] == "limited_hold"
 
 
 def _planner(task, horizon, fmax):

@@ -230,6 +230,17 @@ def test_cli_fit_swingup_end_to_end(tmp_path, data, capsys):
     assert metrics["model"]["real_system"]["params"] == data.metadata["params"]
     assert json.loads((run / "model.json").read_text())["task"] == "cartpole-swingup-friction"
 
+    # plan through it (the task's energy loss), judged on the same real system, and load it
+    plan = tmp_path / "plan"
+    argv = ["plan", "cartpole-swingup-friction", "--model", str(out), "--out", str(plan)]
+    assert main([*argv, "--horizon", "4", "--iterations", "1", "--no-animation", "--quiet"]) == 0
+    metrics = json.loads((plan / "metrics.json").read_text())
+    assert metrics["model"]["kind"] == "hybrid" and np.isfinite(metrics["swingup"]["loss"])
+    assert metrics["model"]["real_system"]["params"] == data.metadata["params"]
+    assert metrics["swingup"]["peak_force"] <= 40.0 + 1e-3  # the task's planning bound
+    policy = diffcontrol.load(plan)
+    assert np.isfinite(policy(np.array([0.0, 0.0, np.pi, 0.0]))).all()
+
 
 def test_cli_records_the_swingup_state(tmp_path, capsys):
     from diffcontrol.cli import main

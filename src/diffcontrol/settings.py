@@ -282,7 +282,8 @@ class PlanConfig(_Settings):
     what ``model.json`` stores of a planner, with the model it plans through. Pendulum's best
     (docs/planning.md): ``PlanConfig(horizon=10, value_grid=401)``. A task's defaults are its
     ``default_plan_config()`` (the swing-ups': ``dt=0.05``, ``horizon=40``, ``iterations=5``;
-    the actuator-limited one's force within 5 N); a continuous-time task is planned through
+    the actuator-limited one's force within 5 N, the friction one's within 40 N with 10
+    iterations); a continuous-time task is planned through
     ``mpc.discretise(task, dt, substeps)``."""
 
     solver: str = _opt("the solver of every step's plan", "ilqr", choices=SOLVERS)

@@ -159,7 +159,7 @@ class FittedSwingUp(CartPoleSwingUp):
     """A swing-up task whose simulator is a fitted ``SwingUpModel`` (module docstring).
 
     Everything but the vector field is the wrapped task's: losses, horizon, training
-    configuration, controller. The parameters that ``train`` passes (and ``config.params``
+    configuration, controller, planning losses and planner settings. The parameters that ``train`` passes (and ``config.params``
     overrides) are the model's: its physical ones and, for a model with a network, the
     network (``FittedSwingUpParams``), an argument of the compiled programs that only the
     controller's training does not change. Like the physical parameters, the network in a
@@ -176,6 +176,16 @@ class FittedSwingUp(CartPoleSwingUp):
         self.env_name = task.env_name
         self.summary = f"{task.summary} (through a fitted {model.model_type} model)"
         self.losses = task.losses
+        self.planning_losses = task.planning_losses
+
+    def default_plan_config(self):
+        return self.base.default_plan_config()
+
+    def running_cost(self, name: str):
+        return self.base.running_cost(name)
+
+    def terminal_cost(self, name: str):
+        return self.base.terminal_cost(name)
 
     def default_params(self) -> cp.SwingUpParams:
         # plain floats, as every task's: the trainer makes them arrays of its own precision

@@ -144,6 +144,33 @@ def limited_hold_end(params: cp.SwingUpParams, y: Array) -> Array:
     return PLAN_ENERGY_WEIGHT * gap**2 + PLAN_END_WEIGHT * end_terms
 
 
+def energy_rate(params: cp.SwingUpParams, y: Array, force: Array) -> Array:
+    """The cost per second of the planning ``energy`` loss: ``PLAN_ANGLE_WEIGHT`` times
+    ``2 (1 - cos theta)``, the smooth wrapped ``theta^2`` (as in ``limited_hold_rate``). The
+    loss has no force term and neither has its plan: the action bound caps the force.
+
+    The weight per second is 1, three times the loss's own ``sum(theta^2) / N`` over the
+    friction swing-up's 3 s: a plan sees 2 s ahead and meets its end terms at its own end, not
+    the task's, and the heavier weight swings up sooner (measured: docs/planning.md).
+    """
+    del params, force
+    return PLAN_ANGLE_WEIGHT * 2 * (1 - jnp.cos(y[2]))
+
+
+def energy_end(params: cp.SwingUpParams, y: Array) -> Array:
+    """The end cost of a plan for ``energy``: the loss's own end terms ``4 theta^2 +
+    x_dot^2`` (the angle smoothed) and ``ENERGY_WEIGHT`` times the energy dissipated so far
+    (the ODE's last state: within a plan only its increase counts, the friction's work)."""
+    del params
+    return 8 * (1 - jnp.cos(y[2])) + y[1] ** 2 + ENERGY_WEIGHT * y[5]
+
+
+PLANNING_COSTS = {
+    "limited_hold": (limited_hold_rate, limited_hold_end),
+    "energy": (energy_rate, energy_end),
+}
+"""The planning losses of the swing-ups by name: (cost per second, end cost of a plan)."""
+
 LOSSES: dict[str, TrajectoryLoss] = {
     "swingup": swingup_loss,
     "limited": limited_loss,
@@ -211,17 +238,18 @@ class CartPoleSwingUp(ContinuousTask):
     def trajectory_loss(self, name: str) -> TrajectoryLoss:
         return LOSSES[name]
 
-    planning_losses = ("limited_hold",)
+    planning_losses: tuple[str, ...] = ("limited_hold", "energy")
 
     def running_cost(self, name: str):
-        """``limited_hold_rate`` (the planning form of ``limited_hold``)."""
-        if name != "limited_hold":
+        """``limited_hold_rate`` and ``energy_rate`` (the planning forms of those losses)."""
+        if name not in PLANNING_COSTS:
             return super().running_cost(name)
-        return limited_hold_rate
+        return PLANNING_COSTS[name][0]
 
     def terminal_cost(self, name: str):
-        """``limited_hold_end``: the pole's energy gap and the loss's end terms."""
-        return limited_hold_end if name == "limited_hold" else None
+        """``limited_hold_end`` (the pole's energy gap and the loss's end terms) and
+        ``energy_end`` (the loss's end terms and the dissipated energy)."""
+        return PLANNING_COSTS[name][1] if name in PLANNING_COSTS else None
 
     def default_plan_config(self):
         """The planner measured on the actuator-limited swing-up (docs/planning.md): the
@@ -340,7 +368,7 @@ class CartPoleSwingUp(ContinuousTask):
         task's name (``model.json`` names the task the controller runs on)."""
         from .fitted_swingup import FittedSwingUp, model_from_dict
 
-        fitted = FittedSwingUp(self, model_from_dict(doc, doc["_path"]))
+        fitted = FittedSwingUp(self, model_from_dict(doc, doc.get("_path", "the fitted model")))
         fitted.name = self.name
         return fitted
 
@@ -412,8 +440,16 @@ class CartPoleSwingUpFriction(CartPoleSwingUp):
     summary = "3 s swing-up with cart and joint friction; the loss adds the dissipated energy"
     losses = ("energy", "swingup", "limited", "limited_hold")
 
+    planning_losses = ("energy", "limited_hold")
+
     def default_params(self) -> cp.SwingUpParams:
         return cp.SwingUpParams(cart_viscous=1.0, cart_coulomb=0.5, pole_viscous=0.1)
+
+    def default_plan_config(self):
+        """The planner of the task's own loss (``energy``, its first planning loss): the
+        force within 40 N and 10 box-iLQR iterations per step, the swing-ups' 0.05 s and
+        2 s otherwise (``benchmarks/plan_swingup_friction.py``, docs/benchmarks.md)."""
+        return super().default_plan_config().replace(action_bound=40.0, iterations=10)
 
     def default_config(self) -> ODETrainConfig:
         return ODETrainConfig(
