@@ -73,6 +73,7 @@ DEFAULTS = dict(
     window=40,
     bptt_batch=32,
     cap=500,  # steps of a fitness episode at most (its return then -cap); Gymnasium's 500
+    last=0,  # 1: perturb and move only the output layer's weights and bias (the rest held)
 )
 
 
@@ -182,7 +183,8 @@ def main() -> None:
         fit = returns(ctrl, unravel, thetas, starts, cap).mean(1)  # (2P,)
         ranks = jnp.argsort(jnp.argsort(fit)).astype(jnp.float32)
         shaped = ranks / (2 * pairs - 1) - 0.5
-        g = (shaped[:pairs] - shaped[pairs:]) @ (eps / scale) / (2 * pairs * sigma)
+        unit = jnp.where(scale > 0, eps / jnp.where(scale > 0, scale, 1.0), 0.0)
+        g = (shaped[:pairs] - shaped[pairs:]) @ unit / (2 * pairs * sigma)
         g = g * scale  # the search-space gradient back in weight units
         if alpha:
             gb = bptt_grad(ctrl, unravel, theta, kb, batch, window)
@@ -212,6 +214,9 @@ def main() -> None:
         for name, cfg in variants:
             t0 = time.perf_counter()
             scale = leaf_std if cfg["rel"] else jnp.ones_like(theta0)
+            if cfg["last"]:  # the output layer is the last two leaves (weight, bias)
+                n_last = sum(leaf.size for leaf in leaves[-2:])
+                scale = scale.at[: theta0.size - n_last].set(0.0)
             best_sim = float(evaluate_theta(bptt, unravel, theta0, eval_key, cfg["eval"]))
             sim0 = best_sim
             best_theta, best_it = theta0, 0
