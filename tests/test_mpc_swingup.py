@@ -97,19 +97,20 @@ def test_energy_planning_costs_are_the_losss_terms():
 
 
 def test_the_friction_swingup_plans_its_own_loss_and_a_fitted_model_plans_like_it():
-    """``cartpole-swingup-friction`` plans with ``energy`` by default (its first planning
-    loss), within 40 N; a swing-up through a fitted model takes the wrapped task's planning
-    losses and planner settings (``diffcontrol plan TASK --model DIR``)."""
+    """``cartpole-swingup-friction`` plans with ``energy`` by default, named in its settings
+    (a saved planner without a loss name keeps the first planning loss, ``limited_hold``),
+    within 40 N; a swing-up through a fitted model takes the wrapped task's planning losses
+    and planner settings (``diffcontrol plan TASK --model DIR``)."""
     from diffcontrol.tasks.fitted_swingup import FittedSwingUp, nominal_model
 
     task = diffcontrol.make("cartpole-swingup-friction")
     config = task.default_plan_config()
-    assert task.planning_losses[0] == "energy" and config.loss is None
+    assert task.planning_losses == ("limited_hold", "energy") and config.loss == "energy"
     assert config.action_bound == 40.0 and config.iterations == 10 and config.dt == 0.05
     fitted = FittedSwingUp(task, nominal_model(task.default_params()))
     assert fitted.planning_losses == task.planning_losses
     assert fitted.default_plan_config() == config
-    assert mpc.discretise(fitted, 0.05).losses[0] == "energy"
+    assert mpc.discretise(fitted, 0.05).losses == ("limited_hold", "energy")
     assert fitted.running_cost("energy") is energy_rate
     assert diffcontrol.make("cartpole-swingup").planning_losses[0] == "limited_hold"
 

@@ -159,8 +159,8 @@ class FittedSwingUp(CartPoleSwingUp):
     """A swing-up task whose simulator is a fitted ``SwingUpModel`` (module docstring).
 
     Everything but the vector field is the wrapped task's: losses, horizon, training
-    configuration, controller, planning losses and planner settings. The parameters that ``train`` passes (and ``config.params``
-    overrides) are the model's: its physical ones and, for a model with a network, the
+    configuration, controller, planning losses and planner settings. The parameters that
+    ``train`` passes (and ``config.params`` overrides) are the model's: its physical ones and, for a model with a network, the
     network (``FittedSwingUpParams``), an argument of the compiled programs that only the
     controller's training does not change. Like the physical parameters, the network in a
     run's parameters is in the run's precision (float32 unless x64 is on), also where a

@@ -440,16 +440,17 @@ class CartPoleSwingUpFriction(CartPoleSwingUp):
     summary = "3 s swing-up with cart and joint friction; the loss adds the dissipated energy"
     losses = ("energy", "swingup", "limited", "limited_hold")
 
-    planning_losses = ("energy", "limited_hold")
-
     def default_params(self) -> cp.SwingUpParams:
         return cp.SwingUpParams(cart_viscous=1.0, cart_coulomb=0.5, pole_viscous=0.1)
 
     def default_plan_config(self):
-        """The planner of the task's own loss (``energy``, its first planning loss): the
-        force within 40 N and 10 box-iLQR iterations per step, the swing-ups' 0.05 s and
-        2 s otherwise (``benchmarks/plan_swingup_friction.py``, docs/benchmarks.md)."""
-        return super().default_plan_config().replace(action_bound=40.0, iterations=10)
+        """The planner of the task's own loss, ``energy`` (named, so that a planner saved
+        without a loss name, before this default, keeps its ``limited_hold``): the force
+        within 40 N and 10 box-iLQR iterations per step, the swing-ups' 0.05 s and 2 s
+        otherwise (``benchmarks/plan_swingup_friction.py``, docs/benchmarks.md)."""
+        return (
+            super().default_plan_config().replace(loss="energy", action_bound=40.0, iterations=10)
+        )
 
     def default_config(self) -> ODETrainConfig:
         return ODETrainConfig(
