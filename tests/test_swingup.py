@@ -496,3 +496,27 @@ def test_cli_trains_with_each_gradient_method(gradient, tmp_path, capsys):
     assert ("approximate" in err) == (gradient == "backsolve")
     curve = json.loads((out / "metrics.json").read_text())["curve"]
     assert curve[-1]["eval_loss"] < curve[0]["eval_loss"]  # 20 updates already help
+
+
+@pytest.mark.slow
+def test_one_member_unbatched_trains_the_same_weights(swingup_run):
+    """The swing-up differentiates its one controller outside ``vmap``
+    (``one_member_unbatched``): faster to compile, and the same weights to the bit as the
+    batched programs, which a subclass keeps unless it declares its own (the limited swing-up's
+    original recipe rounds differently unbatched, so it does not)."""
+    from diffcontrol import io
+    from diffcontrol.tasks.fitted_swingup import FittedSwingUp, nominal_model
+
+    task = diffcontrol.make("cartpole-swingup")
+
+    class Batched(type(task)):
+        one_member_unbatched = False
+
+    assert task.unbatched_member() and not Batched().unbatched_member()
+    for name in ("cartpole-swingup-limited", "cartpole-swingup-friction"):
+        assert not diffcontrol.make(name).unbatched_member()
+    assert not FittedSwingUp(task, nominal_model(task.default_params())).unbatched_member()
+    config = task.default_config().replace(updates=50)
+    batched = train(Batched(), config).controller
+    doc = json.loads((swingup_run / "model.json").read_text())  # the CLI's, unbatched
+    assert io.controller_to_dict(batched, task)["network"] == doc["network"]

@@ -553,6 +553,19 @@ class ContinuousTask(_TaskBase):
     state_names: ClassVar[tuple[str, ...]]
     feature_names: ClassVar[tuple[str, ...]]
 
+    one_member_unbatched: ClassVar[bool] = False
+    """Whether a population of 1 is differentiated and evaluated as one member, not under
+    ``vmap``: batching Diffrax's loops is much of tracing and compiling the training chunk, so
+    it is faster, but XLA then fuses the arithmetic differently and may round it differently.
+    A built-in task sets it where its default settings and every recipe with a population of 1
+    trained to the same weights, bit for bit (docs/benchmarks.md). Read from the task's own
+    class only, like ``fast_compile``: a subclass (another system, a fitted model) keeps the
+    batched programs unless it sets its own."""
+
+    def unbatched_member(self) -> bool:
+        """``one_member_unbatched`` as this task's own class declares it."""
+        return bool(vars(type(self)).get("one_member_unbatched", False))
+
     @abc.abstractmethod
     def initial_state(self, params: PyTree) -> Array:
         """The closed loop's initial state ``y0``."""

@@ -192,6 +192,9 @@ class CartPoleSwingUp(ContinuousTask):
     # benchmarks/compile_options.py: either option changes the chunk's bits, and level 1
     # changes the limited and friction swing-ups' evaluations (each class declares its own)
     fast_compile = {"evaluate": ("xla_cpu_use_fusion_emitters",)}
+    # its one controller unbatched: the same weights to the bit in its defaults and the
+    # original recipe, not in the limited swing-up's original recipe (each class its own)
+    one_member_unbatched = True
     env_name = "CartPoleSwingUp"
     summary = "neural-ODE cart-pole swing-up of the 2020 post: 1 s, unbounded force"
     observation_size = 3

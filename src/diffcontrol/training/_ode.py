@@ -157,15 +157,23 @@ class ODETrainer(eqx.Module):
             key=jax.random.fold_in(key, 1),
         )
 
-    def _member_update(self, controller, opt_state, fail_code, params, horizon, y0s):
-        spec = _trainable(controller)
-        diff, static = eqx.partition(controller, spec)
+    def _one_member(self) -> bool:
+        """A population of 1 that the task lets go unbatched (``unbatched_member``)."""
+        return self.config.population == 1 and self.task.unbatched_member()
+
+    def _member_grad(self, controller, params, horizon, y0s):
+        """One member's loss, its solve's flags and the gradient of its trainable weights."""
+        diff, static = eqx.partition(controller, _trainable(controller))
 
         def loss_of(diff):
             return self.member_loss(eqx.combine(diff, static), params, horizon, y0s)
 
         grad_fn = value_and_grad(loss_of, self.config.gradient)
         (loss, (ok, hit_max, num_steps)), grads = grad_fn(diff)
+        return loss, ok, hit_max, num_steps, grads
+
+    def _member_apply(self, controller, opt_state, fail_code, loss, ok, hit_max, num_steps, grads):
+        diff, static = eqx.partition(controller, _trainable(controller))
         grad_norm = optax.tree_utils.tree_norm(grads)
         finite = jnp.isfinite(loss) & jnp.isfinite(grad_norm)
         code = jnp.where(ok, jnp.where(finite, FAIL_NONE, FAIL_NAN), FAIL_SOLVER)
@@ -195,9 +203,17 @@ class ODETrainer(eqx.Module):
         horizon = self.horizon_at(ts.update)
         key, k_starts = jax.random.split(ts.key)
         y0s = self.starts_of(k_starts, params)  # the same starts for every member
-        ctrl, opt, code, loss, gnorm, steps, live = eqx.filter_vmap(
-            self._member_update, in_axes=(0, 0, 0, None, None, None)
-        )(ts.controller, ts.opt_state, ts.fail_code, params, horizon, y0s)
+        # One member's solve differentiated as it is, not under vmap, where the task says so
+        # (ContinuousTask.one_member_unbatched); the optimiser's step stays under vmap.
+        if self._one_member():
+            out = _as_members(self._member_grad(_only(ts.controller), params, horizon, y0s))
+        else:
+            out = eqx.filter_vmap(self._member_grad, in_axes=(0, None, None, None))(
+                ts.controller, params, horizon, y0s
+            )
+        ctrl, opt, code, loss, gnorm, steps, live = eqx.filter_vmap(self._member_apply)(
+            ts.controller, ts.opt_state, ts.fail_code, *out
+        )
         newly = (code != FAIL_NONE) & (ts.fail_code == FAIL_NONE)
         n_live = jnp.sum(live)
         new = ODETrainState(
@@ -236,6 +252,8 @@ class ODETrainer(eqx.Module):
             loss, (ok, _, _) = self.member_loss(ctrl, params, horizon, y0s)
             return jnp.where(ok & jnp.isfinite(loss), -loss, -jnp.inf)
 
+        if self._one_member():  # as in ``update``
+            return _as_members(one(_only(controller)))
         return eqx.filter_vmap(one)(controller)
 
     # --- the driver's hooks (plain Python, between chunks) --------------------------------
@@ -286,6 +304,16 @@ class ODETrainer(eqx.Module):
 
     def num_parameters(self, controller: MLPController) -> int:
         return sum(int(np.prod(l.weight.shape[-2:])) + l.bias.shape[-1] for l in controller.layers)
+
+
+def _only(members: PyTree) -> PyTree:
+    """The one member of a population of 1 (its arrays without the members' axis)."""
+    return jax.tree.map(lambda x: x[0] if eqx.is_array(x) else x, members)
+
+
+def _as_members(member: PyTree) -> PyTree:
+    """One member's outputs given the members' axis back."""
+    return jax.tree.map(lambda x: x[None] if eqx.is_array(x) else x, member)
 
 
 def failure_message(code: int, config: ODETrainConfig) -> str:
