@@ -179,6 +179,9 @@ def real_benchmark(task: str, rl_method: str, targets: dict[str, int | None], do
     )
     parser.add_argument("--members", type=int, default=1, help="ensemble networks (hybrid/neural)")
     parser.add_argument(
+        "--fit-steps", type=int, default=None, help="Adam steps of each round's fit (the model's)"
+    )
+    parser.add_argument(
         "--name", default="", help="suffix of the result files (real_TASK{NAME}.json), e.g. _plan"
     )
     parser.add_argument(
@@ -208,6 +211,7 @@ def real_benchmark(task: str, rl_method: str, targets: dict[str, int | None], do
         rl_results=rl_file,
         controllers=tuple(args.controllers.split(",")),
         members=args.members,
+        fit_steps=args.fit_steps,
         resume=args.resume,
         progress=lambda line: print(line, flush=True),
     )

@@ -20,7 +20,7 @@ Real steps per round (``CartPole.real_steps_per_round``): 250 for the grey box a
 evaluation episodes are not counted, as for RL.
 
     python benchmarks/real_cartpole.py [--seeds 5] [--models params,hybrid,neural] [--resume]
-        [--compile-cache DIR] [--name _SUFFIX]
+        [--controllers train,plan] [--fit-steps N] [--compile-cache DIR] [--name _SUFFIX]
 
 ``--compile-cache DIR`` turns on JAX's persistent compilation cache in DIR, as
 ``diffcontrol compare --real`` has it (off by default: every program is compiled, as in the
@@ -42,6 +42,9 @@ TARGETS = {
     "diffcontrol (grey box)": None,
     "diffcontrol (hybrid)": 500,
     "diffcontrol (neural)": 2000,
+    "diffcontrol (grey box, planner)": None,
+    "diffcontrol (hybrid, planner)": 500,
+    "diffcontrol (neural, planner)": 2000,
 }
 """Issue 14's targets: real steps to 500 on every seed (none stated for the grey box)."""
 

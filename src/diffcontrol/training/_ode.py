@@ -159,7 +159,8 @@ class ODETrainer(eqx.Module):
 
     def _one_member(self) -> bool:
         """A population of 1 that the task lets go unbatched (``unbatched_member``)."""
-        return self.config.population == 1 and self.task.unbatched_member()
+        unbatched = getattr(self.task, "unbatched_member", None)  # a ContinuousTask's
+        return self.config.population == 1 and unbatched is not None and unbatched()
 
     def _member_grad(self, controller, params, horizon, y0s):
         """One member's loss, its solve's flags and the gradient of its trainable weights."""
