@@ -84,7 +84,7 @@ def test_end_cost_is_zero_upright_at_rest_and_high_hanging():
     assert float(limited_hold_end(p, down)) > 10.0
 
 
-def test_energy_planning_costs_are_the_losss_terms():
+def test_energy_planning_costs_are_the_loss_terms():
     """The planning form of ``energy``: zero cost per second upright, 4 per second hanging
     (``2 (1 - cos theta)``, the force free), and the end cost the loss's end terms plus the
     dissipated energy (the ODE's last state) at its weight."""
