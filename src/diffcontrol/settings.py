@@ -294,7 +294,8 @@ class PlanConfig(_Settings):
         high=10_000,
     )
     iterations: int | None = _opt(
-        "solver iterations per step (default 10 for ilqr, 30 for shooting; the swing-ups' 5)",
+        "solver iterations per step (default 10 for ilqr, 30 for shooting; the swing-ups' 5, "
+        "the friction swing-up's 10)",
         None,
         "N",
         high=10_000,
@@ -316,10 +317,15 @@ class PlanConfig(_Settings):
     )
     value_levels: int = _opt("actions per action dimension of that grid", 41, "N", low=2, high=1001)
     terminal_weight: float = _opt("weight of the terminal cost", 1.0, "W", form="nonneg")
-    loss: str | None = _opt("the task's step loss to plan with (default its first)", None, "NAME")
+    loss: str | None = _opt(
+        "the task's step loss to plan with (default the task's planning default, else its first: "
+        "the friction swing-up's energy)",
+        None,
+        "NAME",
+    )
     action_bound: float | None = _opt(
         "plan actions within +-B (default: the task's bounds; the actuator-limited swing-up's "
-        "force: 5 N)",
+        "force: 5 N, the friction swing-up's 40 N)",
         None,
         "B",
         form="positive",
