@@ -23,6 +23,8 @@ from diffcontrol.errors import ConfigError, DataFileError, InsufficientDataError
 from diffcontrol.identify.data import write_trajectories
 from diffcontrol.wrappers import PENDULUM_FRICTION_ID
 
+from ._monitoring import listening
+
 TRUTH = {"g": 12.0, "friction": 0.1}
 NOISE = np.array([0.01, 0.01, 0.05])  # cos, sin (1), theta_dot (rad/s)
 FIT = dict(steps=100, lm_steps=20)
@@ -218,14 +220,10 @@ def test_data_sets_of_one_step_budget_share_the_fits_compiled_programs():
     identify.prediction_errors(task, task.default_params(), first, (1, 10))
     identify.fit_model(task, first, "hybrid", steps=5)
     events = []  # the session's persistent cache (conftest): a miss is a program compiled
-    listener = lambda event, **kw: events.append(event)  # noqa: E731
-    jax.monitoring.register_event_listener(listener)
-    try:
+    with listening("event", lambda event, **kw: events.append(event)):
         fit = identify.fit_parameters(task, second, **settings)
         errors = identify.prediction_errors(task, task.default_params(), second, (1, 10))
         hybrid = identify.fit_model(task, second, "hybrid", steps=5)
-    finally:
-        jax.monitoring.unregister_event_listener(listener)
     assert "/jax/compilation_cache/cache_hits" in events  # programs were looked up
     assert "/jax/compilation_cache/cache_misses" not in events
     # the padding rows count for nothing: the result is that of the recorded windows alone

@@ -327,7 +327,7 @@ def test_energy_loss():
         rng = np.random.default_rng(SEED + 2)
         for x, v in zip(rng.uniform(-1.2, 0.6, 16), rng.uniform(-0.07, 0.07, 16)):
             s = jnp.array([x, v])
-            floor = float(mc.energy(p64, s)) + p64.gravity / 3
+            floor = float(mc.energy(p64, s)) + float(p64.gravity) / 3
             assert float(mc.energy_above_floor(p64, s)) == pytest.approx(floor, rel=1e-9, abs=1e-15)
         flag = jnp.array([0.45, 0.0])
         goal = float(mc.goal_energy_above_floor(p64))

@@ -61,3 +61,23 @@ def test_the_gymnasium_environment_resets_from_the_distribution():
     env = gymnasium.make("diffcontrol/RandomSpring-v0")
     starts = {tuple(np.round(env.reset(seed=s)[0], 6)) for s in range(3)}
     assert len(starts) == 3
+
+
+@pytest.mark.parametrize(
+    "name", ["pendulum", "cartpole", "acrobot", "mountain-car-continuous", "trebuchet"]
+)
+def test_a_seed_gives_the_same_starts_with_float64_on(name):
+    """Turning on ``jax_enable_x64`` changes the starts' precision, not which starts a key
+    draws: the float64 starts are the float32 ones up to float32's rounding (the draws are
+    the same float32 numbers; a task may scale them in float64, as the trebuchet's wind).
+    Drawn in float64, the same key gives other numbers altogether (pendulum's key 0 gave
+    [2.81, 0.96] in float32 and [-0.51, -0.57] in float64)."""
+    task = diffcontrol.make(name)
+    keys = jax.random.split(jax.random.PRNGKey(0), 64)
+    starts32 = np.asarray(jax.vmap(lambda k: task.reset(k, task.default_params()))(keys))
+    with jax.enable_x64(True):
+        params = task.default_params()
+        starts64 = np.asarray(jax.vmap(lambda k: task.reset(k, params))(keys))
+    assert starts32.dtype == np.float32 and starts64.dtype == np.float64
+    np.testing.assert_allclose(starts64, starts32, rtol=1e-6, atol=1e-7)
+    assert np.ptp(starts32, axis=0).max() > 0  # the keys draw different starts

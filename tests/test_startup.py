@@ -72,6 +72,18 @@ def test_public_names_load_when_used():
         diffcontrol.no_such_name  # noqa: B018
 
 
+def test_a_submodule_is_an_attribute_in_a_fresh_interpreter():
+    """``diffcontrol.controllers`` after a bare ``import diffcontrol``, where nothing else has
+    imported ``importlib.util`` (``help(diffcontrol.controllers)`` reads the attribute)."""
+    code = (
+        "import diffcontrol\n"
+        "assert diffcontrol.controllers.MLPController is diffcontrol.MLPController\n"
+        "assert diffcontrol.envs.__name__ == 'diffcontrol.envs'\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+
+
 def test_builtin_gymnasium_ids_match_the_tasks():
     """The ids registered without JAX at import are those the tasks themselves give."""
     import gymnasium

@@ -25,6 +25,18 @@ def _max_diff(a, b) -> float:
     return max(float(np.max(np.abs(np.asarray(x) - np.asarray(y)))) for x, y in pairs)
 
 
+# What a member promises against the same run trained alone: its weights and losses to
+# rounding (the vmapped program sums in another order), not its CartPole returns bit for bit.
+# An evaluation push is the sign of the network's output, so where that output lies within
+# rounding of zero the two runs push opposite ways once and their episodes part; on some CPUs
+# a point of 4 episodes moved by a step per episode or more (144.25 against 145.25). A mean
+# return is compared to within 5 % of it: a few such parted episodes pass, a member trained
+# with another seed or learning rate (returns apart by 10-100 %) does not.
+WEIGHTS_ATOL = 1e-4
+LOSS_RTOL = 1e-3
+RETURN_RTOL = 0.05
+
+
 @pytest.fixture(scope="module")
 def swept():
     configs = grid(BASE, [0, 1], {"learning_rate": [1e-2, 3e-3]})
@@ -50,10 +62,11 @@ def test_each_member_is_the_run_train_would_make(swept):
     for config, member in zip(configs, result.members, strict=True):
         alone = dc.train(TASK, config)
         assert member.config == config
-        assert _max_diff(member.controller, alone.controller) < 1e-4
-        ours = [p["eval_return"] for p in member.curve]
-        theirs = [p["eval_return"] for p in alone.curve]
-        np.testing.assert_allclose(ours, theirs, atol=1e-3)
+        assert _max_diff(member.controller, alone.controller) < WEIGHTS_ATOL
+        for key, rtol in (("loss", LOSS_RTOL), ("eval_return", RETURN_RTOL)):
+            ours = [p[key] for p in member.curve]
+            theirs = [p[key] for p in alone.curve]
+            np.testing.assert_allclose(ours, theirs, rtol=rtol, err_msg=key)
         assert member.metrics["returned_update"] == alone.metrics["returned_update"]
 
 
@@ -182,13 +195,15 @@ def test_sweep_directory_resume_and_load(tmp_path):
     # a lost member is trained again on resume, and only it; the others are untouched
     lost = out / doc["members"][3]
     before = json.loads((lost / "metrics.json").read_text())["final_eval_return"]
+    weights_before = dc.load(lost)
     kept = (out / doc["members"][0] / "model.json").read_bytes()
     for f in lost.iterdir():
         f.unlink()
     lost.rmdir()
     assert main(["sweep", "--out", str(out), "--resume", "--quiet"]) == 0
     after = json.loads((lost / "metrics.json").read_text())["final_eval_return"]
-    assert math.isclose(before, after, abs_tol=1e-3)
+    assert _max_diff(weights_before._layers, dc.load(lost)._layers) < WEIGHTS_ATOL
+    assert math.isclose(before, after, rel_tol=RETURN_RTOL)
     assert (out / doc["members"][0] / "model.json").read_bytes() == kept
     # not a new sweep into a used directory
     assert main([*args, *_cli_tiny()]) == 2

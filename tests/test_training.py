@@ -13,7 +13,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from jax import monitoring
 
 import diffcontrol
 from diffcontrol import io
@@ -25,6 +24,8 @@ from diffcontrol.training import (
     resolve_config,
     train,
 )
+
+from ._monitoring import listening
 
 
 def _weights(controller):
@@ -119,12 +120,9 @@ def test_chunks_are_compiled_once():
             compiles.append(duration)
 
     cfg = resolve_config(task, updates=12, batch=2, window=3, eval_every=3, eval_episodes=2)
-    monitoring.register_event_duration_secs_listener(listener)
-    try:
+    with listening("event_duration", listener):
         # on_point: one call per evaluation point (progress also carries warnings).
         train(task, cfg.replace(hidden=(7,)), on_point=lambda p, c: at_point.append(len(compiles)))
-    finally:
-        monitoring.unregister_event_duration_listener(listener)
     assert len(at_point) == 5  # updates 0, 3, 6, 9, 12
     assert at_point[0] > 0  # the chunk was compiled (a shape no other test uses)
     assert at_point[2:] == [at_point[1]] * 3, at_point

@@ -25,7 +25,9 @@ PUBLIC_IMPORTS = {
 def _user_files(directory: Path, system: str, alias: str, cls: str) -> str:
     """Write ``user_<system>.py`` (the system) and ``user_<system>_task.py`` (its task under
     a name of its own); returns the import path of the task."""
-    (directory / f"user_{system}.py").write_text((SRC / "systems" / f"{system}.py").read_text())
+    dynamics = (SRC / "systems" / f"{system}.py").read_text()
+    dynamics = dynamics.replace("from .draws import", "from diffcontrol.systems.draws import")
+    (directory / f"user_{system}.py").write_text(dynamics)
     task = (SRC / "tasks" / f"{system}.py").read_text()
     task = task.replace(
         f"from ..systems import {system} as {alias}", f"import user_{system} as {alias}"

@@ -15,6 +15,7 @@ The public API, about twenty names (everything else lives in its module: ``diffc
 from __future__ import annotations
 
 import importlib as _importlib
+import importlib.util as _importlib_util
 import os as _os
 from pathlib import Path as _Path
 from typing import TYPE_CHECKING
@@ -64,7 +65,7 @@ def __getattr__(name: str):
     if name in _LAZY:
         module, attribute = _LAZY[name]
         value = getattr(_importlib.import_module(f".{module}", __name__), attribute)
-    elif not name.startswith("_") and _importlib.util.find_spec(f"{__name__}.{name}"):
+    elif not name.startswith("_") and _importlib_util.find_spec(f"{__name__}.{name}"):
         value = _importlib.import_module(f".{name}", __name__)  # diffcontrol.envs, ...
     else:
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -35,9 +35,10 @@ Where the derivative is non-smooth:
 from __future__ import annotations
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, PRNGKeyArray
+
+from .draws import uniform
 
 EPISODE_LENGTH = 500
 """Gymnasium's ``max_episode_steps`` for ``Acrobot-v1``."""
@@ -83,7 +84,7 @@ class AcrobotParams(eqx.Module):
 def reset(key: PRNGKeyArray, params: AcrobotParams | None = None) -> Float[Array, 4]:
     """Gymnasium's reset distribution: each state component ``~ U(-0.1, 0.1)``."""
     del params
-    return jax.random.uniform(key, (4,), minval=-0.1, maxval=0.1)
+    return uniform(key, (4,), minval=-0.1, maxval=0.1)
 
 
 def dsdt(params: AcrobotParams, state: Float[Array, 4], torque: Array) -> Float[Array, 4]:

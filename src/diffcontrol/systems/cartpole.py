@@ -24,9 +24,10 @@ from __future__ import annotations
 import math
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, PRNGKeyArray
+
+from .draws import uniform
 
 EPISODE_LENGTH = 500
 """Gymnasium's ``max_episode_steps`` for ``CartPole-v1``."""
@@ -56,7 +57,7 @@ class CartPoleParams(eqx.Module):
 def reset(key: PRNGKeyArray, params: CartPoleParams | None = None) -> Float[Array, 4]:
     """Gymnasium's reset distribution: each state component ``~ U(-0.05, 0.05)``."""
     del params
-    return jax.random.uniform(key, (4,), minval=-0.05, maxval=0.05)
+    return uniform(key, (4,), minval=-0.05, maxval=0.05)
 
 
 def step(params: CartPoleParams, state: Float[Array, 4], push: Float[Array, ""]) -> Float[Array, 4]:

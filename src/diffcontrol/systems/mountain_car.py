@@ -40,9 +40,10 @@ Gymnasium truncates episodes at 999 steps.
 from __future__ import annotations
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, PRNGKeyArray
+
+from .draws import uniform
 
 EPISODE_LENGTH = 999
 """Gymnasium's ``max_episode_steps`` for ``MountainCarContinuous-v0``."""
@@ -86,7 +87,7 @@ class MountainCarParams(eqx.Module):
 def reset(key: PRNGKeyArray, params: MountainCarParams | None = None) -> Float[Array, 2]:
     """Gymnasium's reset distribution: ``position ~ U(reset_low, reset_high)``, velocity 0."""
     params = MountainCarParams() if params is None else params
-    position = jax.random.uniform(key, (), minval=params.reset_low, maxval=params.reset_high)
+    position = uniform(key, (), minval=params.reset_low, maxval=params.reset_high)
     return jnp.stack([position, jnp.zeros_like(position)])
 
 

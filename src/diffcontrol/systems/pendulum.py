@@ -29,9 +29,10 @@ There is no termination; Gymnasium truncates episodes at 200 steps.
 from __future__ import annotations
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float, PRNGKeyArray
+
+from .draws import uniform
 
 EPISODE_LENGTH = 200
 """Gymnasium's ``max_episode_steps`` for ``Pendulum-v1``."""
@@ -70,7 +71,7 @@ def reset(key: PRNGKeyArray, params: PendulumParams | None = None) -> Float[Arra
     """Gymnasium's reset distribution: ``theta ~ U(-pi, pi)``, ``theta_dot ~ U(-1, 1)``."""
     del params
     high = jnp.array([jnp.pi, 1.0])
-    return jax.random.uniform(key, (2,), minval=-high, maxval=high)
+    return uniform(key, (2,), minval=-high, maxval=high)
 
 
 def clip_torque(params: PendulumParams, torque: Array) -> Array:

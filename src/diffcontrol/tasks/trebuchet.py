@@ -21,6 +21,7 @@ import numpy as np
 from .._jax_setup import FastJit
 from ..config import TrainConfig
 from ..errors import ConfigError
+from ..systems import draws
 from ..systems import trebuchet as tb
 from ._base import StepLoss, Task
 
@@ -120,12 +121,8 @@ class TrebuchetAiming(Task):
 
     def reset(self, key, params):
         k_target, k_wind = jax.random.split(key)
-        target = jax.random.uniform(
-            k_target, (), minval=TARGET_RANGE_M[0], maxval=TARGET_RANGE_M[1]
-        )
-        wind = jnp.clip(
-            WIND_STD_MPS * jax.random.normal(k_wind, ()), -WIND_LIMIT_MPS, WIND_LIMIT_MPS
-        )
+        target = draws.uniform(k_target, (), minval=TARGET_RANGE_M[0], maxval=TARGET_RANGE_M[1])
+        wind = jnp.clip(WIND_STD_MPS * draws.normal(k_wind, ()), -WIND_LIMIT_MPS, WIND_LIMIT_MPS)
         return jnp.stack([target, wind, jnp.zeros_like(target)])
 
     def step(self, params, state, action):
