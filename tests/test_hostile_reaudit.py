@@ -95,7 +95,8 @@ def test_hostile_text_in_a_fitted_file_and_a_data_header(capsys, tmp_path, kind)
         ({"env_id": f"{EVIL}:X-v0"}, "not import"),
         ({"env_id": "os:X:Y"}, "not an id"),
         ({"env_id": "CartPole-v1", "env_kwargs": "oops"}, "finite"),
-        ({"env_id": "CartPole-v1", "env_kwargs": {"render_mode": 5}}, "does not take"),
+        ({"env_id": "CartPole-v1", "env_kwargs": {"render_mode": 5}}, "to render"),
+        ({"env_id": "CartPole-v1", "env_kwargs": {"sutton_barto": 5}}, "does not take"),
         ("oops", "not an object"),
     ],
 )

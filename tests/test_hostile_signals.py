@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import os
+import shlex
 import shutil
 import signal
 import subprocess
@@ -83,7 +84,7 @@ def test_sigterm_at_each_phase_then_resume(tmp_path, reference, phase, after_lin
         else:
             command = lines[0].split("Continue with: ")[-1].split("finish them with: ")[-1]
             assert command.startswith("diffcontrol train") and command.endswith("--resume"), err
-            resume = command.split()[1:]
+            resume = shlex.split(command)[1:]
     assert main([*resume, "--quiet"] if "--resume" in resume else [*resume, "--quiet"]) == 0
     assert _weights(out) == reference
     assert json.loads((out / "run.json").read_text())["complete"] is True

@@ -11,6 +11,7 @@ import sys
 
 from .._interrupts import terminate_as_interrupt
 from .._jax_setup import GC_THRESHOLDS, checks_as_nan
+from .._shell import command
 from ..errors import DiffcontrolError, Interrupted
 from . import _compare, _identify, _runs, _train
 from ._args import EXIT_USAGE, Parser
@@ -41,7 +42,7 @@ def main(argv: list[str] | None = None) -> int:
     checks_as_nan()  # before Equinox is imported: its programs can then be cached
     argv = sys.argv[1:] if argv is None else list(argv)
     args = build_parser().parse_args(argv)
-    args.command_line = " ".join(["diffcontrol", *argv])  # to continue a long command
+    args.command_line = command(*argv)  # to continue a long command
     try:
         with terminate_as_interrupt():
             return COMMANDS[args.command](args)

@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from .. import envs, io
+from .._shell import command as shell_command
 from ..errors import ConfigError, Interrupted, RunDirectoryError
 from ..settings import CompareConfig
 from ..tasks import Task, resolve
@@ -110,7 +111,7 @@ def run_comparison(
     try:
         return _compare(task, out, config, resume, progress)
     except KeyboardInterrupt:
-        again = command or f"diffcontrol compare {task.name}"
+        again = command or shell_command("compare", task.name)
         raise Interrupted(
             f"interrupted; the finished runs are in {out / 'runs'}. Continue with the same "
             f"options and --resume: {again}" + ("" if resume else " --resume")

@@ -152,29 +152,71 @@ def checked_env(
             f"{where} gives the environment arguments {env_kwargs!r}, not names with finite "
             "numbers (or text, true, false); re-create the file, or pass --env and --env-arg"
         )
+    if "render_mode" in env_kwargs:  # rendering imports pygame, looked up on sys.path
+        raise ConfigError(
+            f"{where} asks the environment to render ({env_kwargs['render_mode']!r}); "
+            "diffcontrol makes environments named by files without rendering: drop "
+            "render_mode from the file"
+        )
     return env_id, dict(env_kwargs)
 
 
 def checked_env_id(env_id: Any, where: str = "a file") -> str:
-    """``env_id`` read from a file, if using it imports nothing: an id without ``:``, or one
-    whose module is already imported (e.g. by this process's own recording).
+    """``env_id`` read from a file, if using it imports nothing a file could have chosen.
+
+    The id must be registered with Gymnasium (the built-in ones, diffcontrol's own, and those
+    of packages this process has imported), or be ``module:Env-v0`` with ``module`` already
+    imported (e.g. by this process's own recording). An id whose environment lives in a
+    module not imported yet (Gymnasium's Box2D or MuJoCo environments) has that module
+    imported here, from the installed packages alone: the current directory is taken off
+    ``sys.path`` meanwhile, so that a ``./Box2D.py`` is never what runs.
 
     Raises:
-        ConfigError: the id names a module that is not imported (``module:Env-v0``), or is
-            not a string: one line saying to pass ``--env`` explicitly.
+        ConfigError: the id is not a string, names a module that is not imported, is not
+            registered, or its environment's module does not import: one line saying to pass
+            ``--env`` explicitly or what to install.
     """
-    if not isinstance(env_id, str) or not env_id:
+    import gymnasium
+
+    if not isinstance(env_id, str) or not env_id or env_id.count(":") > 1:
         raise ConfigError(f"{where} names the environment {env_id!r}, not an id; pass --env")
-    module, sep, _ = env_id.partition(":")
-    if env_id.count(":") > 1:
-        raise ConfigError(f"{where} names the environment {env_id!r}, not an id; pass --env")
+    module, sep, name = env_id.partition(":")
     if sep and module not in sys.modules:
         raise ConfigError(
             f"{where} names the environment {env_id!r}, whose module {module!r} would have to "
             f"be imported; diffcontrol does not import modules named by files: pass "
             f"--env {env_id} explicitly if you trust it"
         )
+    spec = gymnasium.registry.get(name if sep else env_id)
+    if spec is None:
+        raise ConfigError(
+            f"{where} names the environment {env_id!r}, which Gymnasium does not know here; "
+            'pass --env with a registered id (`python -c "import gymnasium; '
+            'gymnasium.pprint_registry()"` lists them)'
+        )
+    entry = spec.entry_point
+    if isinstance(entry, str) and entry.partition(":")[0] not in sys.modules:
+        _import_installed(entry.partition(":")[0], env_id, where)
     return env_id
+
+
+def _import_installed(module: str, env_id: str, where: str) -> None:
+    """Import ``module`` (an environment's, from Gymnasium's registry) with the current
+    directory off ``sys.path``, so that only installed packages are found."""
+    import importlib
+
+    here = {"", ".", os.getcwd()}
+    saved = list(sys.path)
+    sys.path[:] = [p for p in sys.path if p not in here]
+    try:
+        importlib.import_module(module)
+    except Exception as e:  # noqa: BLE001 - a missing optional dependency, said in one line
+        raise ConfigError(
+            f"{where} names the environment {env_id!r}, which cannot be made here "
+            f"({type(e).__name__}: {' '.join(str(e).split())[:160]}); install what it needs"
+        ) from None
+    finally:
+        sys.path[:] = saved
 
 
 def as_env(real: dict | None) -> tuple[str, dict] | None:

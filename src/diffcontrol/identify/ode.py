@@ -31,6 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
+from .._shell import command
 from ..errors import ConfigError, DataFileError, InsufficientDataError
 from ._shooting import (
     HORIZONS,
@@ -98,7 +99,7 @@ def check_data(task: Any, data: TrajectoryData) -> float:
         raise DataFileError(
             f"{where} has the columns {list(data.columns[2:])}, but the models of {task.name} "
             f"are fitted to its full state {[*expected[0], *expected[1]]}; record the state "
-            f"(`diffcontrol record {task.name}`)"
+            f"(`{command('record', task.name)}`)"
         )
     if parse_column(data.columns[0])[2] != "s":
         raise DataFileError(f"{where}: time is in steps; the ODE models need time in seconds")

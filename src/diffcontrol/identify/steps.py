@@ -45,6 +45,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
+from .._shell import command
 from ..errors import ConfigError, DataFileError, InsufficientDataError
 from ..tasks._base import Task
 from ._shooting import (
@@ -87,7 +88,7 @@ def check_data(task: Any, data: TrajectoryData) -> None:
         raise DataFileError(
             f"{where} has the columns {list(data.columns[2:])}, but task {task.name!r} "
             f"({system}) needs {[*expected[0], *expected[1]]}; record the task's system "
-            f"(`diffcontrol record {system}`) or fit the task the data is from"
+            f"(`{command('record', system)}`) or fit the task the data is from"
         )
     dt = data.metadata.get("dt_s")
     model_dt = getattr(task.default_params(), "dt", None)

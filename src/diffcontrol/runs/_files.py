@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from .. import _timing, io
-from ..errors import ModelFileError, UnknownTaskError
+from ..errors import ModelFileError
 from ..tasks import AnyTask, resolve
 
 MODEL_FILE = "model.json"
@@ -223,16 +223,10 @@ def _task_of(doc: dict) -> AnyTask:
     """The registered task a ``model.json`` names (never imported because a file says so)."""
     from .. import tasks
 
-    name = doc["task"]
-    if name in tasks.names():
-        return tasks.make(name)
     source = (doc.get("metadata") or {}).get("task_source")
     hint = f" (it was trained from {source!r})" if isinstance(source, str) else ""
-    raise UnknownTaskError(
-        f"the controller's task {name!r}{hint} is not registered here; name its import path "
-        "with --task module:Class (in Python: open_run(dir, task=...)) — diffcontrol never "
-        "imports code because a file names it"
-    )
+    fix = f"--task module:Class{hint} (in Python: open_run(dir, task=...))"
+    return tasks.named_by_file(doc["task"], "the controller", fix)
 
 
 def read_run_file(run_dir: str | Path) -> dict | None:

@@ -21,8 +21,9 @@ from pathlib import Path
 from typing import Any
 
 from .. import io
+from .._shell import command as shell_command
 from ..errors import ConfigError, RunDirectoryError
-from ..tasks import resolve
+from ..tasks import named_by_file, resolve
 from ._files import METRICS_FILE, MODEL_FILE, mark_complete, read_run_file, save_run
 
 SWEEP_FILE = "sweep.json"
@@ -84,7 +85,10 @@ def sweep_dir(
 
     say = progress or (lambda line: None)
     out = Path(out_dir)
-    task = task or (stored_sweep(out)["task"] if resume else None)
+    if task is None and resume:  # the sweep's own task: registered ones only
+        stored_task = stored_sweep(out)["task"]
+        fix = shell_command("sweep", str(stored_task), "--out", out, "--resume")
+        task = named_by_file(stored_task, str(out / SWEEP_FILE), fix).name
     if task is None:
         raise ConfigError("name the TASK to sweep (or --resume the sweep in --out)")
     seeds = parse_seeds(seeds) if isinstance(seeds, str) else seeds
@@ -118,7 +122,7 @@ def sweep_dir(
     if resume:
         say(f"resuming the sweep in {out}: {len(todo)} of {len(configs)} member(s) left")
     result = None
-    named = "" if ":" not in task else f" {task}"
+    named = [task] if ":" in task else []
     try:
         if todo:
             say(
@@ -144,7 +148,7 @@ def sweep_dir(
             ) from None
         raise RunInterrupted(
             f"interrupted; the members written are kept in {out}. Train the others with: "
-            f"diffcontrol sweep{named} --out {out} --resume"
+            f"{shell_command('sweep', *named, '--out', out, '--resume')}"
         ) from None
     rows = [_row(out / name, configs[i], swept) for i, name in enumerate(doc["members"])]
     best = max(range(len(rows)), key=lambda i: _rank(rows[i]["eval_return"]))
@@ -179,7 +183,7 @@ def _claim(out: Path, doc: dict, resume: bool) -> None:
         if not same:
             raise RunDirectoryError(
                 f"{out} holds a different sweep; resume it with its own settings "
-                f"(`diffcontrol sweep --out {out} --resume` alone) or choose another --out"
+                f"(`{shell_command('sweep', '--out', out, '--resume')}` alone) or choose another --out"
             )
         return
     if out.exists() and (not out.is_dir() or any(out.iterdir())):

@@ -16,8 +16,9 @@ from pathlib import Path
 from typing import Any
 
 from .. import io
+from .._shell import command as shell_command
 from ..errors import ConfigError, Interrupted, RunDirectoryError, TrainingDiverged
-from ..tasks import AnyTask, names, resolve
+from ..tasks import AnyTask, named_by_file, resolve
 from ._files import Run, mark_complete, read_run_file, release_claim, save_run
 
 
@@ -113,11 +114,8 @@ def train_run(
         task = invocation.get("task") or (stored or {}).get("task")
         if stored is None:
             raise ConfigError("name the TASK to train (or --resume the run in --out)")
-        if task not in names():  # never import a module because a file names it
-            raise ConfigError(
-                f"{out} was trained on the task {task!r}, which is not registered; name it: "
-                f"diffcontrol train {task} --out {out} --resume"
-            )
+        fix = shell_command("train", str(task), "--out", out, "--resume")
+        task = named_by_file(task, str(out / io.RUN_FILE), fix).name
     model = model or invocation.get("model")
     if env_id and not model:
         raise ConfigError("--env names the real system of a fitted model: give --model too")
@@ -171,10 +169,15 @@ def train_run(
         invocation["devices"] = devices
     if env_id:
         invocation["env"] = env_id
-    named = "" if spec in _builtin_names() else f" {spec}"
+    named = [] if spec in _builtin_names() else [spec]
     # the command that continues this run: run.json gives all but a module to import
-    resume_command = f"diffcontrol train{named} --out {out} --resume" + (
-        f" --env {env_id}" if env_id and ":" in env_id else ""
+    resume_command = shell_command(
+        "train",
+        *named,
+        "--out",
+        out,
+        "--resume",
+        *(["--env", env_id] if env_id and ":" in env_id else []),
     )
     say(describe(the_task, config, out))  # the first line; an interrupt after it is caught
     try:

@@ -127,6 +127,32 @@ def resolve(spec: str) -> AnyTask:
     return register(obj)
 
 
+def named_by_file(name: object, where: str, fix: str) -> AnyTask:
+    """The task a file names (a run's ``run.json`` or ``model.json``, a sweep's
+    ``sweep.json``, ...): a registered task or the name of an installed entry point, and
+    nothing else. This is the one way a task read from a file is found: diffcontrol never
+    imports a module because a file names it, so an import path read from a file is refused
+    and the user names it again on the command line (or in Python).
+
+    Args:
+        name: the task as the file gives it.
+        where: the file, for the message.
+        fix: how to name the task instead, for the message (a shell-quoted command).
+
+    Raises:
+        UnknownTaskError: one line naming the file, the task and ``fix``.
+    """
+    if isinstance(name, str) and name and ":" not in name:
+        if name in _REGISTRY:
+            return _REGISTRY[name]
+        if any(ep.name == name for ep in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP)):
+            return resolve(name)
+    raise UnknownTaskError(
+        f"{where} names the task {name!r}, which is not registered; name it: {fix} "
+        "(diffcontrol never imports code because a file names it)"
+    )
+
+
 def names() -> list[str]:
     """Names of the registered tasks, in registration order."""
     return list(_REGISTRY)
@@ -156,6 +182,7 @@ __all__ = [
     "CartPoleSwingUpFriction",
     "make",
     "names",
+    "named_by_file",
     "register",
     "resolve",
     "ENTRY_POINT_GROUP",
