@@ -25,15 +25,16 @@ def _max_diff(a, b) -> float:
     return max(float(np.max(np.abs(np.asarray(x) - np.asarray(y)))) for x, y in pairs)
 
 
-# What a member promises against the same run trained alone: its weights and losses to
-# rounding (the vmapped program sums in another order), not its CartPole returns bit for bit.
-# An evaluation push is the sign of the network's output, so where that output lies within
-# rounding of zero the two runs push opposite ways once and their episodes part; on some CPUs
-# a point of 4 episodes moved by a step per episode or more (144.25 against 145.25). A mean
-# return is compared to within 5 % of it: a few such parted episodes pass, a member trained
-# with another seed or learning rate (returns apart by 10-100 %) does not.
+# What a member promises against the same run trained alone: its weights to rounding (the
+# vmapped program sums in another order), not its CartPole losses and returns bit for bit.
+# A push is the sign of the network's output, so where that output lies within rounding of
+# zero the two runs push opposite ways once and their episodes part: on some CPUs a point of
+# 4 evaluation episodes moved by a step per episode or more (144.25 against 145.25), and a
+# chunk's mean training loss by 0.4 % (0.13185 against 0.13130) with the weights still within
+# 1e-4. Losses are compared to 2 % and mean returns to 5 %: a few parted episodes pass, a
+# member trained with another seed or learning rate (10-100 % apart) does not.
 WEIGHTS_ATOL = 1e-4
-LOSS_RTOL = 1e-3
+LOSS_RTOL = 0.02
 RETURN_RTOL = 0.05
 
 
