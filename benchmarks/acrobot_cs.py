@@ -94,7 +94,7 @@ def main() -> None:
     import optax
 
     import diffcontrol
-    from diffcontrol import io
+    from diffcontrol import policies
     from diffcontrol.evaluation import evaluate
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -205,7 +205,7 @@ def main() -> None:
         return eqx.combine(t, fixed)  # the scaling, without gradient, is the controller's
 
     def gym_return(ctrl, episodes=100) -> float:
-        pol = io.NumpyPolicy(io.controller_to_dict(ctrl, task))
+        pol = policies.NumpyPolicy(policies.controller_to_dict(ctrl, task))
         return float(np.mean(evaluate(pol, task, episodes=episodes).returns))
 
     def pad_to(x, m):

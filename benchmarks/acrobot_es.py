@@ -95,7 +95,7 @@ def main() -> None:
     from jax.flatten_util import ravel_pytree
 
     import diffcontrol
-    from diffcontrol import io
+    from diffcontrol import policies
     from diffcontrol.evaluation import evaluate
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -197,7 +197,7 @@ def main() -> None:
         return optax.apply_updates(theta, up), opt_state, fit.mean(), fit.max()
 
     def gym_return(ctrl, episodes=100) -> float:
-        pol = io.NumpyPolicy(io.controller_to_dict(ctrl, task))
+        pol = policies.NumpyPolicy(policies.controller_to_dict(ctrl, task))
         return float(np.mean(evaluate(pol, task, episodes=episodes).returns))
 
     rows = []

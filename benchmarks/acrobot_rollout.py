@@ -59,7 +59,7 @@ def main() -> None:
     import optax
 
     import diffcontrol
-    from diffcontrol import io
+    from diffcontrol import policies
     from diffcontrol.evaluation import evaluate
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -134,7 +134,11 @@ def main() -> None:
 
     def gym_return(ctrl) -> float:
         return float(
-            np.mean(evaluate(io.NumpyPolicy(io.controller_to_dict(ctrl, task)), task).returns)
+            np.mean(
+                evaluate(
+                    policies.NumpyPolicy(policies.controller_to_dict(ctrl, task)), task
+                ).returns
+            )
         )
 
     def teacher_gym(ctrl) -> tuple[float, float, float]:

@@ -175,7 +175,7 @@ def whole_runs(spec: str, seeds: int) -> list[dict]:
     import diffcontrol
     from diffcontrol import _jax_setup
     from diffcontrol.evaluation import evaluate
-    from diffcontrol.io import NumpyPolicy, model_document
+    from diffcontrol.policies import NumpyPolicy, model_document
 
     name, _, recipe = spec.partition(":")
     task = diffcontrol.make(name)

@@ -48,7 +48,7 @@ sys.path.insert(0, str(HERE))
 from _common import machine  # noqa: E402
 
 import diffcontrol  # noqa: E402
-from diffcontrol import identify, io  # noqa: E402
+from diffcontrol import identify, policies  # noqa: E402
 from diffcontrol.evaluation import evaluate  # noqa: E402
 
 REAL = ("diffcontrol/PendulumFriction-v0", {"g": 12.0, "friction": 0.1})
@@ -115,7 +115,7 @@ def fit_all(
 
 
 def real_return(task, controller) -> dict:
-    policy = io.NumpyPolicy(io.controller_to_dict(controller, task))
+    policy = policies.NumpyPolicy(policies.controller_to_dict(controller, task))
     ev = evaluate(policy, task, episodes=EVAL_EPISODES, seed=0, real=REAL)
     return {"mean": ev.mean, "std": ev.std}
 

@@ -36,7 +36,7 @@ sys.path.insert(0, str(HERE))
 from _common import machine  # noqa: E402
 
 import diffcontrol  # noqa: E402
-from diffcontrol import identify, io  # noqa: E402
+from diffcontrol import identify, io, policies  # noqa: E402
 from diffcontrol.systems import trebuchet as tb  # noqa: E402
 from diffcontrol.tasks._trebuchet_fit import distance_errors  # noqa: E402
 
@@ -85,7 +85,7 @@ def train_and_aim(task, config, params: dict, seed: int) -> dict:
     t0 = time.perf_counter()
     result = diffcontrol.train(task, cfg)
     seconds = time.perf_counter() - t0
-    policy = io.AimingPolicy(io.controller_to_dict(result.controller, task))
+    policy = policies.AimingPolicy(policies.controller_to_dict(result.controller, task))
     ev = diffcontrol.evaluation.evaluate_aiming(policy, task, targets=1000, seed=0, params=REAL)
     return {"train_seconds": seconds, **ev.stats}
 

@@ -39,7 +39,7 @@ sys.path.insert(0, str(HERE))
 from _common import machine  # noqa: E402
 
 import diffcontrol  # noqa: E402
-from diffcontrol import io, mpc  # noqa: E402
+from diffcontrol import mpc, policies  # noqa: E402
 from diffcontrol.evaluation import ContinuousRecording, swingup_result  # noqa: E402
 from diffcontrol.rollout import solve_closed_loop  # noqa: E402
 
@@ -164,7 +164,7 @@ def main() -> None:
            "0.5) rad, theta_dot U(-0.5, 0.5) rad/s (keys 0..N-1)",
            "bars": {"abs_theta_rad": ANGLE_BAR, "abs_theta_dot_rad_s": RATE_BAR}}  # fmt: skip
     if args.controller:
-        controller = io.controller_from_dict(io.read_model(args.controller))
+        controller = policies.controller_from_dict(policies.read_model(args.controller))
         source = str(args.controller)
     else:
         print(f"training cartpole-swingup-limited with its defaults, seed {args.train_seed} ...")

@@ -54,7 +54,7 @@ from _common import grid_optima, machine, planner_episodes  # noqa: E402
 from fit_gap_pendulum import EPISODES, NOISE, REAL, record_real  # noqa: E402
 
 import diffcontrol  # noqa: E402
-from diffcontrol import identify, io, mpc  # noqa: E402
+from diffcontrol import identify, mpc, policies  # noqa: E402
 from diffcontrol.evaluation import evaluate  # noqa: E402
 from diffcontrol.settings import PlanConfig  # noqa: E402
 
@@ -134,7 +134,7 @@ def run_seed(task, seed: int, args, optima: dict, updates: int | None) -> dict:
         config = task.default_config().replace(seed=seed)
         config = config if updates is None else config.replace(updates=updates)
         trained = diffcontrol.train(model_task, config)
-        policy = io.NumpyPolicy(io.controller_to_dict(trained.controller, task))
+        policy = policies.NumpyPolicy(policies.controller_to_dict(trained.controller, task))
         mlp_row = policy_rows(mlp_label, policy, task, optima)
         mlp_row["train_seconds"] = time.perf_counter() - t0
         mlp_row["return_on_model"] = trained.metrics["final_eval_return"]

@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 import diffcontrol
-from diffcontrol import io
+from diffcontrol import policies
 from diffcontrol.systems import acrobot as ac
 
 ATOL_F64 = 1e-11
@@ -218,6 +218,6 @@ def test_learns_to_swing_up(task):
     stalls on some starts: -148.)"""
     config = task.default_config().replace(updates=90, eval_every=15, eval_episodes=128)
     result = diffcontrol.train(task, config)
-    policy = io.NumpyPolicy(io.controller_to_dict(result.controller, task))
+    policy = policies.NumpyPolicy(policies.controller_to_dict(result.controller, task))
     ev = diffcontrol.evaluate(policy, task, episodes=20, seed=0)
     assert ev.mean > task.reward_threshold

@@ -195,8 +195,7 @@ def test_compare_trebuchet_rl_in_the_diffcontrol_environment(tmp_path):
 
 @pytest.mark.slow
 def test_compare_pendulum_has_the_planner_and_its_distilled_mlp(tmp_path, capsys, monkeypatch):
-    from diffcontrol.compare import _planning
-    from diffcontrol.compare.run import methods_for
+    from diffcontrol.compare import _planning, methods_for
     from diffcontrol.settings import PlanConfig
 
     assert methods_for(diffcontrol.make("pendulum"))[:3] == ["diffcontrol", "planner", "distilled"]

@@ -18,7 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from diffcontrol import io
+from diffcontrol import io, policies
 from diffcontrol.controllers import (
     ARGMAX_TEMPERATURE,
     MLPController,
@@ -102,13 +102,13 @@ def test_argmax_head_needs_two_choices():
 
 def test_model_json_round_trip(tmp_path):
     ctrl = _controller()
-    doc = io.controller_to_dict(ctrl, _fake_task())
+    doc = policies.controller_to_dict(ctrl, _fake_task())
     assert doc["action"] == {"size": N, "head": "argmax", "low": None, "high": None,
                              "gym": "discrete"}  # fmt: skip
     io.write_json(tmp_path / "model.json", doc)
-    back = io.read_model(tmp_path)
+    back = policies.read_model(tmp_path)
     assert back == doc
-    rebuilt = io.controller_from_dict(back)
+    rebuilt = policies.controller_from_dict(back)
     obs = jnp.asarray(np.random.default_rng(3).normal(size=(50, OBS)), jnp.float32)
     np.testing.assert_array_equal(
         np.asarray(jax.vmap(rebuilt)(obs)), np.asarray(jax.vmap(ctrl)(obs))
@@ -124,15 +124,15 @@ def test_model_json_round_trip(tmp_path):
     ],
 )
 def test_model_json_rejects_mismatched_heads(change, problem):
-    doc = io.controller_to_dict(_controller(), _fake_task())
+    doc = policies.controller_to_dict(_controller(), _fake_task())
     doc["action"].update(change)
     with pytest.raises(ModelFileError, match=problem):
-        io.NumpyPolicy(doc)
+        policies.NumpyPolicy(doc)
 
 
 def test_numpy_policy_equals_jax_controller():
     ctrl = _controller()
-    policy = io.NumpyPolicy(io.controller_to_dict(ctrl, _fake_task()))
+    policy = policies.NumpyPolicy(policies.controller_to_dict(ctrl, _fake_task()))
     obs = np.random.default_rng(4).normal(0, 2, (600, OBS)).astype(np.float32)
     logits = np.asarray(jax.vmap(_controller(head="linear"))(obs))
     top2 = np.sort(logits, axis=-1)[:, -2:]
@@ -154,7 +154,9 @@ def test_numpy_policy_equals_jax_controller():
 def test_gymnasium_accepts_the_action():
     env = gymnasium.make("Acrobot-v1")
     ctrl = MLPController(jax.random.key(5), 6, 3, (16,), head="argmax", final_scale=3.0)
-    policy = io.NumpyPolicy(io.controller_to_dict(ctrl, _fake_task("acro", "Acrobot-v1")))
+    policy = policies.NumpyPolicy(
+        policies.controller_to_dict(ctrl, _fake_task("acro", "Acrobot-v1"))
+    )
     obs, _ = env.reset(seed=0)
     for _ in range(20):
         action = policy(obs)

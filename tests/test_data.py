@@ -16,7 +16,8 @@ from diffcontrol.cli import main
 from diffcontrol.errors import ConfigError
 from diffcontrol.identify import data
 from diffcontrol.identify.data import DataFileError, TrajectoryData, read_trajectories
-from diffcontrol.io import controller_to_dict, write_json
+from diffcontrol.io import write_json
+from diffcontrol.policies import controller_to_dict
 
 PENDULUM_OBS, PENDULUM_ACT = data.known_columns()["Pendulum-v1"]
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import diffcontrol
-from diffcontrol import evaluation, io
+from diffcontrol import evaluation, policies
 from diffcontrol.controllers import MLPController
 
 
@@ -22,7 +22,7 @@ class OneByOne:
         return self.policy(obs)
 
 
-class Counting(io.NumpyPolicy):
+class Counting(policies.NumpyPolicy):
     """A NumPy policy that counts its calls and the observations in each."""
 
     batched = True  # declared again: a subclass is not batched unless it says so
@@ -40,7 +40,7 @@ def _random_policy(name: str, seed: int) -> Counting:
     task = diffcontrol.make(name)
     kwargs = task.controller_kwargs()
     controller = MLPController(jax.random.PRNGKey(seed), hidden=(16,), **kwargs)
-    return Counting(io.controller_to_dict(controller, task, {}))
+    return Counting(policies.controller_to_dict(controller, task, {}))
 
 
 # CartPole (the sign head: episodes of different lengths), Pendulum (continuous, clipped) and
@@ -101,7 +101,7 @@ def test_a_users_own_environment_is_made_once():
 
 
 def test_a_subclass_that_does_not_declare_batched_gets_one_observation_at_a_time():
-    class OneAtATime(io.NumpyPolicy):
+    class OneAtATime(policies.NumpyPolicy):
         def __call__(self, obs):
             assert np.ndim(obs) == 1, "given a batch"
             return super().__call__(obs)

@@ -27,7 +27,7 @@ import numpy as np
 import pytest
 
 import diffcontrol
-from diffcontrol import io
+from diffcontrol import policies
 from diffcontrol.evaluation import Recording, evaluate
 from diffcontrol.systems import mountain_car as mc
 from diffcontrol.training import resolve_config, train
@@ -364,7 +364,7 @@ def test_learns_to_reach_the_flag():
     cfg = resolve_config(task, updates=100, eval_every=50, eval_episodes=32)
     result = train(task, cfg)
     assert result.curve[0]["eval_return"] < 1.0
-    policy = io.NumpyPolicy(io.controller_to_dict(result.controller, task))
+    policy = policies.NumpyPolicy(policies.controller_to_dict(result.controller, task))
     ev = evaluate(policy, task, episodes=20, seed=0)
     assert ev.returns.min() > 90.0, ev.returns
     assert ev.mean > 93.0

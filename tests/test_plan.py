@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import diffcontrol
-from diffcontrol import io, mpc, optimal, runs
+from diffcontrol import mpc, optimal, policies, runs
 from diffcontrol.cli import main
 from diffcontrol.errors import ConfigError, ModelFileError
 from diffcontrol.settings import PlanConfig
@@ -80,7 +80,7 @@ def test_the_run_is_a_run_like_a_trained_one(planner_run, capsys):
 
 def test_a_numpy_reader_refuses_a_planner_in_one_line(planner_run, capsys):
     with pytest.raises(ModelFileError, match="holds a planner"):
-        io.NumpyPolicy(io.read_model(planner_run))
+        policies.NumpyPolicy(policies.read_model(planner_run))
     assert main(["train", "--out", str(planner_run), "--resume"]) == 2  # not a training run
     assert "holds a planner" in capsys.readouterr().err
 

@@ -301,7 +301,7 @@ def test_compare_real_runs_a_planner_through_the_fitted_model_as_its_own_row(tmp
     )  # the default is not written: a loop from before it still resumes
     for k in (1, 2):
         doc_k = json.loads((where / f"round_{k}" / "run" / "model.json").read_text())
-        assert diffcontrol.io.is_planner(doc_k)  # a planner, not an MLP, acted
+        assert diffcontrol.policies.is_planner(doc_k)  # a planner, not an MLP, acted
         assert doc_k["controller"]["model"]["kind"] == "fitted"  # through the round's fit
         assert doc_k["controller"]["settings"]["horizon"] == 4  # the task's loop planner
     recorded = identify.read_trajectories(where / "round_1" / "recorded.csv")

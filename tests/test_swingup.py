@@ -398,7 +398,7 @@ def test_cli_writes_the_posts_outputs(swingup_run):
     assert all(len(data[k]) == 101 for k in ("x", "x_dot", "theta", "theta_dot", "force"))
     metrics = json.loads((swingup_run / "metrics.json").read_text())
     assert metrics["swingup"]["peak_force"] == pytest.approx(max(abs(f) for f in data["force"]))
-    assert isinstance(diffcontrol.load(swingup_run), diffcontrol.io.StatePolicy)
+    assert isinstance(diffcontrol.load(swingup_run), diffcontrol.policies.StatePolicy)
 
 
 @pytest.mark.slow

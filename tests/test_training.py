@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 import diffcontrol
-from diffcontrol import io
+from diffcontrol import policies
 from diffcontrol.evaluation import evaluate
 from diffcontrol.training import (
     TrainingDiverged,
@@ -38,7 +38,7 @@ def test_cartpole_defaults_learn_to_balance():
     task = diffcontrol.make("cartpole")
     result = train(task)
     assert result.metrics["simulated_episodes"] <= 10
-    policy = io.NumpyPolicy(io.controller_to_dict(result.controller, task))
+    policy = policies.NumpyPolicy(policies.controller_to_dict(result.controller, task))
     ev = evaluate(policy, task, episodes=20, seed=0)
     assert ev.mean >= 475, ev.returns
 
@@ -66,7 +66,7 @@ def test_pendulum_learns_on_a_small_budget():
     assert again == pytest.approx(returns[best], rel=1e-4)
 
     # And in Gymnasium's own Pendulum-v1.
-    policy = io.NumpyPolicy(io.controller_to_dict(result.controller, task))
+    policy = policies.NumpyPolicy(policies.controller_to_dict(result.controller, task))
     assert evaluate(policy, task, episodes=10, seed=0).mean > -400
 
 
@@ -172,9 +172,9 @@ def test_load_drops_into_a_plain_gymnasium_loop(cartpole_run, pendulum_run):
 
 def test_numpy_policy_matches_the_jax_controller(pendulum_run, cartpole_run):
     for run in (pendulum_run, cartpole_run):
-        doc = io.read_model(run)
-        ctrl = io.controller_from_dict(doc)
-        policy = io.NumpyPolicy(doc)
+        doc = policies.read_model(run)
+        ctrl = policies.controller_from_dict(doc)
+        policy = policies.NumpyPolicy(doc)
         obs = np.random.default_rng(0).normal(size=(50, doc["observation"]["size"]))
         with jax.default_matmul_precision("highest"):  # a GPU would use TF32 otherwise
             want = np.asarray(jax.vmap(ctrl)(jnp.asarray(obs, jnp.float32)))

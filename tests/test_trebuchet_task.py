@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import diffcontrol
-from diffcontrol import io
+from diffcontrol import policies
 from diffcontrol.cli import main
 from diffcontrol.evaluation import evaluate_aiming
 from diffcontrol.systems import trebuchet as tb
@@ -91,7 +91,7 @@ def test_aiming_network_learns_on_a_small_budget():
     task = diffcontrol.make("trebuchet")
     result = train(task, resolve_config(task, updates=300))  # the CLI tests' programs
     assert result.curve[0]["eval_return"] < -10
-    policy = io.AimingPolicy(io.controller_to_dict(result.controller, task))
+    policy = policies.AimingPolicy(policies.controller_to_dict(result.controller, task))
     stats = evaluate_aiming(policy, task, targets=300, seed=1).stats
     assert stats["reachable"] > 250 and stats["mean_miss_m"] < 1.0, stats
 
@@ -118,14 +118,14 @@ def test_cli_train_writes_everything_and_load_aims(trebuchet_run):
     assert metrics["simulated_episodes"] == 20 * resolve_config(diffcontrol.make("trebuchet")).batch
 
     policy = diffcontrol.load(trebuchet_run)
-    assert isinstance(policy, diffcontrol.io.AimingPolicy)
+    assert isinstance(policy, diffcontrol.policies.AimingPolicy)
     angle, weight = policy(80.0, -3.0)
     assert isinstance(angle, float) and 5 <= angle <= 85 and 30 <= weight <= 450
     angles, weights = policy(np.array([30.0, 60.0, 90.0]), np.array([0.0, 2.0, -2.0]))
     assert angles.shape == weights.shape == (3,)
     assert (angles[1], weights[1]) == pytest.approx(policy(60.0, 2.0))
     # The NumPy policy is the JAX controller.
-    controller = io.controller_from_dict(io.read_model(trebuchet_run))
+    controller = policies.controller_from_dict(policies.read_model(trebuchet_run))
     np.testing.assert_allclose(
         np.asarray(controller(np.array([80.0, -3.0]))), [angle, weight], rtol=1e-5
     )

@@ -16,9 +16,6 @@ from __future__ import annotations
 
 import importlib as _importlib
 import importlib.util as _importlib_util
-import os as _os
-from pathlib import Path as _Path
-from typing import TYPE_CHECKING
 
 from . import _gym_ids
 from .errors import ConfigError, DiffcontrolError
@@ -26,8 +23,10 @@ from .errors import ConfigError, DiffcontrolError
 __version__ = "0.1.0"
 
 # The public names are imported when first used (PEP 562), so that `import diffcontrol` and
-# `diffcontrol --help` do not import JAX. The Gymnasium ids are registered at once (without
-# JAX: the environments are imported when one is made).
+# `diffcontrol --help` do not import JAX, and so that this module imports none of the
+# package's layers: it is the package's face, not a layer (type checkers read the names from
+# __init__.pyi). The Gymnasium ids are registered at once (without JAX: the environments are
+# imported when one is made).
 _LAZY = {
     "check_task": ("checks", "check_task"),
     "ODETrainConfig": ("config", "ODETrainConfig"),
@@ -45,18 +44,9 @@ _LAZY = {
     "TrainResult": ("training", "TrainResult"),
     "sweep": ("training", "sweep"),
     "train": ("training", "train"),
+    "load": ("runs", "load"),
+    "list_tasks": ("tasks", "names"),
 }
-
-if TYPE_CHECKING:
-    from .checks import check_task
-    from .config import ODETrainConfig, TrainConfig
-    from .controllers import MLPController
-    from .evaluation import evaluate
-    from .identify import fit, record
-    from .runs import Run, open_run
-    from .tasks import ContinuousTask, Task, register
-    from .tasks import resolve as make
-    from .training import TrainResult, train
 
 _gym_ids.register()  # gymnasium.make("diffcontrol/<Name>-v0") for every built-in task
 
@@ -75,56 +65,6 @@ def __getattr__(name: str):
 
 def __dir__() -> list[str]:
     return sorted({*globals(), *__all__})
-
-
-def load(run_dir: str | _os.PathLike, task: Task | ContinuousTask | str | None = None):
-    """Load the controller saved in ``run_dir`` (a run directory or its ``model.json``) as a
-    NumPy policy, for any task.
-
-    The policy is the task's (its ``load_policy`` hook): by default a ``NumpyPolicy``,
-    ``policy(obs)`` -> a valid Gymnasium action, which drops into a plain
-    ``gymnasium.make(...)`` loop; an ``AimingPolicy`` for the trebuchet
-    (``policy(target_m, wind_mps) -> (angle_deg, weight_lb)``); a ``StatePolicy`` for a
-    continuous-time task (``policy(state) -> action`` on the physical state). A planner
-    (written by ``diffcontrol plan``) loads as an ``mpc.PlannerPolicy``, ``policy(obs)`` ->
-    Gymnasium action like the others, but it imports JAX and runs one compiled solve per
-    call (its terminal value grid, if any, is solved again here from the stored settings);
-    a continuous-time task's planner as an ``mpc.SampledPlannerPolicy``, ``policy(state)`` ->
-    action like a ``StatePolicy``, but an action to hold for ``policy.dt`` seconds (one
-    solve per control period, JAX again).
-
-    Args:
-        run_dir: a directory written by ``diffcontrol train`` or ``result.save``.
-        task: the task (or its name or import path) when it is not registered; without it a
-            task that is not registered loads by the file's format alone (a ``NumpyPolicy``,
-            or a ``StatePolicy`` where the file gives the state's features).
-
-    Raises:
-        ModelFileError: the file is missing, corrupt, or of an unsupported version.
-    """
-    from . import io, tasks
-    from .errors import ModelFileError
-    from .io import NumpyPolicy, StatePolicy, read_model
-
-    doc = read_model(_Path(run_dir))
-    if isinstance(task, str):
-        task = tasks.resolve(task)
-    if task is None and doc["task"] in tasks.names():
-        task = tasks.make(doc["task"])
-    if task is not None:
-        from .runs import load_policy
-
-        return load_policy(task, doc)  # the task's, or a planner's
-    if io.is_planner(doc):
-        raise ModelFileError(f"the planner's task {doc['task']!r} is not registered; pass task=")
-    return StatePolicy(doc) if "features" in doc["observation"] else NumpyPolicy(doc)
-
-
-def list_tasks() -> list[str]:
-    """Names of the registered tasks."""
-    from . import tasks
-
-    return tasks.names()
 
 
 __all__ = [

@@ -4,8 +4,9 @@
 registers the built-in tasks' ids from ``BUILTIN``. The environments themselves
 (``diffcontrol.envs``, which imports JAX) are imported by Gymnasium from the string entry
 points only when one is made. ``diffcontrol.tasks.register`` registers every task it is given
-from the task itself (``register_env``), the built-in ones again with the same specs: a test
-keeps ``BUILTIN`` equal to them.
+from the task itself (``tasks.register_env``), the built-in ones again with the same specs: a
+test keeps ``BUILTIN`` equal to them. This module imports nothing of the package: the tasks
+use it, and the package's ``__init__`` registers ``BUILTIN`` with it.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from typing import Any
 
 NAMESPACE = "diffcontrol"
 VERSION = 0
-_ENVS = "diffcontrol.envs"
+ENVS = "diffcontrol.envs"
 
 BUILTIN: tuple[tuple[str, str, str | None, int, float | None], ...] = (
     # (id, entry point, task, max_episode_steps, reward_threshold)
@@ -60,57 +61,5 @@ def env_name(task: Any) -> str:
 
 
 def env_id(task: Any) -> str:
-    """The Gymnasium id of ``task`` (an instance or a registered name): ``diffcontrol/<Name>-v0``."""
-    if isinstance(task, str):
-        from . import tasks
-
-        task = tasks.make(task)
+    """The Gymnasium id of a task instance: ``diffcontrol/<Name>-v0``."""
     return f"{NAMESPACE}/{env_name(task)}-v{VERSION}"
-
-
-def supports(task: Any) -> bool:
-    """Whether ``task`` can be stepped as a Gymnasium environment by ``TaskEnv`` (every
-    discrete-time task can)."""
-    from .tasks._base import Task
-
-    return isinstance(task, Task)
-
-
-def _entry(task: Any) -> tuple[str, int] | None:
-    """The environment class and the episode length (steps) for ``task``, if it has one."""
-    from .tasks._base import ContinuousTask
-
-    if supports(task):
-        return f"{_ENVS}:TaskEnv", task.episode_length
-    if isinstance(task, ContinuousTask):
-        return f"{_ENVS}:ContinuousTaskEnv", task.default_config().saves - 1
-    return None
-
-
-def register_env(task: Any) -> str:
-    """Register ``task`` as ``diffcontrol/<Name>-v0`` (again, if already there); returns the id.
-
-    Raises:
-        ConfigError: the task's kind cannot be a Gymnasium environment.
-    """
-    from gymnasium.envs.registration import register, registry
-
-    entry = _entry(task)
-    if entry is None:
-        from .errors import ConfigError
-
-        raise ConfigError(
-            f"{task!r} is neither a Task nor a ContinuousTask, so it has no Gymnasium environment"
-        )
-    entry_point, steps = entry
-    eid = env_id(task)
-    if eid in registry:
-        del registry[eid]
-    register(
-        id=eid,
-        entry_point=entry_point,
-        kwargs={"task": task.name},
-        max_episode_steps=steps,
-        reward_threshold=getattr(task, "reward_threshold", None),
-    )
-    return eid

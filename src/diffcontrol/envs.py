@@ -35,10 +35,13 @@ import jax.numpy as jnp
 import numpy as np
 from gymnasium import spaces
 
+from . import _gym_ids
 from . import tasks as _tasks
-from ._gym_ids import NAMESPACE, VERSION, _entry, env_id, env_name, register_env, supports
+from ._gym_ids import NAMESPACE, VERSION, env_name
 from .errors import ConfigError
-from .tasks import Task
+from .tasks import Task, register_env
+from .tasks import env_entry as _entry
+from .tasks import supports_env as supports
 
 __all__ = [
     "NAMESPACE",
@@ -54,6 +57,11 @@ __all__ = [
 ]
 
 _COMPILED: dict[str, tuple[Any, Any]] = {}
+
+
+def env_id(task: Any) -> str:
+    """The Gymnasium id of ``task`` (an instance or a registered name): ``diffcontrol/<Name>-v0``."""
+    return _gym_ids.env_id(_tasks.make(task) if isinstance(task, str) else task)
 
 
 def _compiled(task: Task, params: Any, nominal: bool) -> tuple[Any, Any]:

@@ -5,8 +5,9 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+import diffcontrol.cli._args as a
+
 from ..settings import CompareConfig
-from . import _args as a
 from ._args import FLAG, REQUIRED, add
 
 

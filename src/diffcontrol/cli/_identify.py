@@ -8,8 +8,9 @@ import argparse
 import time
 from typing import Any
 
+import diffcontrol.cli._args as a
+
 from ..settings import MODELS, FitConfig, LoopConfig, RecordConfig
-from . import _args as a
 from ._args import FLAG, REQUIRED, add
 
 

@@ -6,7 +6,8 @@ import argparse
 import json
 from typing import Any
 
-from . import _args as a
+import diffcontrol.cli._args as a
+
 from ._args import FLAG, REQUIRED, add
 
 

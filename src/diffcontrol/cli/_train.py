@@ -8,9 +8,10 @@ import warnings
 from pathlib import Path
 from typing import Any
 
+import diffcontrol.cli._args as a
+
 from ..config import ODETrainConfig, TrainConfig
 from ..settings import PlanConfig
-from . import _args as a
 from ._args import FLAG, REQUIRED, add
 
 _DISCRETE = {f.name for f in dataclasses.fields(TrainConfig)}

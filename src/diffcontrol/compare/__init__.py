@@ -15,7 +15,6 @@ protocol (``diffcontrol.compare.run``), and writes to its output directory:
 from __future__ import annotations
 
 import os
-import platform
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -25,14 +24,14 @@ from .._shell import command as shell_command
 from ..errors import ConfigError, Interrupted, RunDirectoryError
 from ..settings import CompareConfig
 from ..tasks import Task, resolve
-from ._planning import PLANNING_METHODS, run_planning
+from ._planning import PLANNING_METHODS, methods_for, run_planning
 from .baselines import BASELINES, INSTALL_HINT, Baseline, require_rl
-from .report import plot, summarize, table
+from .real import run_real_comparison
+from .report import machine, plot, summarize, table
 from .run import (
     DEFAULT_EVAL_EVERY,
     THRESHOLDS,
     evaluate_batch,
-    methods_for,
     run_diffcontrol,
     run_rl,
 )
@@ -239,43 +238,6 @@ def _prepare(out: Path, settings: dict, resume: bool) -> Path:
     (out / "runs").mkdir(exist_ok=True)
     return out
 
-
-def machine() -> dict[str, Any]:
-    """The CPU, cores this process may use, and the versions that shape the timings."""
-
-    import jax
-
-    cpu = platform.processor() or "unknown"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    info: dict[str, Any] = {
-        "cpu": cpu,
-        "cores_allowed": sorted(os.sched_getaffinity(0))
-        if hasattr(os, "sched_getaffinity")
-        else None,
-        "python": platform.python_version(),
-        "jax": jax.__version__,
-    }
-    try:
-        import stable_baselines3
-        import torch
-
-        info.update(
-            stable_baselines3=stable_baselines3.__version__,
-            torch=torch.__version__,
-            torch_threads=torch.get_num_threads(),
-        )
-    except ImportError:
-        pass
-    return info
-
-
-from .real import run_real_comparison  # noqa: E402  (it reads machine() above)
 
 __all__ = [
     "BASELINES",

@@ -24,8 +24,11 @@ from collections.abc import Callable
 
 import numpy as np
 
+from ..errors import ConfigError
 from ..settings import PlanConfig
 from ..tasks import Task
+from .baselines import BASELINES
+from .run import _final, _line, _point, evaluate_batch, numpy_policy_act
 
 PLANNING_METHODS = ("planner", "distilled")
 PLANNER = PlanConfig(horizon=10, value_grid=401)
@@ -57,7 +60,6 @@ def run_planning(
     """Run ``method`` (``planner`` or ``distilled``) with ``seed``; ``memo`` keeps the planner
     (and its grid) between the calls of one comparison."""
     from ..evaluation import evaluate
-    from .run import _final, _line, _point, evaluate_batch, numpy_policy_act
 
     if "planner" not in memo:
         from ..mpc import PlannerPolicy, planner_from_config
@@ -78,14 +80,14 @@ def run_planning(
             return memo[key]
 
     else:
-        from .. import io
+        from .. import policies
         from ..mpc import distil
 
         result = distil(task, policy.planner, seed=seed, progress=say, **DISTIL)
         m = result.metrics
         steps, seconds = m["simulated_steps"], m["train_seconds"]
         extra = {"config": m["distillation"], "compile_seconds": m["compile_seconds"]}
-        mlp = io.NumpyPolicy(io.controller_to_dict(result.controller, task, {}))
+        mlp = policies.NumpyPolicy(policies.controller_to_dict(result.controller, task, {}))
 
         def returns(episodes: int) -> np.ndarray:
             return evaluate_batch(numpy_policy_act(mlp), task, episodes, eval_seed)
@@ -114,3 +116,18 @@ def _algo(method: str) -> str:
     value = f", terminal value -V_0 of a {p.value_grid}-point grid" if p.value_grid else ""
     planner = f"MPC: {p.solver}, H = {p.horizon}{value}"
     return planner if method == "planner" else f"DAgger distillation of ({planner}) into the MLP"
+
+
+def methods_for(task: Task) -> list[str]:
+    """The methods ``compare`` runs for ``task``: ``diffcontrol``, the planner and its distilled
+    MLP where the task can take them (``compare._planning``), then its RL baselines.
+
+    Raises:
+        ConfigError: no RL baselines are defined for the task.
+    """
+    if task.name not in BASELINES:
+        raise ConfigError(
+            f"no RL baselines are defined for task {task.name!r}; `compare` supports: "
+            f"{', '.join(sorted(BASELINES))}"
+        )
+    return ["diffcontrol", *planning_methods(task), *BASELINES[task.name]]

@@ -42,7 +42,7 @@ from .. import io
 from ..errors import ConfigError, RunDirectoryError
 from ..settings import CONTROLLERS
 from ..tasks import Task, make, names, resolve
-from .report import plot, summarize, table
+from .report import machine, plot, summarize, table
 from .run import THRESHOLDS, first_reached
 
 LABELS = {"params": "grey box", "hybrid": "hybrid", "neural": "neural"}
@@ -318,7 +318,7 @@ def _report(task, out, settings, results, rl, thresholds) -> dict:
     doc = {
         **settings,
         "created": io.now_iso(),
-        "machine": _machine(),
+        "machine": machine(),
         "real_steps_to_threshold": per_seed,
         "real_steps_to_threshold_over_all_episodes": per_seed_all,
         "summary": summary,
@@ -334,9 +334,3 @@ def _report(task, out, settings, results, rl, thresholds) -> dict:
     plot(task.name, results + rl, thresholds, out / "comparison.png", title=title, ylim=(low, top))
     doc["files"] = [str(out / f) for f in ("comparison.json", "comparison.md", "comparison.png")]
     return doc
-
-
-def _machine() -> dict:
-    from . import machine
-
-    return machine()

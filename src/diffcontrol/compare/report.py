@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import math
+import os
+import platform
 import statistics
 from pathlib import Path
 from typing import Any
@@ -184,3 +186,38 @@ def plot(
     fig.suptitle(title or f"{task_name}: diffcontrol against RL baselines")
     fig.tight_layout()
     return write_figure(fig, path)
+
+
+def machine() -> dict[str, Any]:
+    """The CPU, cores this process may use, and the versions that shape the timings."""
+
+    import jax
+
+    cpu = platform.processor() or "unknown"
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    info: dict[str, Any] = {
+        "cpu": cpu,
+        "cores_allowed": sorted(os.sched_getaffinity(0))
+        if hasattr(os, "sched_getaffinity")
+        else None,
+        "python": platform.python_version(),
+        "jax": jax.__version__,
+    }
+    try:
+        import stable_baselines3
+        import torch
+
+        info.update(
+            stable_baselines3=stable_baselines3.__version__,
+            torch=torch.__version__,
+            torch_threads=torch.get_num_threads(),
+        )
+    except ImportError:
+        pass
+    return info

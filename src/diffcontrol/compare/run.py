@@ -49,23 +49,6 @@ DEFAULT_EVAL_EVERY = {"cartpole": 2000, "pendulum": 1000, "trebuchet": 1000}
 """RL evaluation interval in environment steps, per task."""
 
 
-def methods_for(task: Task) -> list[str]:
-    """The methods ``compare`` runs for ``task``: ``diffcontrol``, the planner and its distilled
-    MLP where the task can take them (``compare._planning``), then its RL baselines.
-
-    Raises:
-        ConfigError: no RL baselines are defined for the task.
-    """
-    if task.name not in BASELINES:
-        raise ConfigError(
-            f"no RL baselines are defined for task {task.name!r}; `compare` supports: "
-            f"{', '.join(sorted(BASELINES))}"
-        )
-    from ._planning import planning_methods
-
-    return ["diffcontrol", *planning_methods(task), *BASELINES[task.name]]
-
-
 def make_eval_env(task: Task) -> gymnasium.Env:
     """The environment every method is evaluated (and RL trained) in: Gymnasium's own where
     the task has one (``Pendulum-v1``, ``CartPole-v1``), else ``diffcontrol/<Name>-v0``."""
@@ -162,7 +145,7 @@ def run_diffcontrol(
     say: Callable[[str], None],
 ) -> dict:
     """Train diffcontrol's default configuration with ``seed``; evaluate as described above."""
-    from .. import io
+    from .. import policies
     from ..training import resolve_config, train
 
     config = resolve_config(task, seed=seed, updates=updates)
@@ -170,7 +153,7 @@ def run_diffcontrol(
     eval_seconds = 0.0
 
     def policy_of(controller) -> Any:
-        return io.NumpyPolicy(io.controller_to_dict(controller, task, {}))
+        return policies.NumpyPolicy(policies.controller_to_dict(controller, task, {}))
 
     def on_point(point: dict, controller) -> None:
         nonlocal eval_seconds

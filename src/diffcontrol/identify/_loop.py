@@ -24,7 +24,8 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import ConfigError, RunDirectoryError
-from ..io import now_iso, read_json, read_model, write_figure, write_json
+from ..io import now_iso, read_json, write_figure, write_json
+from ..policies import read_model
 from ..settings import FitConfig, LoopConfig
 from ._fit import fit_dir
 from ._rounds import NoisyPolicy, model_error, parse_start, predictor_of, start_params

@@ -300,7 +300,7 @@ def record_gym(
 
 
 def _record_env(env_id, episodes, task, env_kwargs, controller, seed, max_steps, noise_m, progress):
-    from ..io import NumpyPolicy, read_model
+    from ..policies import NumpyPolicy, read_model
 
     if noise_m is not None:
         raise ConfigError(

@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import os
 import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from .. import _timing, io
+from .. import _timing, io, policies
 from ..errors import ModelFileError
 from ..tasks import AnyTask, resolve
 
@@ -66,11 +67,51 @@ class Run:
 def load_policy(task: AnyTask, doc: dict) -> Any:
     """The policy of a ``model.json`` document: the task's ``load_policy`` (a NumPy policy),
     or for a planner its ``mpc.PlannerPolicy`` (which imports JAX)."""
-    if io.is_planner(doc):
+    if policies.is_planner(doc):
         from ._plan import planner_policy
 
         return planner_policy(task, doc)
     return task.load_policy(doc)
+
+
+def load(run_dir: str | os.PathLike, task: AnyTask | str | None = None) -> Any:
+    """Load the controller saved in ``run_dir`` (a run directory or its ``model.json``) as a
+    NumPy policy, for any task.
+
+    The policy is the task's (its ``load_policy`` hook): by default a ``NumpyPolicy``,
+    ``policy(obs)`` -> a valid Gymnasium action, which drops into a plain
+    ``gymnasium.make(...)`` loop; an ``AimingPolicy`` for the trebuchet
+    (``policy(target_m, wind_mps) -> (angle_deg, weight_lb)``); a ``StatePolicy`` for a
+    continuous-time task (``policy(state) -> action`` on the physical state). A planner
+    (written by ``diffcontrol plan``) loads as an ``mpc.PlannerPolicy``, ``policy(obs)`` ->
+    Gymnasium action like the others, but it imports JAX and runs one compiled solve per
+    call (its terminal value grid, if any, is solved again here from the stored settings);
+    a continuous-time task's planner as an ``mpc.SampledPlannerPolicy``, ``policy(state)`` ->
+    action like a ``StatePolicy``, but an action to hold for ``policy.dt`` seconds (one
+    solve per control period, JAX again).
+
+    Args:
+        run_dir: a directory written by ``diffcontrol train`` or ``result.save``.
+        task: the task (or its name or import path) when it is not registered; without it a
+            task that is not registered loads by the file's format alone (a ``NumpyPolicy``,
+            or a ``StatePolicy`` where the file gives the state's features).
+
+    Raises:
+        ModelFileError: the file is missing, corrupt, or of an unsupported version.
+    """
+    from .. import tasks
+    from ..policies import NumpyPolicy, StatePolicy, read_model
+
+    doc = read_model(Path(run_dir))
+    if isinstance(task, str):
+        task = tasks.resolve(task)
+    if task is None and doc["task"] in tasks.names():
+        task = tasks.make(doc["task"])
+    if task is not None:
+        return load_policy(task, doc)  # the task's, or a planner's
+    if policies.is_planner(doc):
+        raise ModelFileError(f"the planner's task {doc['task']!r} is not registered; pass task=")
+    return StatePolicy(doc) if "features" in doc["observation"] else NumpyPolicy(doc)
 
 
 def _judged(task: AnyTask, params: Any, real: dict | None) -> tuple[AnyTask, Any]:
@@ -121,7 +162,7 @@ def save_run(
     doc = (
         own(metrics)
         if own
-        else io.model_document(result.task, result.controller, result.config, metrics)
+        else policies.model_document(result.task, result.controller, result.config, metrics)
     )
     io.write_json(out / MODEL_FILE, doc)
     task, params = _judged(result.task, result.params, real)
@@ -174,7 +215,7 @@ def open_run(
     """
     path = Path(run_dir)
     directory = path if path.is_dir() else path.parent
-    doc = io.read_model(path)
+    doc = policies.read_model(path)
     if task is None:
         task = _task_of(doc)
     elif isinstance(task, str):
@@ -187,7 +228,7 @@ def open_run(
                 f"{what}s of size {own}; open it with its own task (--task)"
             )
     config = task.default_config()
-    planner = io.is_planner(doc)  # its run.json holds the planner's settings, not training's
+    planner = policies.is_planner(doc)  # its run.json holds the planner's settings, not training's
     if (directory / io.RUN_FILE).exists() and not planner:
         stored = io.read_json(directory / io.RUN_FILE, "run file").get("config")
         try:
@@ -215,7 +256,7 @@ def open_run(
     from ..training import task_params
 
     task, params = _judged(task, task_params(task, config.params), real or None)
-    controller = None if planner else io.controller_from_dict(doc)  # a planner: run.policy
+    controller = None if planner else policies.controller_from_dict(doc)  # a planner: run.policy
     return Run(task, controller, config, params, doc, metrics, real or None)
 
 

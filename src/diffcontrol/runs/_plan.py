@@ -2,7 +2,7 @@
 a run, and ``planner_policy`` builds it back from ``model.json`` (``diffcontrol.load``,
 ``evaluate``, ``animate``).
 
-A planner's ``model.json`` (see ``io.planner_document``) holds its settings and the model it
+A planner's ``model.json`` (see ``policies.planner_document``) holds its settings and the model it
 plans through: the task's own simulator (``{"kind": "simulator"}``) or the whole
 ``fitted.json`` of ``diffcontrol fit`` (``{"kind": "fitted", "fitted": {...}}``, networks
 included), so the file is self-contained. Unlike an MLP's, it needs JAX at run time: every
@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from .. import io
+from .. import io, policies
 from ..errors import ConfigError, ModelFileError
 from ..settings import PlanConfig
 from ..tasks import AnyTask, resolve
@@ -49,7 +49,7 @@ class PlanResult:
         value = None if self.value is None else self.value.to_json()
         problem = self.policy.planner.problem  # the planner's own bounds (the task may have none)
         bounds = [np.asarray(b, float).tolist() for b in (problem.low, problem.high)]
-        doc = io.planner_document(self.task, self.plan.to_json(), self.model, meta, value)
+        doc = policies.planner_document(self.task, self.plan.to_json(), self.model, meta, value)
         doc["action"].update(low=bounds[0], high=bounds[1])
         return doc
 

@@ -20,7 +20,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from .. import io
+from .. import io, policies
 from .._shell import command as shell_command
 from ..errors import ConfigError, RunDirectoryError
 from ..tasks import named_by_file, resolve
@@ -154,7 +154,7 @@ def sweep_dir(
     best = max(range(len(rows)), key=lambda i: _rank(rows[i]["eval_return"]))
     best_dir = out / doc["members"][best]
     if not (best_dir / "learning_curve.png").exists():
-        from ..runs import open_run
+        from ._files import open_run
 
         run = open_run(best_dir, the_task, real=None)
         member = _as_result(run)
@@ -237,7 +237,7 @@ def _write_member(member_dir: Path, result: Any, task_spec: str) -> None:
     )
     io.write_json(
         member_dir / MODEL_FILE,
-        io.model_document(result.task, result.controller, result.config, metrics),
+        policies.model_document(result.task, result.controller, result.config, metrics),
     )
     io.write_json(member_dir / METRICS_FILE, metrics)
     mark_complete(member_dir)

@@ -12,11 +12,12 @@ import importlib
 import importlib.metadata
 import os
 import sys
+from typing import Any
 
 from .. import _gym_ids
 from .._task_list import ENTRY_POINT_GROUP
-from ..errors import UnknownTaskError
-from ._base import ContinuousTask, StepLoss, Task, TrajectoryLoss
+from ..errors import ConfigError, UnknownTaskError
+from ._base import ContinuousTask, StepLoss, Task, TrajectoryLoss, task_params
 from .acrobot import Acrobot
 from .cartpole import CartPole
 from .mountain_car import MountainCarContinuous
@@ -33,6 +34,49 @@ AnyTask = Task | ContinuousTask
 _REGISTRY: dict[str, AnyTask] = {}
 
 
+def supports_env(task: Any) -> bool:
+    """Whether ``task`` can be stepped as a Gymnasium environment by ``envs.TaskEnv`` (every
+    discrete-time task can)."""
+    return isinstance(task, Task)
+
+
+def env_entry(task: Any) -> tuple[str, int] | None:
+    """The environment class and the episode length (steps) for ``task``, if it has one."""
+    if supports_env(task):
+        return f"{_gym_ids.ENVS}:TaskEnv", task.episode_length
+    if isinstance(task, ContinuousTask):
+        return f"{_gym_ids.ENVS}:ContinuousTaskEnv", task.default_config().saves - 1
+    return None
+
+
+def register_env(task: Any) -> str:
+    """Register ``task`` as ``diffcontrol/<Name>-v0`` (again, if already there); returns the id.
+
+    Raises:
+        ConfigError: the task's kind cannot be a Gymnasium environment.
+    """
+    from gymnasium.envs.registration import register as register_gym
+    from gymnasium.envs.registration import registry
+
+    entry = env_entry(task)
+    if entry is None:
+        raise ConfigError(
+            f"{task!r} is neither a Task nor a ContinuousTask, so it has no Gymnasium environment"
+        )
+    entry_point, steps = entry
+    eid = _gym_ids.env_id(task)
+    if eid in registry:
+        del registry[eid]
+    register_gym(
+        id=eid,
+        entry_point=entry_point,
+        kwargs={"task": task.name},
+        max_episode_steps=steps,
+        reward_threshold=getattr(task, "reward_threshold", None),
+    )
+    return eid
+
+
 def register(task: AnyTask) -> AnyTask:
     """Add a task instance to the registry under ``task.name`` and make it a Gymnasium
     environment (``diffcontrol/<Name>-v0``) at once; returns it.
@@ -43,8 +87,8 @@ def register(task: AnyTask) -> AnyTask:
     if task.name in _REGISTRY and type(_REGISTRY[task.name]) is not type(task):
         raise ValueError(f"a different task is already registered as {task.name!r}")
     _REGISTRY[task.name] = task
-    if _gym_ids._entry(task) is not None:
-        _gym_ids.register_env(task)
+    if env_entry(task) is not None:
+        register_env(task)
     return task
 
 
@@ -184,7 +228,11 @@ __all__ = [
     "names",
     "named_by_file",
     "register",
+    "register_env",
+    "env_entry",
+    "supports_env",
     "resolve",
+    "task_params",
     "ENTRY_POINT_GROUP",
     "Pendulum",
     "PendulumUnclipped",

@@ -9,9 +9,11 @@ from types import MappingProxyType
 from typing import Any, ClassVar
 
 import equinox as eqx
+import jax
 import numpy as np
 from jaxtyping import Array, PRNGKeyArray, PyTree
 
+from .._gym_ids import env_id
 from ..errors import ConfigError
 from ._grid import GridAxis
 
@@ -62,8 +64,6 @@ class _TaskBase(abc.ABC):
     def gym_label(self) -> str:
         """How evaluation results name the environment: ``gym_id`` (plus any changes), or the
         task's own ``diffcontrol/<Name>-v0``."""
-        from ..envs import env_id
-
         return self.gym_id or env_id(self)
 
     # --- hooks of a run: how a trained controller is loaded, judged and drawn ---------------
@@ -157,7 +157,7 @@ class _TaskBase(abc.ABC):
 
         Default: a ``NumpyPolicy``, ``policy(obs) -> Gymnasium action``.
         """
-        from ..io import NumpyPolicy
+        from ..policies import NumpyPolicy
 
         return NumpyPolicy(doc)
 
@@ -499,8 +499,6 @@ class Task(_TaskBase):
         ``diffcontrol/<Name>-v0`` where it has no Gymnasium twin."""
         import gymnasium
 
-        from ..envs import env_id
-
         return gymnasium.make(self.gym_id or env_id(self), **kwargs)
 
     def set_gym_state(self, env: Any, state: np.ndarray) -> None:
@@ -621,7 +619,7 @@ class ContinuousTask(_TaskBase):
 
     def load_policy(self, doc: dict) -> Any:
         """A ``StatePolicy``: ``policy(state) -> action`` on the physical state."""
-        from ..io import StatePolicy
+        from ..policies import StatePolicy
 
         return StatePolicy(doc)
 
@@ -681,3 +679,21 @@ def _no_builtin_loss(task: _TaskBase, name: str, argument: str) -> str:
         f"task {task.name!r} has no built-in loss {name!r}; pass your loss to "
         f"diffcontrol.train(task, {argument}=...) or define {type(task).__name__}.{argument}"
     )
+
+
+def task_params(
+    task: Task | ContinuousTask, overrides: tuple[tuple[str, float], ...] = ()
+) -> PyTree:
+    """The task's nominal parameters with ``overrides`` applied, as JAX arrays."""
+    params = task.default_params()
+    for name, value in overrides:
+        if not hasattr(params, name):
+            fields = [f.name for f in dataclasses.fields(params)]
+            raise ConfigError(
+                f"task {task.name!r} has no parameter {name!r}; its parameters are {', '.join(fields)}"
+            )
+        params = eqx.tree_at(lambda p, n=name: getattr(p, n), params, value)
+    task.check_params(params)
+    # Converted by NumPy (the same rounding), then placed: no compiled conversion programs.
+    dtype = jax.dtypes.canonicalize_dtype(float)
+    return jax.tree.map(lambda x: jax.device_put(np.asarray(x, dtype=dtype)), params)

@@ -177,7 +177,7 @@ def record_data(task: Any, episodes: int, *, env_id=None, env_kwargs=None, contr
     """The trebuchet task's ``record_data``: ``episodes`` throws with random inputs (or a
     trained ``controller`` aiming at random targets) of the trebuchet whose parameters
     ``env_kwargs`` change, with ``noise_m`` m of noise on the distances."""
-    from ..io import AimingPolicy, read_model
+    from ..policies import AimingPolicy, read_model
 
     for flag, value in (("--max-steps", max_steps), ("an environment id", env_id)):
         if value is not None:

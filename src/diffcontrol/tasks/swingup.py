@@ -38,7 +38,7 @@ from jaxtyping import Array, Float
 
 from ..config import ODETrainConfig
 from ..systems import cartpole_swingup as cp
-from ._base import ContinuousTask, TrajectoryLoss
+from ._base import ContinuousTask, TrajectoryLoss, task_params
 
 ENERGY_WEIGHT = 0.1
 """Weight of the dissipated energy (per joule) in the ``energy`` loss."""
@@ -346,7 +346,6 @@ class CartPoleSwingUp(ContinuousTask):
         """The state and force at 50 Hz under random forces, of the cart-pole with this task's
         parameters changed by ``env_kwargs`` (``fitted_swingup.record_swingup``)."""
         from ..errors import ConfigError
-        from ..training import task_params
         from .fitted_swingup import record_swingup
 
         for flag, value in (("--controller", controller), ("--max-steps", max_steps)):

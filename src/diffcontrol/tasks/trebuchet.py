@@ -178,7 +178,7 @@ class TrebuchetAiming(Task):
 
     def load_policy(self, doc: dict):
         """An ``AimingPolicy``: ``policy(target_m, wind_mps) -> (angle_deg, weight_lb)``."""
-        from ..io import AimingPolicy
+        from ..policies import AimingPolicy
 
         return AimingPolicy(doc)
 

@@ -25,7 +25,7 @@ from ..config import TrainConfig
 from ..controllers import MLPController
 from ..errors import TrainingDiverged
 from ..rollout import batch_returns
-from ..tasks import StepLoss, Task
+from ..tasks import StepLoss, Task, task_params
 
 
 class TrainState(eqx.Module):
@@ -510,8 +510,6 @@ def make_trainer(
     if step_loss is None:
         step_loss = task.step_loss(builtin_loss_name(task, config.loss, "step_loss"))
     if params is None and config.value_grid:
-        from ._driver import task_params  # (it imports this module)
-
         params = task_params(task, config.params)
     trainer = Trainer(
         task=task,

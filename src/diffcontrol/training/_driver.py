@@ -21,12 +21,12 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, PRNGKeyArray, PyTree
 
-from .. import _timing, io
+from .. import _timing, io, policies
 from .._jax_setup import compile_with
 from ..checks import validate_task
 from ..controllers import MLPController
 from ..errors import ConfigError, TrainingDiverged
-from ..tasks import AnyTask, ContinuousTask, StepLoss, TrajectoryLoss
+from ..tasks import AnyTask, ContinuousTask, StepLoss, TrajectoryLoss, task_params
 from ._bptt import make_trainer
 from ._devices import batch_placement, check_devices, divisible, gathered, is_writer, placer
 from ._diagnostics import Diagnostics
@@ -61,22 +61,6 @@ class TrainResult:
         from ..runs import save_run
 
         return save_run(self, out_dir, **options)[1]
-
-
-def task_params(task: AnyTask, overrides: tuple[tuple[str, float], ...] = ()) -> PyTree:
-    """The task's nominal parameters with ``overrides`` applied, as JAX arrays."""
-    params = task.default_params()
-    for name, value in overrides:
-        if not hasattr(params, name):
-            fields = [f.name for f in dataclasses.fields(params)]
-            raise ConfigError(
-                f"task {task.name!r} has no parameter {name!r}; its parameters are {', '.join(fields)}"
-            )
-        params = eqx.tree_at(lambda p, n=name: getattr(p, n), params, value)
-    task.check_params(params)
-    # Converted by NumPy (the same rounding), then placed: no compiled conversion programs.
-    dtype = jax.dtypes.canonicalize_dtype(float)
-    return jax.tree.map(lambda x: jax.device_put(np.asarray(x, dtype=dtype)), params)
 
 
 def resolve_config(task: AnyTask, recipe: str | None = None, **overrides: Any) -> Any:
@@ -387,7 +371,9 @@ def train(
         "processes": jax.process_count(),
     }
     if out is not None and is_writer():  # the controller, loadable at once
-        io.write_json(out / "model.json", io.model_document(task, controller, config, metrics))
+        io.write_json(
+            out / "model.json", policies.model_document(task, controller, config, metrics)
+        )
     return TrainResult(
         task=task, config=config, params=params, controller=controller, metrics=metrics
     )

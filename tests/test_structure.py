@@ -1,0 +1,124 @@
+"""The package's structure, read from its source with ``ast`` (nothing is imported): imports
+run one way. An import inside a function counts as much as one at the top of a module: a
+cycle hidden in a function body is still a cycle.
+
+The package is moving to having no import cycle at all (docs/development.md, "Layers"). Until
+it gets there, ``IN_CYCLES`` lists the modules still on a cycle: a module that joins one fails
+the test, and so does one that has left every cycle while still listed here, so the list only
+shrinks."""
+
+from __future__ import annotations
+
+import ast
+from collections import defaultdict
+from pathlib import Path
+
+import diffcontrol
+
+PACKAGE = Path(diffcontrol.__file__).parent
+
+
+def _modules() -> dict[str, Path]:
+    modules = {}
+    for path in sorted(PACKAGE.rglob("*.py")):
+        parts = path.relative_to(PACKAGE.parent).with_suffix("").parts
+        name = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+        modules[name] = path
+    return modules
+
+
+def import_graph() -> dict[str, set[str]]:
+    """Each module of the package and the package's modules it imports, anywhere in it (a
+    ``from .. import x`` imports the package itself, then ``x``)."""
+    modules = _modules()
+    graph: dict[str, set[str]] = defaultdict(set)
+    for name, path in modules.items():
+        here = name.split(".") if path.name == "__init__.py" else name.split(".")[:-1]
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Import):
+                targets = [alias.name for alias in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or ""
+                if node.level:
+                    parent = here[: len(here) - node.level + 1]
+                    base = ".".join([*parent, *([node.module] if node.module else [])])
+                targets = [base, *(f"{base}.{alias.name}" for alias in node.names)]
+            else:
+                continue
+            for target in targets:
+                while target and target not in modules:
+                    target = target.rpartition(".")[0]
+                if target and target != name:
+                    graph[name].add(target)
+    return graph
+
+
+def cycles(graph: dict[str, set[str]]) -> list[set[str]]:
+    """The strongly connected components of more than one module (Tarjan's algorithm)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    found: list[set[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        for w in graph.get(v, ()):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = set()
+            while True:
+                w = stack.pop()
+                component.add(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                found.append(component)
+
+    for v in list(graph):
+        if v not in index:
+            visit(v)
+    return found
+
+
+def test_the_cycle_finder_finds_a_cycle_hidden_in_a_function():
+    graph = {"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}
+    assert cycles(graph) == [{"a", "b", "c"}]
+    assert cycles({"a": {"b"}, "b": set()}) == []
+
+
+IN_CYCLES = frozenset(
+    """
+    _checks.contract _checks.parity _checks.shapes animation checks envs evaluation identify
+    identify._fit identify._loop identify._rounds identify._routes identify.data
+    identify.data._files identify.data._format identify.data._table identify.ensemble
+    identify.fitted identify.hybrid identify.ode identify.plot identify.recording
+    identify.steps mpc mpc._config mpc._discretise mpc._distil mpc._policy optimal plots
+    rollout runs runs._files runs._plan runs._sweep runs._train runs._use tasks tasks._base
+    tasks._trebuchet_fit tasks._trebuchet_record tasks._trebuchet_throws tasks.acrobot
+    tasks.cartpole tasks.fitted_swingup tasks.mountain_car tasks.pendulum tasks.swingup
+    tasks.trebuchet training training._bptt training._driver training._ode training._sweep
+    """.split()
+)
+"""The modules still on an import cycle (without the ``diffcontrol.`` prefix)."""
+
+
+def test_no_module_joins_an_import_cycle_and_the_list_only_shrinks():
+    on_cycles = {m.removeprefix("diffcontrol.") for c in cycles(import_graph()) for m in c}
+    joined, left = on_cycles - IN_CYCLES, IN_CYCLES - on_cycles
+    assert not joined, f"modules that joined an import cycle: {sorted(joined)}"
+    assert not left, f"modules no longer on a cycle: drop them from IN_CYCLES: {sorted(left)}"
+
+
+def test_the_package_face_and_the_base_import_no_layer():
+    """``diffcontrol/__init__.py`` imports the public names lazily (by name, which no
+    import statement shows), and the base modules import nothing above them."""
+    graph = import_graph()
+    base = {"diffcontrol.errors", "diffcontrol._gym_ids", "diffcontrol._shell"}
+    assert graph["diffcontrol"] <= base, graph["diffcontrol"]
+    for module in base:
+        assert graph.get(module, set()) <= base, (module, graph[module])
