@@ -3,7 +3,7 @@
 The "real" system is ``cartpole-swingup-friction``'s cart-pole with its friction (viscous
 1 N s/m and Coulomb 0.5 N on the cart, viscous 0.1 N m s/rad in the joint); the nominal model
 is the same physics without friction. Data: 10 episodes of 5 s at 50 Hz from the real system
-under exploratory forces (``diffcontrol.tasks.fitted_swingup.record_swingup``, seed 0), the first 8
+under exploratory forces (``diffcontrol.builtin.swingup.fitted.record_swingup``, seed 0), the first 8
 fitted (``--episodes N``: the first N, at most 8), the last 2 held out for the prediction errors
 only (nothing is fitted or trained on them); with N < 8 episodes N to 7 are recorded but unused,
 so every run sees the same held-out pair and a fit on N episodes uses exactly episodes 0 to N-1. Models, fitted by multiple shooting on
@@ -45,9 +45,10 @@ from _common import machine  # noqa: E402
 
 import diffcontrol  # noqa: E402
 from diffcontrol import identify  # noqa: E402
-from diffcontrol.evaluation import simulate_continuous, swingup_result  # noqa: E402
-from diffcontrol.tasks import fitted_swingup as of  # noqa: E402
-from diffcontrol.tasks.fitted_swingup import FittedSwingUp, SwingUpModel  # noqa: E402
+from diffcontrol.builtin.swingup import fitted as of  # noqa: E402
+from diffcontrol.builtin.swingup.fitted import FittedSwingUp, SwingUpModel  # noqa: E402
+from diffcontrol.builtin.swingup.judge import swingup_result  # noqa: E402
+from diffcontrol.evaluation import simulate_continuous  # noqa: E402
 
 TASK = "cartpole-swingup-friction"
 EPISODES, FIT_EPISODES = 10, 8

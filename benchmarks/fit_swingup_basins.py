@@ -43,14 +43,14 @@ sys.path.insert(0, str(HERE))
 from _common import machine  # noqa: E402
 
 import diffcontrol  # noqa: E402
-from diffcontrol.evaluation import simulate_continuous  # noqa: E402
-from diffcontrol.identify.data import TrajectoryData, concat  # noqa: E402
-from diffcontrol.tasks import fitted_swingup as of  # noqa: E402
-from diffcontrol.tasks.fitted_swingup import (  # noqa: E402
+from diffcontrol.builtin.swingup import fitted as of  # noqa: E402
+from diffcontrol.builtin.swingup.fitted import (  # noqa: E402
     ACTION_COLUMNS,
     STATE_COLUMNS,
     FittedSwingUp,
 )
+from diffcontrol.evaluation import simulate_continuous  # noqa: E402
+from diffcontrol.identify.data import TrajectoryData, concat  # noqa: E402
 
 TASK = "cartpole-swingup-friction"
 DT_S = 0.02

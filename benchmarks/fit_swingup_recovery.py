@@ -29,8 +29,8 @@ sys.path.insert(0, str(HERE))
 from _common import machine  # noqa: E402
 
 import diffcontrol  # noqa: E402
-from diffcontrol.tasks import fitted_swingup as of  # noqa: E402
-from diffcontrol.tasks.fitted_swingup import FRICTION_NAMES  # noqa: E402
+from diffcontrol.builtin.swingup import fitted as of  # noqa: E402
+from diffcontrol.builtin.swingup.fitted import FRICTION_NAMES  # noqa: E402
 
 NOISE = np.array([0.005, 0.05, 0.005, 0.05])
 

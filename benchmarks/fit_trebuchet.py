@@ -37,8 +37,9 @@ from _common import machine  # noqa: E402
 
 import diffcontrol  # noqa: E402
 from diffcontrol import identify, io, policies  # noqa: E402
+from diffcontrol.builtin.trebuchet.fit import distance_errors  # noqa: E402
+from diffcontrol.builtin.trebuchet.judge import evaluate_aiming  # noqa: E402
 from diffcontrol.systems import trebuchet as tb  # noqa: E402
-from diffcontrol.tasks._trebuchet_fit import distance_errors  # noqa: E402
 
 TRUTH = {"drag_coefficient": 1.5, "wind_factor": 1.5}
 REAL = tb.TrebuchetParams(**TRUTH)
@@ -86,7 +87,7 @@ def train_and_aim(task, config, params: dict, seed: int) -> dict:
     result = diffcontrol.train(task, cfg)
     seconds = time.perf_counter() - t0
     policy = policies.AimingPolicy(policies.controller_to_dict(result.controller, task))
-    ev = diffcontrol.evaluation.evaluate_aiming(policy, task, targets=1000, seed=0, params=REAL)
+    ev = evaluate_aiming(policy, task, targets=1000, seed=0, params=REAL)
     return {"train_seconds": seconds, **ev.stats}
 
 

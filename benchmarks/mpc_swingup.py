@@ -40,7 +40,8 @@ from _common import machine  # noqa: E402
 
 import diffcontrol  # noqa: E402
 from diffcontrol import mpc, policies  # noqa: E402
-from diffcontrol.evaluation import ContinuousRecording, swingup_result  # noqa: E402
+from diffcontrol.builtin.swingup.judge import swingup_result  # noqa: E402
+from diffcontrol.evaluation import ContinuousRecording  # noqa: E402
 from diffcontrol.rollout import solve_closed_loop  # noqa: E402
 
 HORIZON_S = 10.0
@@ -61,7 +62,7 @@ def starts(task, params, n: int) -> np.ndarray:
 
 def end_figures(ys: np.ndarray, force: np.ndarray, dt: float) -> dict:
     """The end state, peak force, swings and upright time of a closed loop saved every ``dt``
-    (``evaluation.swingup_result``: swings are the pole's reversals before it first comes
+    (``builtin.swingup.judge.swingup_result``: swings are the pole's reversals before it first comes
     within 0.1 rad of upright; ``upright_from_s`` the time from which it stays there)."""
     t = dt * np.arange(len(ys))
     res = swingup_result(ContinuousRecording("cartpole-swingup-limited", t, ys, force, np.nan))

@@ -10,7 +10,7 @@ each model, and is judged on the real system by the task's own evaluation (the f
 reference solve with the planner in the loop, the task's ``energy`` loss).
 
 Per data seed S: 10 episodes of exploratory forces are recorded from the real system
-(``fitted_swingup.record_swingup(real, 10, seed=S)``, as ``benchmarks/fit_swingup.py`` does
+(``builtin.swingup.fitted.record_swingup(real, 10, seed=S)``, as ``benchmarks/fit_swingup.py`` does
 for S = 0; 5 s each) and the first N are fitted (a grey box and a hybrid, the fit's defaults:
 200 and 500 Adam steps). Rows: the planner through the nominal model (no friction), the grey
 box, the hybrid and the true model. The target compares the hybrid's planner with the true
@@ -39,9 +39,9 @@ from _common import machine  # noqa: E402
 
 import diffcontrol  # noqa: E402
 from diffcontrol import mpc  # noqa: E402
+from diffcontrol.builtin.swingup import fitted as of  # noqa: E402
+from diffcontrol.builtin.swingup.fitted import FittedSwingUp  # noqa: E402
 from diffcontrol.evaluation import simulate_continuous  # noqa: E402
-from diffcontrol.tasks import fitted_swingup as of  # noqa: E402
-from diffcontrol.tasks.fitted_swingup import FittedSwingUp  # noqa: E402
 
 TASK = "cartpole-swingup-friction"
 RECORDED = 10

@@ -45,7 +45,7 @@ def main() -> None:
     import numpy as np
 
     import diffcontrol
-    from diffcontrol.tasks import fitted_swingup as fs
+    from diffcontrol.builtin.swingup import fitted as fs
 
     task = diffcontrol.make("cartpole-swingup-friction")
     data = fs.record_swingup(task.default_params(), 3, seed=0)

@@ -1,5 +1,5 @@
-"""The trebuchet's throws and grey box (``tasks._trebuchet_throws``, ``_trebuchet_record``,
-``_trebuchet_fit``; ``diffcontrol record/fit/loop trebuchet``): a throw is a one-step episode.
+"""The trebuchet's throws and grey box (``builtin.trebuchet``: ``throws``, ``record``,
+``fit``; ``diffcontrol record/fit/loop trebuchet``): a throw is a one-step episode.
 
 The "real" trebuchet has drag coefficient 1.5 and wind factor 1.5 (the nominal model has 1 and
 1). Every throw batch has 15 or 12 throws, so that the compiled throw programs are shared
@@ -15,14 +15,14 @@ import numpy as np
 import pytest
 
 import diffcontrol
+from diffcontrol.builtin.trebuchet import fit as ft
+from diffcontrol.builtin.trebuchet import record as rec
+from diffcontrol.builtin.trebuchet.throws import Throws, read_throws, throws_of, throws_table
 from diffcontrol.cli import main
 from diffcontrol.errors import ConfigError, DataFileError, InsufficientDataError
 from diffcontrol.identify import fit, read_trajectories
 from diffcontrol.identify.data import TrajectoryData, write_trajectories
 from diffcontrol.systems import trebuchet as tb
-from diffcontrol.tasks import _trebuchet_fit as ft
-from diffcontrol.tasks import _trebuchet_record as rec
-from diffcontrol.tasks._trebuchet_throws import Throws, read_throws, throws_of, throws_table
 
 TRUTH = {"drag_coefficient": 1.5, "wind_factor": 1.5}
 REAL_ARGS = [f"--env-arg={n}={v}" for n, v in TRUTH.items()]

@@ -101,7 +101,7 @@ def test_the_friction_swingup_plans_its_own_loss_and_a_fitted_model_plans_like_i
     (a saved planner without a loss name keeps the first planning loss, ``limited_hold``),
     within 40 N; a swing-up through a fitted model takes the wrapped task's planning losses
     and planner settings (``diffcontrol plan TASK --model DIR``)."""
-    from diffcontrol.tasks.fitted_swingup import FittedSwingUp, nominal_model
+    from diffcontrol.builtin.swingup.fitted import FittedSwingUp, nominal_model
 
     task = diffcontrol.make("cartpole-swingup-friction")
     config = task.default_plan_config()

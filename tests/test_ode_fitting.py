@@ -1,5 +1,5 @@
 """Fitting swing-up models (grey box, hybrid, neural) to recorded state data, and training
-through them (``diffcontrol.ode_fitting``, ``diffcontrol.tasks.fitted_swingup``).
+through them (``diffcontrol.identify.ode``, ``diffcontrol.builtin.swingup.fitted``).
 
 Tiny budgets: 3 episodes of 3 s at 50 Hz (2 fitted, 1 held out), short windows, a few dozen
 Adam steps. The full reproduction is ``benchmarks/fit_swingup.py``.
@@ -17,15 +17,15 @@ import numpy as np
 import pytest
 
 import diffcontrol
-from diffcontrol.errors import ConfigError, DataFileError, InsufficientDataError
-from diffcontrol.identify.data import TrajectoryData
-from diffcontrol.systems import cartpole_swingup as cp
-from diffcontrol.tasks import fitted_swingup as of
-from diffcontrol.tasks.fitted_swingup import (
+from diffcontrol.builtin.swingup import fitted as of
+from diffcontrol.builtin.swingup.fitted import (
     FittedSwingUp,
     frictionless,
     generalized_force_accelerations,
 )
+from diffcontrol.errors import ConfigError, DataFileError, InsufficientDataError
+from diffcontrol.identify.data import TrajectoryData
+from diffcontrol.systems import cartpole_swingup as cp
 
 REAL = cp.SwingUpParams(cart_viscous=1.0, cart_coulomb=0.5, pole_viscous=0.1, pole_coulomb=0.05)
 

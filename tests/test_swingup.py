@@ -30,10 +30,11 @@ from scipy.integrate import solve_ivp
 
 import diffcontrol
 from diffcontrol import rollout
+from diffcontrol.builtin.swingup.judge import swingup_result
 from diffcontrol.cli import main
 from diffcontrol.config import ODETrainConfig
 from diffcontrol.errors import ConfigError, SolverFailed
-from diffcontrol.evaluation import simulate_continuous, swingup_result
+from diffcontrol.evaluation import simulate_continuous
 from diffcontrol.systems import cartpole_swingup as cp
 from diffcontrol.training import make_ode_trainer, train
 
@@ -507,7 +508,7 @@ def test_one_member_unbatched_trains_the_same_weights():
     pins allow the two agree to the bit (docs/benchmarks.md); JAX 0.8's unbatched program
     rounds differently (3e-6 after three updates), and 50 updates of a swing-up grow that to
     1e-2, so three updates are compared, to 5e-5."""
-    from diffcontrol.tasks.fitted_swingup import FittedSwingUp, nominal_model
+    from diffcontrol.builtin.swingup.fitted import FittedSwingUp, nominal_model
 
     task = diffcontrol.make("cartpole-swingup")
 

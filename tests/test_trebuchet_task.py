@@ -10,8 +10,8 @@ import pytest
 
 import diffcontrol
 from diffcontrol import policies
+from diffcontrol.builtin.trebuchet.judge import evaluate_aiming
 from diffcontrol.cli import main
-from diffcontrol.evaluation import evaluate_aiming
 from diffcontrol.systems import trebuchet as tb
 from diffcontrol.tasks import trebuchet as aim
 from diffcontrol.training import resolve_config, train

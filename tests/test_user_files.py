@@ -17,7 +17,7 @@ SRC = Path(diffcontrol.__file__).parent
 PUBLIC_IMPORTS = {
     "from ..config import TrainConfig": "from diffcontrol import TrainConfig",
     "from ._base import StepLoss, Task": "from diffcontrol.tasks import StepLoss, Task",
-    "from ..animation import close, scene": "from diffcontrol.animation import close, scene",
+    "from ._scene import close, scene": "from diffcontrol.animation import close, scene",
     "from ._grid import GridAxis": "from diffcontrol.optimal import GridAxis",
 }
 

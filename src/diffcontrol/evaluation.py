@@ -9,7 +9,8 @@ from typing import Any
 
 import numpy as np
 
-from .tasks import Task
+from .tasks import ContinuousTask, Task
+from .tasks._hooks import task_hook
 
 
 @dataclasses.dataclass
@@ -120,6 +121,28 @@ def evaluate(
     finally:
         env.close()
     return EvalResult(label, seed, returns, lengths)
+
+
+@task_hook
+def evaluate_run(task: Any, run: Any, episodes: int | None = None, seed: int = 0) -> Any:
+    """Judge a trained controller (a ``diffcontrol.runs.Run``): the final evaluation of
+    ``diffcontrol train`` and what ``diffcontrol evaluate`` prints.
+
+    Returns an object with ``key`` (its name in ``metrics.json``), ``to_json()`` and
+    ``summary()`` (one line), or ``None`` where there is nothing to evaluate in. Default:
+    Gymnasium episodes with reset seeds ``seed ... seed+episodes-1`` in ``gym_id`` (the task's
+    own ``diffcontrol/<Name>-v0`` where it has no twin), or in the run's real system (e.g. the
+    environment a fitted model's data came from); a continuous-time task has none unless it
+    defines its own (the built-in swing-ups' reference solve). A task overrides it as
+    ``tasks._hooks`` says.
+    """
+    n = episodes or task.default_eval_episodes
+    return evaluate(run.policy, task, episodes=n, seed=seed, real=run.real_env)
+
+
+@evaluate_run.register(ContinuousTask)
+def _no_evaluation(task: Any, run: Any, episodes: int | None = None, seed: int = 0) -> None:
+    return None
 
 
 def _one_by_one(policy: Any, env: Any, episodes: int, seed: int) -> tuple[np.ndarray, ...]:
@@ -276,91 +299,6 @@ def record_episode(
 
 
 # ---------------------------------------------------------------------------------------------
-# Aiming tasks (the trebuchet): miss statistics over random situations in the simulator.
-
-
-@dataclasses.dataclass
-class AimResult:
-    """Misses of an aiming controller over random targets and winds (seeded NumPy draws).
-
-    Only reachable targets count in the statistics; ``unreachable`` says how many were not.
-    """
-
-    task: str
-    seed: int
-    targets: np.ndarray
-    winds: np.ndarray
-    angles: np.ndarray
-    weights: np.ndarray
-    distances: np.ndarray
-    reachable: np.ndarray
-
-    key = "aim_eval"  # its entry in metrics.json
-
-    @property
-    def misses(self) -> np.ndarray:
-        return self.distances - self.targets
-
-    @property
-    def stats(self) -> dict[str, Any]:
-        from .tasks.trebuchet import miss_statistics
-
-        return miss_statistics(self.misses, self.reachable)
-
-    def to_json(self) -> dict[str, Any]:
-        return {"task": self.task, "seed": self.seed, **self.stats}
-
-    def summary(self) -> str:
-        s = self.stats
-        head = f"{self.task}, {s['targets']} random targets (seed {self.seed}): "
-        if not s["reachable"]:
-            return head + f"none of the {s['targets']} targets was reachable"
-        return head + (
-            f"|miss| over {s['reachable']} reachable targets: mean {s['mean_miss_m']:.3f} m, "
-            f"median {s['median_miss_m']:.3f} m, 95th percentile {s['p95_miss_m']:.3f} m, "
-            f"worst {s['worst_miss_m']:.3f} m ({s['unreachable']} of {s['targets']} unreachable)"
-        )
-
-    def headline(self) -> str:
-        """A few words for the end of ``diffcontrol train``'s last line."""
-        s = self.stats
-        return f"mean |miss| {s['mean_miss_m']:.3f} m" if s["reachable"] else "no reachable target"
-
-
-def evaluate_aiming(
-    policy: Any, task: Task, targets: int = 1000, seed: int = 0, params: Any = None
-) -> AimResult:
-    """Aim ``policy`` (a ``model.json`` policy) at ``targets`` random situations.
-
-    Targets ~ U(20, 100) m and winds ~ N(0, 5^2) m/s (clipped to +-20 m/s) are drawn with
-    ``numpy.random.default_rng(seed)``, so every controller meets the same situations. Each
-    throw is simulated with ``diffcontrol.systems.trebuchet.shoot``; a target counts as
-    reachable when it lies between the shortest and longest throws the heads' bounds allow
-    in its wind (``reachable_range``).
-
-    ``params`` (a ``TrebuchetParams``; default the nominal ones) is the trebuchet that throws:
-    pass the "real" system's to evaluate a controller trained on a model of it. The
-    reachability is then that of the real system too.
-    """
-
-    from .tasks import trebuchet as aim
-
-    if targets <= 0:
-        raise ValueError(f"targets must be positive, got {targets}")
-    rng = np.random.default_rng(seed)
-    target = rng.uniform(*aim.TARGET_RANGE_M, size=targets)
-    wind = np.clip(
-        aim.WIND_STD_MPS * rng.standard_normal(targets), -aim.WIND_LIMIT_MPS, aim.WIND_LIMIT_MPS
-    )
-    actions = policy.action(np.stack([target, wind], axis=-1))
-    angle, weight = actions[:, 0], actions[:, 1]
-    distance = aim.shoot_in_chunks(wind, angle, weight, params)
-    shortest, longest = (np.asarray(x, np.float64) for x in aim.reachable_range(wind, params))
-    reachable = (target >= shortest) & (target <= longest)
-    return AimResult(task.name, seed, target, wind, angle, weight, distance, reachable)
-
-
-# ---------------------------------------------------------------------------------------------
 # Continuous-time tasks (the swing-ups): a reference solve of the closed loop.
 
 REFERENCE_RTOL = 1e-9
@@ -406,54 +344,6 @@ class ContinuousRecording:
             "impulse": self.y[:, 4].tolist(),
             "dissipated_energy": self.y[:, 5].tolist(),
         }
-
-
-@dataclasses.dataclass
-class SwingUpResult:
-    """How a swing-up ended (the reference solve): the issue's pass/fail figures and more."""
-
-    task: str
-    horizon_s: float
-    final_theta: float
-    final_theta_dot: float
-    final_x: float
-    final_x_dot: float
-    peak_force: float
-    dissipated_energy: float
-    swings: int
-    upright_time: float | None
-    loss: float
-    solves: str | None = None  # a planner's count of unconverged and non-finite solves
-
-    key = "swingup"  # its entry in metrics.json
-
-    def headline(self) -> str:
-        """A few words for the end of ``diffcontrol train``'s last line."""
-        return (
-            f"final |θ| {abs(self.final_theta):.3f} rad, ẋ {self.final_x_dot:+.3f} m/s, "
-            f"peak |F| {self.peak_force:.1f} N; loss {self.loss:.4g}"
-        )
-
-    def to_json(self) -> dict[str, Any]:
-        doc = dataclasses.asdict(self)
-        solves = doc.pop("solves")
-        return doc if solves is None else {**doc, "planner_solves": solves}
-
-    def summary(self) -> str:
-        """One line (and, for a planner, a second with its solves)."""
-        up = (
-            f"upright (|θ| < 0.1 rad) from {self.upright_time:.2f} s"
-            if self.upright_time is not None
-            else "never upright for good"
-        )
-        return f"{self.task} (reference solve, dopri8 at 1e-9): " + (
-            f"at t = {self.horizon_s:g} s: |θ| {abs(self.final_theta):.4f} rad, θ̇ "
-            f"{self.final_theta_dot:+.3f} rad/s, ẋ {self.final_x_dot:+.3f} m/s, x "
-            f"{self.final_x:+.2f} m; peak |F| {self.peak_force:.1f} N; {self.swings} swings; "
-            f"{up}; loss {self.loss:.4f}"
-            + (f"; dissipated {self.dissipated_energy:.2f} J" if self.dissipated_energy else "")
-            + ("" if self.solves is None else f"\nplanner: {self.solves}")
-        )
 
 
 def simulate_continuous(
@@ -541,35 +431,3 @@ def simulate_continuous(
         if not (bool(ok) and bool(ok_loss)):
             raise ValueError("the reference solve failed: the closed loop explodes")
     return ContinuousRecording(task.name, np.asarray(ts), np.asarray(ys), np.asarray(force), loss)
-
-
-def swingup_result(rec: ContinuousRecording) -> SwingUpResult:
-    """The end state, peak force, swings and upright time of a recorded swing-up.
-
-    ``swings`` counts the pole's direction reversals (sign changes of ``theta_dot``) before it
-    first comes within 0.1 rad of upright. ``upright_time`` is the first time from which it
-    stays within 0.1 rad to the end (``None`` if it does not end there).
-    """
-    theta = (rec.y[:, 2] + np.pi) % (2 * np.pi) - np.pi
-    up = np.abs(theta) < 0.1
-    first_up = int(np.argmax(up)) if up.any() else len(theta)
-    rate = rec.y[:first_up, 3]
-    signs = np.sign(rate[np.abs(rate) > 1e-3])  # ignore numerical jitter at rest
-    swings = int(np.sum(signs[1:] != signs[:-1])) if signs.size > 1 else 0
-    upright_time = None
-    if up[-1]:
-        last_down = np.flatnonzero(~up)
-        upright_time = float(rec.t[last_down[-1] + 1]) if last_down.size else 0.0
-    return SwingUpResult(
-        task=rec.task,
-        horizon_s=float(rec.t[-1]),
-        final_theta=float(theta[-1]),
-        final_theta_dot=float(rec.y[-1, 3]),
-        final_x=float(rec.y[-1, 0]),
-        final_x_dot=float(rec.y[-1, 1]),
-        peak_force=float(np.max(np.abs(rec.force))),
-        dissipated_energy=float(rec.y[-1, 5]),
-        swings=swings,
-        upright_time=upright_time,
-        loss=rec.loss,
-    )

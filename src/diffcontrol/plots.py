@@ -21,7 +21,7 @@ def _save(fig: Any, path: str | Path) -> Path:
     return write_figure(fig, path)
 
 
-def _column_layout(fig: Any, rows: int) -> None:
+def column_layout(fig: Any, rows: int) -> None:
     """Fixed margins (inches) for a column of ``rows`` axes sharing their x axis: room for
     a title, y labels with ticks of up to seven characters (−250000), the x label and ticks. Used
     instead of ``tight_layout`` for the pictures of every run: it measures every label by
@@ -76,7 +76,7 @@ def learning_curve(
     ax2.set_xlabel("simulated episodes (standard length)")
     for ax in (ax1, ax2):
         ax.grid(alpha=0.3)
-    _column_layout(fig, 2)
+    column_layout(fig, 2)
     return _save(fig, path)
 
 
@@ -102,91 +102,7 @@ def rollout(recording: Recording, task: Task, path: str | Path) -> Path:
     axes[0].set_title(
         f"{recording.env_id} (Gymnasium), one episode: return {recording.total_return:.1f}"
     )
-    _column_layout(fig, n)
-    return _save(fig, path)
-
-
-def _throw_frame(ax: Any, throw: Any, i: int, target: float, wind: float) -> dict[str, Any]:
-    """Draw the trebuchet and the projectile's path up to step ``i`` of a recorded throw.
-    Returns the artists that move during a throw (``arm``, ``weight``, ``sling``, ``path``,
-    ``stone``), for an animation to update."""
-    arm, cw, proj = (np.asarray(a) for a in (throw.arm_tip, throw.counterweight, throw.projectile))
-    from .systems.trebuchet import TrebuchetParams
-
-    ground = -float(TrebuchetParams().pivot_height)
-    ax.axhline(ground, color="0.4", lw=1)
-    ax.plot([0.0], [0.0], "ko", ms=4)
-    ax.plot([0.0, 0.0], [ground, 0.0], color="0.3", lw=2)
-    moving = {}
-    (moving["arm"],) = ax.plot(
-        [arm[i, 0], 0.0, cw[i, 0]], [arm[i, 1], 0.0, cw[i, 1]], color="#8b5a2b", lw=3
-    )
-    (moving["weight"],) = ax.plot([cw[i, 0]], [cw[i, 1]], "s", color="0.2", ms=8)
-    on_sling = int(np.asarray(throw.phases)[i]) < 2
-    sling = ([arm[i, 0], proj[i, 0]], [arm[i, 1], proj[i, 1]]) if on_sling else ([], [])
-    (moving["sling"],) = ax.plot(*sling, color="0.5", lw=1)
-    (moving["path"],) = ax.plot(proj[: i + 1, 0], proj[: i + 1, 1], color="C0", lw=1)
-    (moving["stone"],) = ax.plot([proj[i, 0]], [proj[i, 1]], "o", color="C3", ms=5)
-    ax.plot([target], [ground], marker="v", color="C2", ms=12, label=f"target {target:.1f} m")
-    ax.annotate(
-        f"wind {wind:+.1f} m/s",
-        xy=(0.02, 0.92),
-        xycoords="axes fraction",
-        fontsize=9,
-    )
-    return moving
-
-
-def throw(throw: Any, target: float, wind: float, path: str | Path, title: str = "") -> Path:
-    """A recorded trebuchet throw: the path, the machine at release, and the target."""
-    times = np.asarray(throw.time)
-    rel = np.asarray(throw.phases) >= 2
-    i_rel = int(np.argmax(rel)) if rel.any() else len(times) - 1
-    fig, ax = plt.subplots(figsize=(8, 3.6))
-    _throw_frame(ax, throw, len(times) - 1, target, wind)
-    arm = np.asarray(throw.arm_tip)
-    ax.plot([arm[i_rel, 0], 0.0], [arm[i_rel, 1], 0.0], color="#8b5a2b", lw=1, ls=":")
-    proj = np.asarray(throw.projectile)
-    x_max = max(float(np.max(proj[:, 0])), target) + 5
-    ax.set_xlim(-5, x_max)
-    ax.set_ylim(-2.5, max(float(np.max(proj[:, 1])) + 3, 8))
-    ax.set_aspect("equal", adjustable="box")
-    ax.set_xlabel("x from the pivot (m)")
-    ax.set_ylabel("height (m)")
-    miss = float(throw.distance) - target
-    ax.set_title(title or f"distance {float(throw.distance):.2f} m, miss {miss:+.2f} m")
-    ax.legend(loc="upper right", fontsize=8)
-    ax.grid(alpha=0.3)
-    fig.tight_layout()
-    return _save(fig, path)
-
-
-def swingup(recording: Any, path: str | Path, title: str = "") -> Path:
-    """The post's three panels against time: pole angle (wrapped, 0 = up), cart position, force.
-
-    ``recording`` is an ``evaluation.ContinuousRecording``.
-    """
-    t, y, force = recording.t, recording.y, recording.force
-    # Wrapped into (-pi, pi] so that the start, hanging down at pi, does not jump to -pi.
-    theta = np.pi - (np.pi - y[:, 2]) % (2 * np.pi)
-    fig, axes = plt.subplots(3, 1, figsize=(7, 6.4), sharex=True)
-    panels = [
-        (theta, "angle θ (rad, 0 = up)", "C0"),
-        (y[:, 0], "position x (m)", "C1"),
-        (force, "force F (N)", "k"),
-    ]
-    for ax, (series, label, color) in zip(axes, panels):
-        ax.plot(t, series, color=color, lw=1.5)
-        ax.set_ylabel(label)
-        ax.grid(alpha=0.3)
-    axes[0].axhline(0.0, color="C2", lw=1, ls="--")
-    axes[0].set_yticks([-np.pi, -np.pi / 2, 0, np.pi / 2, np.pi], ["−π", "−π/2", "0", "π/2", "π"])
-    axes[2].set_xlabel("time (s)")
-    peak = float(np.max(np.abs(force)))
-    axes[0].set_title(
-        title or f"{recording.task}: peak |F| {peak:.1f} N, loss {recording.loss:.3f}"
-    )
-    _column_layout(fig, 3)
+    column_layout(fig, n)
     return _save(fig, path)
 
 

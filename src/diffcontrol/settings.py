@@ -20,6 +20,9 @@ from .errors import ConfigError
 
 MODELS = ("params", "hybrid", "neural")
 """The models ``identify.fit`` learns: grey box, hybrid (physics plus a network), neural."""
+MIN_TRANSITIONS = {"hybrid": 200, "neural": 1000}
+"""The fewest recorded transitions a network model is fitted to (a Pendulum-v1 episode has
+200): a hybrid model only learns what the physics misses, a black box learns everything."""
 CONTROLLERS = ("train", "plan")
 """What acts on the real system in a loop: an MLP trained through the fitted model, or a
 planner through it (``Task.loop_planner``)."""

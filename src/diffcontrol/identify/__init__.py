@@ -4,14 +4,14 @@
   files (``diffcontrol-trajectories``), every system's data (a single measured outcome is a
   one-step episode). ``record`` records any Gymnasium environment, as the real system of a
   task when ``task=`` is given (the columns are then the task's ``data_columns()``);
-  ``record_data`` is a task's own recording (its ``record_data`` hook).
+  ``record_data`` is a task's own recording (``record_task``).
 - **Models**: ``params`` (grey box: the task's physical parameters), ``hybrid`` (the physics
   plus a ``Correction`` network) and ``neural`` (a network alone), of a discrete step
   (``HybridModel``, ``NeuralModel``, ``model_task``; ``members=K`` makes the network an
   ``Ensemble`` of K, whose spread is the model's uncertainty) or of a vector field (the task's own
   model, ``identify.ode``).
 - **Fitting**: ``fit(task, data, model, **settings) -> FitResult``, by the task's route
-  (``task.model_route()``: its step, its vector field, or the task's own); the prediction
+  (``model_route(task)``: its step, its vector field, or the task's own); the prediction
   errors of ``identify.steps`` / ``identify.ode`` and the plot of ``identify.plot``.
 - **Files**: ``fit_dir`` writes a fit directory (``fitted.json`` by ``save_fit``,
   ``prediction.png``); ``read_fitted`` and ``fitted_model`` read it back, and
@@ -40,7 +40,7 @@ from .fitted import (
 )
 from .hybrid import MIN_TRANSITIONS, HybridModel, NeuralModel, fit_model, model_task
 from .network import Correction, correction_from_dict, correction_to_dict
-from .recording import describe, record, record_data
+from .recording import describe, record, record_data, record_task
 from .steps import fit_parameters, predict, prediction_errors
 
 __all__ = [
@@ -80,6 +80,7 @@ __all__ = [
     "real_system",
     "record",
     "record_data",
+    "record_task",
     "describe",
     "save_fit",
 ]

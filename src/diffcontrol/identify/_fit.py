@@ -13,6 +13,7 @@ from typing import Any
 
 from ..errors import ConfigError, RunDirectoryError
 from ..settings import FitConfig
+from ._routes import model_route
 from ._shooting import MODEL_TYPES, FitResult
 from .fitted import FITTED_FILE, FITTED_FORMAT
 
@@ -21,7 +22,7 @@ def fit(task: Any, data: Any, model: str = "params", **settings: Any) -> FitResu
     """Fit a model of ``task``'s system to recorded ``data``.
 
     The route (the discrete step, the vector field, or the task's own) is the task's
-    ``model_route()``; nothing here asks which system the task is.
+    ``model_route``; nothing here asks which system the task is.
 
     Args:
         task: any task (``diffcontrol.make``/``tasks.resolve``).
@@ -44,7 +45,7 @@ def fit(task: Any, data: Any, model: str = "params", **settings: Any) -> FitResu
     """
     if model not in MODEL_TYPES:
         raise ConfigError(f"unknown model kind {model!r}; choose one of {list(MODEL_TYPES)}")
-    route = task.model_route()
+    route = model_route(task)
     steps, lr = route.defaults.get(model, (None, None))
     settings = {"steps": steps, "learning_rate": lr, **settings}
     result = route.fit(task, data, model, **{k: v for k, v in settings.items() if v is not None})
@@ -143,7 +144,7 @@ def fit_dir(
         RunDirectoryError: ``out`` cannot take the files (or holds a fit, without ``force``);
             otherwise what ``fit`` raises, and nothing is created for a refused fit.
     """
-    route = task.model_route()
+    route = model_route(task)
     if hasattr(route, "check_model"):  # before anything is read or created
         route.check_model(task, model)
     steps, lr = route.defaults.get(model, route.defaults["params"])

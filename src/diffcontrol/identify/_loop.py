@@ -1,6 +1,6 @@
 """``loop``: record -> fit -> train, a few rounds, for a system known only by acting.
 
-Each round is made of the library's steps (the task's ``record_data``: ``record`` of Gymnasium
+Each round is made of the library's steps (``record_task``: ``record`` of Gymnasium
 episodes by default; ``identify.fit_dir``, ``train`` through the fitted model,
 ``runs.save_run``) on files in ``out``, so every round's outputs are the ones
 ``diffcontrol record/fit/train`` write, and an interrupted loop continues where it stopped
@@ -30,7 +30,7 @@ from ..settings import FitConfig, LoopConfig
 from ._fit import fit_dir
 from ._rounds import NoisyPolicy, model_error, parse_start, predictor_of, start_params
 from .data import concat, read_trajectories, write_trajectories
-from .recording import check_spaces, make_env, record
+from .recording import check_spaces, make_env, record, record_task
 
 LOOP_FILE = "loop.json"
 
@@ -88,7 +88,7 @@ def loop(
             f"{task.name!r}; e.g. pendulum"
         )
     # Gymnasium episodes (the default recorder) or the task's own data (the trebuchet's throws)
-    episodes_of_env = type(task).record_data is Task.record_data
+    episodes_of_env = record_task.implementation(task) is record_task.dispatch(Task)
     if episodes_of_env and type(task).state_from_observation is Task.state_from_observation:
         raise ConfigError(
             f"loop cannot fit a model of {task.name!r} (it does not reconstruct its state from "
@@ -175,7 +175,8 @@ def loop(
                     total_steps=steps,
                 )
             else:
-                data = task.record_data(
+                data = record_task(
+                    task,
                     episodes,
                     env_id=env_id,
                     env_kwargs=env_kwargs,

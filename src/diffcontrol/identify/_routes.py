@@ -1,8 +1,8 @@
 """The routes of model learning: how a task's data is read, fitted, judged and drawn.
 
-A task picks its route with its ``model_route()`` hook (by base class: ``STEPS`` for a
-discrete-time ``Task``, ``ODE`` for a ``ContinuousTask``; a task with its own model, fit or
-plot returns its own route, a ``TrajectoryRoute`` subclass in the task's files), so
+A task's route is ``model_route(task)`` (by base class: ``STEPS`` for a discrete-time
+``Task``, ``ODE`` for a ``ContinuousTask``; a task with its own model, fit or plot overrides it
+with its own route, a ``TrajectoryRoute`` subclass in the system's files), so
 ``identify.fit`` and ``identify.fit_dir`` never ask which system a task is. Each route has
 the same methods: ``read(path)``, ``count(data)``, ``split(data, n)``, ``announce(...)`` (the
 line said before fitting), ``fit(task, data, model_type, **settings)`` and ``outputs(...)``
@@ -19,6 +19,8 @@ from typing import Any
 
 import numpy as np
 
+from ..tasks import Task
+from ..tasks._hooks import task_hook
 from ._shooting import HORIZONS, FitResult
 
 
@@ -241,10 +243,10 @@ class ODERoute(TrajectoryRoute):
         return fit_vector_field(task, data, model_type, s.get("params"), **kw)
 
     def outputs(self, task, result, data, train, held_out, data_file, settings, out):
-        from .ode import prediction_errors
+        from .ode import model_document, nominal_model, prediction_errors
         from .plot import ode_predictor, prediction_plot
 
-        nominal = task.nominal_model(task.default_params())
+        nominal = nominal_model(task, task.default_params())
         errors = None
         if held_out is not None:
             errors = {
@@ -254,7 +256,7 @@ class ODERoute(TrajectoryRoute):
         network = result.model_type != "params"
         body = {
             "parameters": parameters_doc(result),
-            **task.model_document(result.model),
+            **model_document(task, result.model),
             "fit": dict(
                 window_steps=result.window,
                 windows=result.windows,
@@ -316,3 +318,12 @@ def _one_network(settings: dict, why: str) -> None:
 
 STEPS = StepRoute()
 ODE = ODERoute()
+
+
+@task_hook
+def model_route(task: Any) -> Any:
+    """How models of ``task`` are learned (its data file, fit, prediction errors and plot):
+    by base class, the discrete step (``STEPS`` for a ``Task``) or the vector field (``ODE``
+    for a ``ContinuousTask``); a task with its own model, fit or plot overrides it (the
+    trebuchet's throws) as ``tasks._hooks`` says."""
+    return STEPS if isinstance(task, Task) else ODE

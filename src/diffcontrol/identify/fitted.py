@@ -20,9 +20,11 @@ import equinox as eqx
 
 from ..errors import ConfigError, ModelFileError
 from ..io import scalar_arguments
+from ..tasks import Task
+from ..tasks._hooks import task_hook
 from ._shooting import MODEL_TYPES, NETWORK_MODELS
 from .ensemble import ensemble_from_dict
-from .hybrid import HybridModel, NeuralModel
+from .hybrid import HybridModel, NeuralModel, model_task
 from .network import correction_from_dict
 
 FITTED_FILE = "fitted.json"
@@ -238,3 +240,20 @@ def real_params(task: Any, real: dict | None) -> Any:
     params = fitted_physics(task, {"task": task.name, "all_parameters": values})
     task.check_params(params)  # the ranges, as for --param
     return params
+
+
+@task_hook
+def fitted_task(task: Any, doc: dict) -> Any:
+    """``task`` with its simulator replaced by the hybrid or neural model of a ``fitted.json``
+    document (``diffcontrol train --model``); a task with a model of its own overrides it
+    (the swing-ups) as ``tasks._hooks`` says.
+
+    Raises:
+        ConfigError: a continuous-time task that defines no fitted task of its own.
+    """
+    if not isinstance(task, Task):
+        raise ConfigError(
+            f"task {task.name!r} cannot be trained through a fitted model (it defines no "
+            "fitted_task)"
+        )
+    return model_task(task, fitted_model(task, doc))

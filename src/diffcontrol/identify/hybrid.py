@@ -18,15 +18,12 @@ import optax
 from jaxtyping import Array
 
 from ..errors import ConfigError, InsufficientDataError
+from ..settings import MIN_TRANSITIONS
 from ..tasks._base import Task
 from ._shooting import NETWORK_MODELS, FitResult, adam_fit, check_settings
 from .ensemble import Ensemble, bootstrap_counts, check_members, make_ensemble
 from .network import Correction
 from .steps import _windows, check_data, masked_mean, predict, task_actions
-
-MIN_TRANSITIONS = {"hybrid": 200, "neural": 1000}
-"""The fewest recorded transitions a network model is fitted to (a Pendulum-v1 episode has
-200): a hybrid model only learns what the physics misses, a black box learns everything."""
 
 
 class HybridModel(eqx.Module):

@@ -2,8 +2,8 @@
 
 The data: episodes of the full state sampled every ``dt_s`` seconds, and the action held
 constant over each interval (a zero-order hold), in the ``diffcontrol-trajectories`` format
-with the task's ``data_columns()``. What is particular to a system comes from its task's
-hooks: ``nominal_model(params)`` (the known physics), ``initial_model(...)`` (the model before
+with the task's ``data_columns()``. What is particular to a system comes from the hooks here
+(``tasks._hooks``): ``nominal_model`` (the known physics), ``initial_model`` (the model before
 fitting: which parameters a grey box fits, how a hybrid's network enters the vector field),
 ``fit_parameter_names`` and ``state_error`` (e.g. an angle difference wrapped to one turn).
 A model has ``derivative(state, action) -> d state / dt`` and ``params``; a network model has
@@ -33,6 +33,7 @@ import optax
 
 from .._shell import command
 from ..errors import ConfigError, DataFileError, InsufficientDataError
+from ..tasks._hooks import task_hook
 from ._shooting import (
     HORIZONS,
     MIN_TRANSITIONS_PER_PARAMETER,
@@ -47,6 +48,35 @@ from .data import TrajectoryData, parse_column
 
 MIN_TRANSITIONS_NETWORK = 250
 """The fewest recorded transitions a hybrid or neural fit accepts (5 s of data at 50 Hz)."""
+
+
+# --- what a continuous-time task's model is: the layer's defaults, a task's own overrides ------
+
+
+@task_hook
+def nominal_model(task: Any, params: Any) -> Any:
+    """The known physics of ``task`` as a model (``derivative(state, action)``, ``params``)."""
+    raise ConfigError(f"task {task.name!r} defines no model to fit (nominal_model)")
+
+
+@task_hook
+def initial_model(task: Any, model_type: str, nominal: Any, data: Any, dt_s: float,
+                  hidden: tuple[int, ...], key: Any) -> Any:  # fmt: skip
+    """The model of ``model_type`` before fitting, with the ``nominal`` parameters; a network
+    model holds its network as ``correction``."""
+    raise ConfigError(f"task {task.name!r} defines no model to fit (initial_model)")
+
+
+@task_hook
+def state_error(task: Any, pred: Any, target: Any) -> Any:
+    """Predicted minus recorded state (a task wraps its angles here)."""
+    return pred - target
+
+
+@task_hook
+def model_document(task: Any, model: Any) -> dict:
+    """The fitted model as fitted.json's ``all_parameters`` and ``network``."""
+    raise ConfigError(f"task {task.name!r} cannot store a fitted model (model_document)")
 
 
 def _hold_solve(model: Any, state, force, dt, substeps: int):
@@ -157,7 +187,7 @@ def fit_vector_field(
         data: episodes with the task's ``data_columns()`` at a fixed step.
         model_type: ``params`` (the task's ``fit_parameter_names``), ``hybrid`` or ``neural``.
         params: the known physics (default the task's ``default_params()``), made nominal by
-            ``task.nominal_model``.
+            ``nominal_model(task, ...)``.
         window: intervals predicted from every recorded state (>= 1).
         steps: Adam steps (>= 0) at ``learning_rate`` (cosine-decayed to 5 % for networks;
             for ``params`` in the parameters' units per step).
@@ -209,10 +239,8 @@ def _fit(
     task, data, model_type, params, names, window, steps, lr, hidden, weight_decay, substeps, lm_steps,
     seed, dt,
 ) -> FitResult:  # fmt: skip
-    nominal_model = _f64(
-        task.nominal_model(jax.tree.map(lambda x: jnp.asarray(x, jnp.float64), params))
-    )
-    nominal = nominal_model.params
+    physics = _f64(nominal_model(task, jax.tree.map(lambda x: jnp.asarray(x, jnp.float64), params)))
+    nominal = physics.params
     batch = _windows(data, window)
     if batch is None:
         longest = max(len(e.actions) for e in data.episodes())
@@ -221,7 +249,7 @@ def _fit(
             f"window of at most {longest} steps or record longer episodes"
         )
     model0 = _f64(
-        task.initial_model(model_type, nominal, data, dt, hidden, jax.random.PRNGKey(seed))
+        initial_model(task, model_type, nominal, data, dt, hidden, jax.random.PRNGKey(seed))
     )
     if model_type == "params":
         where = lambda m: tuple(getattr(m.params, n) for n in names)  # noqa: E731
@@ -240,7 +268,7 @@ def _fit(
         starts, forces, targets = batch
         m = build(theta)
         pred = jax.vmap(lambda s, f: predict(m, s, f, dt, substeps))(starts, forces)
-        return (task.state_error(pred, targets) * inv_std).reshape(-1)
+        return (state_error(task, pred, targets) * inv_std).reshape(-1)
 
     def penalty(theta):
         if model_type == "params" or weight_decay == 0:
@@ -255,7 +283,7 @@ def _fit(
         optimiser = optax.adam(lr)
     else:
         optimiser = optax.adam(optax.cosine_decay_schedule(lr, max(steps, 1), alpha=0.05))
-    nominal_loss = float(_nominal_loss(task, nominal_model, batch, dt, substeps, inv_std))
+    nominal_loss = float(_nominal_loss(task, physics, batch, dt, substeps, inv_std))
 
     best, best_loss, history, diverged, message = adam_fit(
         loss, theta0, optimiser, steps, batch, "model"
@@ -295,7 +323,7 @@ def _fit(
 def _nominal_loss(task, nominal_model, batch, dt, substeps, inv_std):
     starts, actions, targets = batch
     pred = jax.vmap(lambda s, a: predict(nominal_model, s, a, dt, substeps))(starts, actions)
-    return jnp.mean((task.state_error(pred, targets) * inv_std) ** 2)
+    return jnp.mean((state_error(task, pred, targets) * inv_std) ** 2)
 
 
 def prediction_errors(
@@ -327,7 +355,7 @@ def prediction_errors(
                     "starts": 0,
                 }
                 continue
-            err = np.asarray(task.state_error(run(batch[0], batch[1]), batch[2][:, -1]))
+            err = np.asarray(state_error(task, run(batch[0], batch[1]), batch[2][:, -1]))
             out[h] = {
                 "rmse": float(np.sqrt(np.mean(err**2))),
                 "rmse_by_column": dict(zip(names, np.sqrt(np.mean(err**2, axis=0)).tolist())),

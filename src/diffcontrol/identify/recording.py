@@ -4,8 +4,8 @@
 system of a task (its spaces must match the task's) and the columns are named by the task
 (``task.data_columns()``), and without it by the task that names that environment's columns
 (``data.known_columns()``). ``record_data(source, ...)`` is ``diffcontrol record``: a task's
-own recording (its ``record_data`` hook: Gymnasium episodes by default; a task may record its
-own simulator, e.g. one-step episodes of a single measured outcome) or a plain Gymnasium id,
+own recording (``record_task``: Gymnasium episodes by default; a task may record its own
+simulator, e.g. one-step episodes of a single measured outcome) or a plain Gymnasium id,
 written to a CSV or NPZ file.
 """
 
@@ -26,6 +26,8 @@ from ..envs import make_env
 from ..errors import ConfigError
 from ..io import now_iso
 from ..settings import RecordConfig
+from ..tasks import Task
+from ..tasks._hooks import task_hook
 from .data import DISCRETE_UNIT, TrajectoryData, known_columns, write_trajectories
 
 
@@ -277,6 +279,16 @@ def _check_finite(obs: Any, env_id: str, episode: int, step: int) -> None:
         )
 
 
+@task_hook(method="record_data")
+def record_task(task: Any, episodes: int, **options: Any) -> TrajectoryData:
+    """Record ``episodes`` episodes of ``task``'s real system, for model learning (``diffcontrol
+    record TASK``; ``record_data`` lists the ``options``): Gymnasium episodes for a
+    discrete-time task (``record_gym``); a task with data of its own overrides it (the
+    trebuchet's throws, the swing-up's states) as ``tasks._hooks`` says, its method named
+    ``record_data``."""
+    raise ConfigError(f"task {task.name!r} cannot record data (it defines no record_data)")
+
+
 def record_gym(
     task: Any,
     episodes: int,
@@ -289,7 +301,7 @@ def record_gym(
     noise_m: float | None = None,
     progress: Callable[[str], None] | None = None,
 ) -> TrajectoryData:
-    """A task's default ``record_data``: Gymnasium episodes of ``env_id`` (default the task's
+    """A discrete-time task's ``record_task``: Gymnasium episodes of ``env_id`` (default the task's
     own environment) as the task's real system, with the columns named by the task."""
     from ..envs import env_id as own_id
 
@@ -366,7 +378,7 @@ def record_data(
     """``diffcontrol record``: record ``config.episodes`` episodes and write them to ``out``.
 
     Args:
-        source: a registered task's name (its ``record_data``: Gymnasium episodes, or the
+        source: a registered task's name (``record_task``: Gymnasium episodes, or the
             task's own recording) or a Gymnasium id (``module:Env-v0`` too; imported because
             the caller named it).
         config: what to record (``RecordConfig``): how many episodes, with which
@@ -393,7 +405,7 @@ def record_data(
     options = {f.name: getattr(config, f.name) for f in dataclasses.fields(config)}
     episodes = options.pop("episodes")
     if task is not None:
-        data = task.record_data(episodes, env_id=env_id, progress=progress, **options)
+        data = record_task(task, episodes, env_id=env_id, progress=progress, **options)
     else:
         data = _record_env(source, episodes, None, progress=progress, **options)
     try:
@@ -416,3 +428,8 @@ def describe(data: TrajectoryData) -> str:
         f"{len(data.observation_columns)} {kind} and {len(data.action_columns)} action "
         "column(s)"
     )
+
+
+@record_task.register(Task)
+def _record_gym_episodes(task: Any, episodes: int, **options: Any) -> TrajectoryData:
+    return record_gym(task, episodes, **options)

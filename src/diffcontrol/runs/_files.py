@@ -12,6 +12,7 @@ from typing import Any
 
 from .. import _timing, io, policies
 from ..errors import ModelFileError
+from ..evaluation import evaluate_run
 from ..tasks import AnyTask, resolve
 
 MODEL_FILE = "model.json"
@@ -172,7 +173,7 @@ def save_run(
     if final_eval != 0 or not task.final_eval_skippable:
         t0 = time.perf_counter()
         with _timing.phase(timings, "evaluate"):
-            ev = task.evaluate_run(run, episodes=final_eval, seed=0)
+            ev = evaluate_run(task, run, episodes=final_eval, seed=0)
         if ev is not None:
             metrics[ev.key] = {**ev.to_json(), "seconds": time.perf_counter() - t0}
             metrics["final_evaluation"] = ev.key
@@ -188,7 +189,9 @@ def save_run(
                 metrics, out / "learning_curve.png", getattr(task, "reward_threshold", None)
             )
             files.append("learning_curve.png")
-        files += task.write_figures(run, out, animation=animation)
+        from ._figures import write_figures  # matplotlib, when pictures are drawn
+
+        files += write_figures(task, run, out, animation=animation)
     if process_total:
         timings["total"] = _timing.process_seconds()
     # metrics.json last: its timings include the pictures

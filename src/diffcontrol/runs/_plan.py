@@ -65,7 +65,7 @@ def planning_model(task: AnyTask, model: dict, where: str = "model.json") -> tup
 
     if model.get("kind") == "simulator":
         return task, task_params(task)
-    from ..identify.fitted import fitted_physics
+    from ..identify.fitted import fitted_physics, fitted_task
 
     doc = model.get("fitted")
     if model.get("kind") != "fitted" or not isinstance(doc, dict):
@@ -76,7 +76,7 @@ def planning_model(task: AnyTask, model: dict, where: str = "model.json") -> tup
         raise ModelFileError(f"{where}: {e}") from None
     if doc.get("model") == "params":
         return task, task_params(task, tuple(sorted(doc["all_parameters"].items())))
-    fitted = task.fitted_task(doc)  # its default parameters are the model
+    fitted = fitted_task(task, doc)  # its default parameters are the model
     return fitted, fitted.default_params()
 
 

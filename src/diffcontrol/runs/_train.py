@@ -285,7 +285,7 @@ def fitted_training(
     """
     import numpy as np
 
-    from ..identify.fitted import fitted_physics, read_fitted, real_system
+    from ..identify.fitted import fitted_physics, fitted_task, read_fitted, real_system
 
     doc = read_fitted(fit_dir)
     fitted_physics(task, doc)  # refuses a model of another task
@@ -303,7 +303,7 @@ def fitted_training(
             f"--param cannot change the physics of the {doc['model']} model in {fit_dir}; "
             "refit it, or train with a grey-box (--model params) fit"
         )
-    fitted = task.fitted_task(doc)
+    fitted = fitted_task(task, doc)
     nets = doc["network"].get("members") or [doc["network"]]  # an ensemble's, or the one
     weights = sum(
         np.asarray(l["weight"]).size + len(l["bias"]) for n in nets for l in n.get("layers", [])

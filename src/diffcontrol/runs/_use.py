@@ -8,6 +8,7 @@ from typing import Any
 
 from .. import io
 from ..errors import ConfigError
+from ..evaluation import evaluate_run
 from ._files import Run, open_run
 
 
@@ -21,7 +22,7 @@ def evaluate_dir(
     seed: int = 0,
     optimum: int | None = None,
 ) -> tuple[Run, Any]:
-    """Evaluate the controller in ``run_dir`` with its task's ``evaluate_run`` hook.
+    """Evaluate the controller in ``run_dir`` with ``evaluation.evaluate_run`` (its task's, where the task has one).
 
     Args:
         task: the run's task where it is not registered (see ``open_run``).
@@ -50,7 +51,7 @@ def evaluate_dir(
     elif env_kwargs:
         raise ConfigError("--env-arg needs --env (the environment it applies to)")
     run = open_run(run_dir, task=task, real=real)
-    ev = run.task.evaluate_run(run, episodes=episodes, seed=seed)
+    ev = evaluate_run(run.task, run, episodes=episodes, seed=seed)
     if ev is None:
         raise ConfigError(
             f"task {run.task.name!r} has no environment to evaluate in; name one with --env"
@@ -112,15 +113,17 @@ def animate_dir(
     target: float = 80.0,
     wind: float = -3.0,
 ) -> tuple[Path, str]:
-    """Write the animation of the controller in ``run_dir`` (its task's ``animate_run``) to
-    ``out`` (a new ``.gif``; default ``run_dir/rollout.gif``, replaced). ``seed`` resets the
-    episode; ``target`` and ``wind`` are an aiming task's. Returns the path and what it shows."""
+    """Write the animation of the controller in ``run_dir`` (``animate_run``) to ``out`` (a
+    new ``.gif``; default ``run_dir/rollout.gif``, replaced). ``seed`` resets the episode;
+    ``target`` and ``wind`` are an aiming task's. Returns the path and what it shows."""
+    from ._figures import animate_run  # matplotlib
+
     run = open_run(run_dir, task=task)
     path = Path(out) if out else Path(run_dir) / "rollout.gif"
     if not out:
-        return path, run.task.animate_run(run, path, seed=seed, target=target, wind=wind)
+        return path, animate_run(run.task, run, path, seed=seed, target=target, wind=wind)
     io.check_new_file(path, ".gif")
-    draw = lambda tmp: run.task.animate_run(run, tmp, seed=seed, target=target, wind=wind)  # noqa: E731
+    draw = lambda tmp: animate_run(run.task, run, tmp, seed=seed, target=target, wind=wind)  # noqa: E731
     return path, io.write_new(path, draw)  # never replaces a file made meanwhile
 
 

@@ -13,7 +13,7 @@ import jax
 import numpy as np
 from jaxtyping import Array, PRNGKeyArray, PyTree
 
-from .._gym_ids import env_id
+from .._gym_ids import env_id as own_env_id
 from ..errors import ConfigError
 from ._grid import GridAxis
 
@@ -64,11 +64,12 @@ class _TaskBase(abc.ABC):
     def gym_label(self) -> str:
         """How evaluation results name the environment: ``gym_id`` (plus any changes), or the
         task's own ``diffcontrol/<Name>-v0``."""
-        return self.gym_id or env_id(self)
+        return self.gym_id or own_env_id(self)
 
-    # --- hooks of a run: how a trained controller is loaded, judged and drawn ---------------
-    # The generic layers (``diffcontrol.runs``, ``load``, the CLI) call these and never ask
-    # which system a task is; a task overrides the ones whose defaults do not suit it.
+    # --- a run: how a trained controller is loaded and judged ---------------------------------
+    # What the layers do with a run (evaluate it, draw it, animate it) are their functions
+    # (``evaluation.evaluate_run``, ``runs.write_figures``, ``runs.animate_run``); a task
+    # overrides them as ``tasks._hooks`` says.
 
     default_eval_episodes: ClassVar[int] = 100
     """How many episodes (or situations) the final evaluation of ``diffcontrol train`` runs."""
@@ -161,69 +162,6 @@ class _TaskBase(abc.ABC):
 
         return NumpyPolicy(doc)
 
-    def evaluate_run(self, run: Any, episodes: int | None = None, seed: int = 0) -> Any:
-        """Judge a trained controller (a ``diffcontrol.runs.Run``): the final evaluation of
-        ``diffcontrol train`` and what ``diffcontrol evaluate`` prints.
-
-        Returns an object with ``key`` (its name in ``metrics.json``), ``to_json()`` and
-        ``summary()`` (one line), or ``None`` where there is nothing to evaluate in. Default:
-        Gymnasium episodes with reset seeds ``seed ... seed+episodes-1`` in ``gym_id`` (the
-        task's own ``diffcontrol/<Name>-v0`` where it has no twin), or in the run's real
-        system (e.g. the environment a fitted model's data came from).
-        """
-        from ..evaluation import evaluate
-
-        env = run.real_env
-        n = episodes or self.default_eval_episodes
-        return evaluate(run.policy, self, episodes=n, seed=seed, real=env)
-
-    def write_figures(self, run: Any, out: Any, animation: bool = True) -> list[str]:
-        """Write the run's pictures into the directory ``out``; returns the file names.
-
-        Default: one Gymnasium episode (reset seed 0, in the run's real system where it has
-        one) as ``rollout.png`` (states, actions, rewards) and, where the task can draw itself
-        (``frames``) and ``animation``, ``rollout.gif``.
-        """
-        from .. import plots
-        from ..evaluation import record_episode
-
-        rec = record_episode(run.policy, self, seed=0, real=run.real_env)
-        plots.rollout(rec, self, out / "rollout.png")
-        files = ["rollout.png"]
-        if animation and self.can_draw:
-            from ..animation import animate
-
-            animate(rec, self, out / "rollout.gif")
-            files.append("rollout.gif")
-        return files
-
-    def animate_run(self, run: Any, path: Any, seed: int = 0, **options: Any) -> str:
-        """Write an animation of the run to ``path``; returns a one-line description.
-
-        Default: one Gymnasium episode with reset seed ``seed``, drawn by ``frames``.
-        """
-        from ..animation import animate
-        from ..errors import ConfigError
-        from ..evaluation import record_episode
-
-        if not self.can_draw:
-            raise ConfigError(f"task {self.name!r} cannot draw itself (it defines no frames())")
-        rec = record_episode(run.policy, self, seed=seed, real=run.real_env)
-        animate(rec, self, path)
-        return f"return {rec.total_return:.1f}, {len(rec.rewards)} steps"
-
-    def frames(self, recording: Any, every: int) -> Any:
-        """Draw a recorded episode: yield one matplotlib figure per frame (every ``every``-th
-        state of ``recording``, a ``diffcontrol.evaluation.Recording``), the same figure
-        redrawn each time. Tasks that define it get ``rollout.gif``; the default draws
-        nothing."""
-        raise NotImplementedError
-
-    @property
-    def can_draw(self) -> bool:
-        """Whether the task defines ``frames`` (an animation of its episodes)."""
-        return type(self).frames is not _TaskBase.frames
-
     # --- hooks of model learning (``diffcontrol.identify``): the data and the fit ----------
 
     fit_parameter_names: ClassVar[tuple[str, ...]] = ()
@@ -247,24 +185,8 @@ class _TaskBase(abc.ABC):
 
     def data_file_name(self, env_id: str | None = None) -> str:
         """The default file ``diffcontrol record`` writes (``ENV_ID`` with ``/`` as ``-``)."""
-        from ..envs import env_id as own_id
-
-        return (env_id or self.gym_id or own_id(self)).replace("/", "-").replace(":", "-") + ".csv"
-
-    def record_data(self, episodes: int, **options: Any) -> Any:
-        """Record ``episodes`` episodes of this task's real system, for model learning
-        (``diffcontrol record``; ``identify.record_data`` lists the ``options``)."""
-        from ..errors import ConfigError
-
-        raise ConfigError(f"task {self.name!r} cannot record data (it defines no record_data)")
-
-    def model_route(self) -> Any:
-        """How models of this task are learned (``identify``'s route object: its data file,
-        fit, prediction errors and plot). Default: by base class, the discrete step
-        (``Task``) or the vector field (``ContinuousTask``)."""
-        from ..identify import _routes
-
-        return _routes.STEPS if isinstance(self, Task) else _routes.ODE
+        own = env_id or self.gym_id or own_env_id(self)
+        return own.replace("/", "-").replace(":", "-") + ".csv"
 
     def controller_kwargs(self) -> dict[str, Any]:
         """Keyword arguments that make an ``MLPController`` fit this task."""
@@ -409,7 +331,7 @@ class Task(_TaskBase):
         transitions a network is fitted to (``identify.MIN_TRANSITIONS``: 1,000 for a network
         alone), i.e. 200/200/1,000 on the Pendulum. A task whose episodes end early (the
         CartPole's random ones last ~20 steps) or run long chooses its own."""
-        from ..identify.hybrid import MIN_TRANSITIONS
+        from ..settings import MIN_TRANSITIONS
 
         return max(self.episode_length, MIN_TRANSITIONS.get(model, 0))
 
@@ -469,22 +391,6 @@ class Task(_TaskBase):
             a = np.clip(a, self.action_low, self.action_high)
         return a
 
-    def fitted_task(self, doc: dict) -> Any:
-        """This task with its simulator replaced by the hybrid or neural model of a
-        ``fitted.json`` document (``diffcontrol train --model``)."""
-        from ..identify.fitted import fitted_model
-        from ..identify.hybrid import model_task
-
-        return model_task(self, fitted_model(self, doc))
-
-    def record_data(self, episodes: int, **options: Any) -> Any:
-        """Gymnasium episodes of ``options["env_id"]`` (default the task's own environment),
-        whose spaces must match the task's, with the columns named by the task
-        (``identify.record_data``)."""
-        from ..identify.recording import record_gym
-
-        return record_gym(self, episodes, **options)
-
     def step_seconds(self, params: PyTree) -> float | None:
         """Simulated seconds per step, for time axes and recorded data: the parameter ``dt``
         or ``tau`` where the parameters have one, else ``None`` (time is then in steps)."""
@@ -499,7 +405,7 @@ class Task(_TaskBase):
         ``diffcontrol/<Name>-v0`` where it has no Gymnasium twin."""
         import gymnasium
 
-        return gymnasium.make(self.gym_id or env_id(self), **kwargs)
+        return gymnasium.make(self.gym_id or own_env_id(self), **kwargs)
 
     def set_gym_state(self, env: Any, state: np.ndarray) -> None:
         """Put the Gymnasium twin ``env`` (from ``make_gym_env``) into the task's ``state``.
@@ -623,15 +529,6 @@ class ContinuousTask(_TaskBase):
 
         return StatePolicy(doc)
 
-    def evaluate_run(self, run: Any, episodes: int | None = None, seed: int = 0) -> Any:
-        """No evaluation by default (a continuous-time task defines its own, e.g. a
-        reference solve)."""
-        return None
-
-    def write_figures(self, run: Any, out: Any, animation: bool = True) -> list[str]:
-        """No pictures by default."""
-        return []
-
     # --- model learning (``identify.ode``): what a system's model is -----------------------
 
     def data_columns(self) -> tuple[tuple[str, ...], tuple[str, ...]]:
@@ -639,30 +536,6 @@ class ContinuousTask(_TaskBase):
         return tuple(f"state.{n} [?]" for n in self.state_names), tuple(
             f"action.{j} [?]" for j in range(self.action_size)
         )
-
-    def nominal_model(self, params: PyTree) -> Any:
-        """The known physics as a model (``derivative(state, action)``, ``params``)."""
-        from ..errors import ConfigError
-
-        raise ConfigError(f"task {self.name!r} defines no model to fit (nominal_model)")
-
-    def initial_model(self, model_type: str, nominal: PyTree, data: Any, dt_s: float,
-                      hidden: tuple[int, ...], key: PRNGKeyArray) -> Any:  # fmt: skip
-        """The model of ``model_type`` before fitting, with the ``nominal`` parameters; a
-        network model holds its network as ``correction``."""
-        from ..errors import ConfigError
-
-        raise ConfigError(f"task {self.name!r} defines no model to fit (initial_model)")
-
-    def state_error(self, pred: Array, target: Array) -> Array:
-        """Predicted minus recorded state (a task wraps its angles here)."""
-        return pred - target
-
-    def model_document(self, model: Any) -> dict:
-        """The fitted model as fitted.json's ``all_parameters`` and ``network``."""
-        from ..errors import ConfigError
-
-        raise ConfigError(f"task {self.name!r} cannot store a fitted model (model_document)")
 
     def force_fn(self, controller: Any) -> StateFeedback:
         """The controller as the ODE's input ``(t, state) -> action``: state feedback through

@@ -171,7 +171,7 @@ class MountainCarContinuous(Task):
         import numpy as np
         from matplotlib.patches import Rectangle
 
-        from ..animation import close, scene
+        from ._scene import close, scene
 
         p = self.default_params()
         lo, hi, goal = p.min_position, p.max_position, p.goal_position

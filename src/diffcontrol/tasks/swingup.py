@@ -38,7 +38,7 @@ from jaxtyping import Array, Float
 
 from ..config import ODETrainConfig
 from ..systems import cartpole_swingup as cp
-from ._base import ContinuousTask, TrajectoryLoss, task_params
+from ._base import ContinuousTask, TrajectoryLoss
 
 ENERGY_WEIGHT = 0.1
 """Weight of the dissipated energy (per joule) in the ``energy`` loss."""
@@ -269,46 +269,12 @@ class CartPoleSwingUp(ContinuousTask):
         # 1500). Measured in benchmarks/swingup.py.
         return ODETrainConfig(horizon_s=1.0, saves=50, updates=1000, learning_rate=0.05)
 
-    # --- hooks of a run: judged by a reference solve, drawn as a cart-pole ---------------------
+    # --- a run is judged by a reference solve and drawn as a cart-pole (builtin.swingup) ---
 
     default_eval_episodes = 1  # one reference solve
     final_eval_skippable = False  # the reference solve is what a run reports and draws
 
-    def reference_solve(self, run):
-        """The float64 reference solve of the run's closed loop (``simulate_continuous``),
-        solved once per run: its controller inside the ODE, or a planner's sampled-data
-        loop (``run.feedback``)."""
-        from ..evaluation import simulate_continuous
-
-        if "reference_solve" not in run.memo:
-            run.memo["reference_solve"] = simulate_continuous(
-                self, run.feedback, run.params, config=run.config
-            )
-        return run.memo["reference_solve"]
-
-    def evaluate_run(self, run, episodes=None, seed=0):
-        """The end state, peak force, swings and loss of the reference solve (dopri8 at
-        1e-9), on the real system where the run has one (``evaluation.swingup_result``)."""
-        from ..evaluation import swingup_result
-
-        return swingup_result(self.reference_solve(run))
-
-    def write_figures(self, run, out, animation=True):
-        """``data.json`` (the reference solve's time series), ``swingup.png`` (angle,
-        position, force) and ``rollout.gif``."""
-        from .. import io, plots
-
-        rec = self.reference_solve(run)
-        io.write_json(out / "data.json", rec.to_json())
-        plots.swingup(rec, out / "swingup.png")
-        if not animation:
-            return ["data.json", "swingup.png"]
-        from ..animation import animate_swingup
-
-        animate_swingup(rec, out / "rollout.gif")
-        return ["data.json", "swingup.png", "rollout.gif"]
-
-    # --- learning a model from data (``diffcontrol.identify``; ``fitted_swingup``) ------------
+    # --- learning a model from data (``diffcontrol.identify``; ``builtin.swingup``) ----------
 
     fit_parameter_names = ("cart_viscous", "cart_coulomb", "pole_viscous", "pole_coulomb")
     """The grey box fits the friction coefficients (the nominal model is frictionless)."""
@@ -318,69 +284,6 @@ class CartPoleSwingUp(ContinuousTask):
 
     def data_file_name(self, env_id=None):
         return f"{self.name}-state.csv"
-
-    def nominal_model(self, params):
-        from .fitted_swingup import nominal_model
-
-        return nominal_model(params)
-
-    def initial_model(self, model_type, nominal, data, dt_s, hidden, key):
-        """Zero friction, or a hybrid's network of the generalised forces of the velocities
-        (``fitted_swingup``), or a neural network of the accelerations."""
-        from .fitted_swingup import initial_model
-
-        return initial_model(model_type, nominal, data, dt_s, hidden, key)
-
-    def state_error(self, pred, target):
-        from .fitted_swingup import state_error
-
-        return state_error(pred, target)
-
-    def model_document(self, model) -> dict:
-        from .fitted_swingup import model_to_dict
-
-        return {k: v for k, v in model_to_dict(model).items() if k != "kind"}
-
-    def record_data(self, episodes, *, env_id=None, env_kwargs=None, controller=None,
-                    seed=0, max_steps=None, noise_m=None, progress=None):  # fmt: skip
-        """The state and force at 50 Hz under random forces, of the cart-pole with this task's
-        parameters changed by ``env_kwargs`` (``fitted_swingup.record_swingup``)."""
-        from ..errors import ConfigError
-        from .fitted_swingup import record_swingup
-
-        for flag, value in (("--controller", controller), ("--max-steps", max_steps)):
-            if value is not None:
-                raise ConfigError(
-                    f"{flag} does not apply to recording {self.name}: its episodes are 5 s of "
-                    "random forces; drop it"
-                )
-        if noise_m is not None:
-            raise ConfigError(f"--noise-m applies to the trebuchet only, not {self.name}; drop it")
-        params = task_params(self, tuple((env_kwargs or {}).items()))
-        if progress:
-            changed = ", ".join(f"{n}={v:g}" for n, v in (env_kwargs or {}).items())
-            progress(
-                f"recording {episodes} episode(s) of the {self.name} cart-pole "
-                f"({changed or 'its parameters'})"
-            )
-        return record_swingup(params, episodes, seed=seed)
-
-    def fitted_task(self, doc):
-        """The swing-up through a fitted ``SwingUpModel`` (``FittedSwingUp``), under this
-        task's name (``model.json`` names the task the controller runs on)."""
-        from .fitted_swingup import FittedSwingUp, model_from_dict
-
-        fitted = FittedSwingUp(self, model_from_dict(doc, doc.get("_path", "the fitted model")))
-        fitted.name = self.name
-        return fitted
-
-    def animate_run(self, run, path, seed=0, **options):
-        """A GIF of the reference solve."""
-        from ..animation import animate_swingup
-
-        rec = self.reference_solve(run)
-        animate_swingup(rec, path)
-        return f"{rec.t[-1]:g} s, peak |F| {abs(rec.force).max():.1f} N"
 
     def recipes(self) -> dict[str, dict[str, Any]]:
         # The repository's sciml_train(loss, p0, ADAM(0.05), maxiters = 1500); last weights kept.

@@ -95,29 +95,15 @@ class TrebuchetAiming(Task):
     def default_params(self) -> tb.TrebuchetParams:
         return tb.TrebuchetParams()
 
-    # --- learning its physics from recorded throws (``_trebuchet_throws``, ``_fit``) -------
+    # --- learning its physics from recorded throws (``builtin.trebuchet``) -----------------
 
     def data_columns(self):
         """A throw is a one-step episode: the wind and distance 0, the aim, then the wind and
-        the measured distance (``_trebuchet_throws``)."""
+        the measured distance (``builtin.trebuchet.throws``)."""
         return THROW_COLUMNS
-
-    def model_route(self):
-        """The grey box fitted to the measured distances (``_trebuchet_fit.THROWS``)."""
-        from ._trebuchet_fit import THROWS
-
-        return THROWS
 
     def data_file_name(self, env_id=None) -> str:
         return "trebuchet-throws.csv"
-
-    def record_data(self, episodes, **options):
-        """``episodes`` throws with random inputs (or a trained ``controller`` aiming at random
-        targets) of the trebuchet whose parameters ``env_kwargs`` change, ``noise_m`` m of
-        noise on the distances (``_trebuchet_record.record_throws``)."""
-        from ._trebuchet_record import record_data
-
-        return record_data(self, episodes, **options)
 
     def reset(self, key, params):
         k_target, k_wind = jax.random.split(key)
@@ -182,45 +168,11 @@ class TrebuchetAiming(Task):
 
         return AimingPolicy(doc)
 
-    def evaluate_run(self, run, episodes=None, seed=0):
-        """Miss statistics over ``episodes`` random targets (default 1,000) drawn with
-        ``seed``, thrown by the run's real trebuchet where it has one
-        (``evaluation.evaluate_aiming``)."""
-        from ..evaluation import evaluate_aiming
-
-        params = run.params if run.real else None
-        n = episodes or self.default_eval_episodes
-        return evaluate_aiming(run.policy, self, targets=n, seed=seed, params=params)
-
     def throw(self, run, target_m: float, wind_mps: float):
         """Simulate the throw that the run's controller aims at one target."""
         check_target(target_m, wind_mps)
         angle, weight = run.policy(target_m, wind_mps)
         return _SIMULATE(wind_mps, angle, weight, run.params if run.real else None)
-
-    def write_figures(self, run, out, animation=True):
-        """``rollout.png`` (and ``rollout.gif``): the throw at ``EXAMPLE_THROW``."""
-        from .. import plots
-
-        target, wind = self.EXAMPLE_THROW
-        throw = self.throw(run, target, wind)
-        plots.throw(throw, target, wind, out / "rollout.png")
-        if not animation:
-            return ["rollout.png"]
-        from ..animation import animate_throw
-
-        animate_throw(throw, target, wind, out / "rollout.gif")
-        return ["rollout.png", "rollout.gif"]
-
-    def animate_run(self, run, path, seed=0, target=None, wind=None, **options):
-        """A GIF of the throw the controller aims at ``target`` m in ``wind`` m/s."""
-        from ..animation import animate_throw
-
-        target = self.EXAMPLE_THROW[0] if target is None else target
-        wind = self.EXAMPLE_THROW[1] if wind is None else wind
-        throw = self.throw(run, target, wind)
-        animate_throw(throw, target, wind, path)
-        return f"distance {float(throw.distance):.2f} m, target {target:g} m"
 
     def aim(self, run, target_m: float, wind_mps: float, direct: bool = False):
         """Aim the run's controller at one target (``diffcontrol aim``): the network's angle

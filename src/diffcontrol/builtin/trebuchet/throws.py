@@ -23,7 +23,7 @@ column in another unit is refused with the conversion (``distance [ft]``: "multi
 0.3048"), as is an input out of its range, naming the file, the line, row or episode and the
 column.
 
-``_trebuchet_record`` records throws (``record_throws``), ``_trebuchet_fit`` fits the
+``record`` records throws (``record_throws``), ``fit`` fits the
 trebuchet's physics to them.
 """
 
@@ -36,9 +36,9 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from ..errors import DataFileError
-from ..identify.data import TrajectoryData, parse_column, read_trajectories
-from ..identify.data._files import (
+from ...errors import DataFileError
+from ...identify.data import TrajectoryData, parse_column, read_trajectories
+from ...identify.data._files import (
     check_header,
     csv_parts,
     csv_table,
@@ -46,8 +46,8 @@ from ..identify.data._files import (
     read_npz,
     readable_suffix,
 )
-from ..io import parse_json
-from .trebuchet import THROW_COLUMNS
+from ...io import parse_json
+from ...tasks.trebuchet import THROW_COLUMNS
 
 COLUMNS = (*THROW_COLUMNS[0], *THROW_COLUMNS[1])
 """The four throw columns of the table: wind, distance, release angle, counterweight."""

@@ -1,7 +1,7 @@
 """The trebuchet's physics fitted to recorded throws, and its route of model learning.
 
 A throw is one input ``(wind, release angle, counterweight)`` and one measured outcome, the
-distance (a one-step episode: ``_trebuchet_throws``). The model is the differentiable trebuchet
+distance (a one-step episode: ``throws``). The model is the differentiable trebuchet
 itself (``systems.trebuchet.shoot``) with some of its parameters unknown (by default the drag
 coefficient ``C_d`` and ``wind_factor``, how strongly the wind acts on the flight). They are
 fitted by least squares on the distance residuals ``r_i = shoot(w_i, a_i, m_i; theta) - d_i``
@@ -27,7 +27,7 @@ product enters).
 **Divergence** is reported, not hidden: a non-finite loss stops the fit with ``diverged=True``
 and the best parameters seen before it are kept; no NaN is returned.
 
-``THROWS`` is the task's ``model_route()``: ``identify.fit`` and ``identify.fit_dir`` reach the
+``THROWS`` is the task's ``model_route``: ``identify.fit`` and ``identify.fit_dir`` reach the
 fit, the held-out distance errors and the plot through it.
 """
 
@@ -44,13 +44,13 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from ..errors import ConfigError, InsufficientDataError
-from ..identify._routes import TrajectoryRoute, parameters_doc
-from ..identify._shooting import FitResult, check_settings, set_params, standard_errors
-from ..identify.data import TrajectoryData
-from ..systems import trebuchet as tb
-from ._trebuchet_record import as64, padded_rows, parameter_names, params_dict, predict_distances
-from ._trebuchet_throws import Throws, read_throws, throws_of
+from ...errors import ConfigError, InsufficientDataError
+from ...identify._routes import TrajectoryRoute, parameters_doc
+from ...identify._shooting import FitResult, check_settings, set_params, standard_errors
+from ...identify.data import TrajectoryData
+from ...systems import trebuchet as tb
+from .record import as64, padded_rows, parameter_names, params_dict, predict_distances
+from .throws import Throws, read_throws, throws_of
 
 MIN_THROWS_PER_PARAMETER = 5
 """The fewest recorded throws per fitted parameter."""
@@ -274,7 +274,7 @@ def throws_plot(
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from ..io import write_figure
+    from ...io import write_figure
 
     data = _throws(data)
     fig, (ax, ax_wind) = plt.subplots(1, 2, figsize=(10.0, 4.2))
@@ -301,7 +301,7 @@ def throws_plot(
 
 
 class ThrowRoute(TrajectoryRoute):
-    """The trebuchet's route of model learning (its ``model_route()``): its grey box fitted to
+    """The trebuchet's route of model learning (its ``model_route``): its grey box fitted to
     recorded throws (one-step episodes), judged by the held-out distance errors."""
 
     unit = "throw"
@@ -398,4 +398,4 @@ class ThrowRoute(TrajectoryRoute):
 
 
 THROWS = ThrowRoute()
-"""The route of ``TrebuchetAiming.model_route()``."""
+"""The trebuchet's ``model_route``."""

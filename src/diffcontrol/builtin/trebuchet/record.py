@@ -3,7 +3,7 @@
 ``record_throws`` plays the real trebuchet: it throws a ``TrebuchetParams`` (the "real" one,
 e.g. ``drag_coefficient = 1.5`` and ``wind_factor = 1.5``) with random or given inputs, or
 aimed by a trained controller, and adds Gaussian noise to the measured distances; the throws
-come back as one-step episodes (``_trebuchet_throws``). ``record_data`` is the task's
+come back as one-step episodes (``throws``). ``record_data`` is the task's
 ``record_data`` hook (``diffcontrol record trebuchet``).
 """
 
@@ -17,12 +17,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..errors import ConfigError
-from ..identify.data import TrajectoryData
-from ..io import now_iso
-from ..systems import trebuchet as tb
-from ._trebuchet_throws import Throws, throws_table
-from .trebuchet import TARGET_RANGE_M
+from ...errors import ConfigError
+from ...identify.data import TrajectoryData
+from ...io import now_iso
+from ...systems import trebuchet as tb
+from ...tasks.trebuchet import TARGET_RANGE_M
+from .throws import Throws, throws_table
 
 RANDOM_ANGLE_DEG = (20.0, 70.0)
 """``record_throws`` draws random release angles uniformly from here (degrees)."""
@@ -57,7 +57,7 @@ def trebuchet_params(env_args: list[tuple[str, float]]) -> tb.TrebuchetParams:
             f"{', '.join(known)} (e.g. --env-arg drag_coefficient=1.5 --env-arg wind_factor=1.5)"
         )
     params = tb.TrebuchetParams(**{name: float(value) for name, value in env_args})
-    from . import make
+    from ...tasks import make
 
     make("trebuchet").check_params(params)  # the task's ranges, as for --param
     return params
@@ -177,7 +177,7 @@ def record_data(task: Any, episodes: int, *, env_id=None, env_kwargs=None, contr
     """The trebuchet task's ``record_data``: ``episodes`` throws with random inputs (or a
     trained ``controller`` aiming at random targets) of the trebuchet whose parameters
     ``env_kwargs`` change, with ``noise_m`` m of noise on the distances."""
-    from ..policies import AimingPolicy, read_model
+    from ...policies import AimingPolicy, read_model
 
     for flag, value in (("--max-steps", max_steps), ("an environment id", env_id)):
         if value is not None:
