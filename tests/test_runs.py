@@ -93,6 +93,18 @@ def test_of_two_processes_claiming_a_directory_one_wins(tmp_path):
         assert sorted(outcomes) == ["refused", "won"], outcomes
 
 
+def test_a_claim_made_between_the_check_and_the_write_is_refused(tmp_path, monkeypatch):
+    """The race above, made certain: another process writes ``run.json`` after this one's
+    check found the directory empty. Without ``--resume`` the claim is refused (it was taken
+    as a run to resume, so both processes trained into one directory)."""
+    out = tmp_path / "race"
+    run = {"task": "t", "config": {"seed": 0}}
+    monkeypatch.setattr(io, "check_run_dir", lambda *args: None)  # the check passed earlier
+    io.prepare_run_dir(out, run, resume=False)  # the other process's claim
+    with pytest.raises(RunDirectoryError, match="another process has just claimed"):
+        io.prepare_run_dir(out, run, resume=False)
+
+
 def test_a_finished_run_refuses_the_library_resume(cartpole_run):
     doc = json.loads((cartpole_run / "run.json").read_text())
     with pytest.raises(RunDirectoryError, match="finished run"):

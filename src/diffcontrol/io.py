@@ -405,7 +405,7 @@ def prepare_run_dir(out_dir: str | os.PathLike, run: dict, resume: bool) -> Path
     check_run_dir(out_dir, run, resume)
     out = Path(out_dir)
     existing = out / RUN_FILE
-    if existing.exists():  # the same run, to resume
+    if resume and existing.exists():  # the same run (check_run_dir compared them)
         return out
     try:
         out.mkdir(parents=True, exist_ok=True)
