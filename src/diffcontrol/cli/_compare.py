@@ -5,10 +5,8 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-import diffcontrol.cli._args as a
-
 from ..settings import CompareConfig
-from ._args import FLAG, REQUIRED, add
+from ._args import FLAG, NO_COMPILE_CACHE, QUIET, REQUIRED, add, config_of, config_specs, say
 
 
 def add_parsers(sub: Any) -> None:
@@ -31,9 +29,9 @@ def add_parsers(sub: Any) -> None:
         ("--real", FLAG, False, None, "count the REAL system's steps: diffcontrol learns a "
          "model by acting on the real environment (explore, fit, train, act; grey box, hybrid, "
          "neural) beside the RL runs of --rl-results; writes DIR/loops/ as it goes"),
-        *a.config_specs(CompareConfig),
-        a.NO_COMPILE_CACHE,
-        a.QUIET,
+        *config_specs(CompareConfig),
+        NO_COMPILE_CACHE,
+        QUIET,
     )
     # fmt: on
 
@@ -41,9 +39,9 @@ def add_parsers(sub: Any) -> None:
 def cmd_compare(args: argparse.Namespace) -> int:
     from ..compare import run_comparison
 
-    more = {"real": args.real, "resume": args.resume, "progress": a.say(args)}
+    more = {"real": args.real, "resume": args.resume, "progress": say(args)}
     more |= {"compile_cache": not args.no_compile_cache, "command": args.command_line}
-    doc = run_comparison(args.task, args.out, a.config_of(CompareConfig, args), **more)
+    doc = run_comparison(args.task, args.out, config_of(CompareConfig, args), **more)
     print(doc["table"])
     if args.real:
         print(f"real steps to {doc['threshold']:g} per seed: {doc['real_steps_to_threshold']}")

@@ -8,10 +8,8 @@ import argparse
 import time
 from typing import Any
 
-import diffcontrol.cli._args as a
-
 from ..settings import MODELS, FitConfig, LoopConfig, RecordConfig
-from ._args import FLAG, REQUIRED, add
+from ._args import FLAG, QUIET, REQUIRED, TASK, add, config_of, config_specs, env_arg, say
 
 
 def add_parsers(sub: Any) -> None:
@@ -31,10 +29,10 @@ def add_parsers(sub: Any) -> None:
     add(p,
         ("env_id", str, REQUIRED, "ENV_ID", "a Gymnasium environment id or a task name"),
         ("--task", str, None, "TASK", "the task whose real system ENV_ID is"),
-        *a.config_specs(RecordConfig),
+        *config_specs(RecordConfig),
         ("--out", str, None, "FILE", "a .csv or .npz file"),
         ("--force", FLAG, False, None, "overwrite FILE if it exists"),
-        a.QUIET,
+        QUIET,
     )
     p = sub.add_parser(
         "fit",
@@ -49,13 +47,13 @@ def add_parsers(sub: Any) -> None:
         ),
     )
     add(p,
-        a.TASK,
+        TASK,
         ("--data", str, REQUIRED, "FILE", "recorded trajectories/throws"),
         ("--model", MODELS, REQUIRED, None, "grey box, hybrid or neural"),
         ("--out", str, REQUIRED, "DIR", "output directory"),
-        *a.config_specs(FitConfig),
+        *config_specs(FitConfig),
         ("--force", FLAG, False, None, "replace DIR/fitted.json if it exists"),
-        a.QUIET,
+        QUIET,
     )
     p = sub.add_parser(
         "loop",
@@ -69,11 +67,11 @@ def add_parsers(sub: Any) -> None:
         ),
     )
     add(p,
-        a.TASK,
+        TASK,
         ("--out", str, REQUIRED, "DIR", "output directory"),
         ("--env", str, None, "ENV_ID", "the real system (task's own)"),
-        a.env_arg("a numeric argument of the real environment (repeatable), e.g. g=12"),
-        *a.config_specs(LoopConfig),
+        env_arg("a numeric argument of the real environment (repeatable), e.g. g=12"),
+        *config_specs(LoopConfig),
         ("--resume", FLAG, False, None, "continue an interrupted loop in DIR"),
         ("--quiet", FLAG, False, None, "print only each round's summary"),
     )
@@ -83,8 +81,8 @@ def add_parsers(sub: Any) -> None:
 def cmd_fit(args: argparse.Namespace) -> int:
     from .. import identify, tasks
 
-    more = {"force": args.force, "progress": a.say(args)}
-    task, config = tasks.resolve(args.task), a.config_of(FitConfig, args)
+    more = {"force": args.force, "progress": say(args)}
+    task, config = tasks.resolve(args.task), config_of(FitConfig, args)
     done = identify.fit_dir(task, args.data, args.model, args.out, config, **more)
     print("\n".join(done.lines))
     return 0
@@ -93,8 +91,8 @@ def cmd_fit(args: argparse.Namespace) -> int:
 def cmd_loop(args: argparse.Namespace) -> int:
     from .. import identify, tasks
 
-    config = a.config_of(LoopConfig, args)
-    more = {"env_kwargs": dict(args.env_arg), "resume": args.resume, "progress": a.say(args)}
+    config = config_of(LoopConfig, args)
+    more = {"env_kwargs": dict(args.env_arg), "resume": args.resume, "progress": say(args)}
     identify.loop(tasks.resolve(args.task), args.out, config, env_id=args.env, **more)
     return 0
 
@@ -104,7 +102,7 @@ def cmd_record(args: argparse.Namespace) -> int:
 
     t0 = time.perf_counter()
     task = tasks.resolve(args.task) if args.task else None
-    more = {"task": task, "force": args.force, "progress": a.say(args)}
-    data, out = identify.record_data(args.env_id, a.config_of(RecordConfig, args), args.out, **more)
+    more = {"task": task, "force": args.force, "progress": say(args)}
+    data, out = identify.record_data(args.env_id, config_of(RecordConfig, args), args.out, **more)
     print(f"wrote {out}: {identify.describe(data)} ({time.perf_counter() - t0:.1f} s)")
     return 0
