@@ -4,7 +4,7 @@ pictures, read back, and trained into, for any task (built-in, or the user's own
 A run directory holds ``run.json`` (the task, the settings and how the run was started,
 written when training starts; ``"complete"`` once its files are written), ``checkpoint.npz``
 (for resuming), ``model.json`` (the controller, runnable with NumPy alone), ``metrics.json``
-(what was measured) and whatever pictures the task draws (its ``write_figures`` hook). A
+(what was measured) and whatever pictures the task draws (``_figures.write_figures``). A
 planning controller (``plan_run``) is a run too, with its settings and model in ``model.json``.
 """
 

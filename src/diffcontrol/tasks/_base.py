@@ -68,7 +68,7 @@ class _TaskBase(abc.ABC):
 
     # --- a run: how a trained controller is loaded and judged ---------------------------------
     # What the layers do with a run (evaluate it, draw it, animate it) are their functions
-    # (``evaluation.evaluate_run``, ``runs.write_figures``, ``runs.animate_run``); a task
+    # (``evaluation.evaluate_run``, ``runs._figures.write_figures`` and ``animate_run``); a task
     # overrides them as ``tasks._hooks`` says.
 
     default_eval_episodes: ClassVar[int] = 100
