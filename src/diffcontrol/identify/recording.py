@@ -430,6 +430,4 @@ def describe(data: TrajectoryData) -> str:
     )
 
 
-@record_task.register(Task)
-def _record_gym_episodes(task: Any, episodes: int, **options: Any) -> TrajectoryData:
-    return record_gym(task, episodes, **options)
+record_task.register(Task)(record_gym)
