@@ -7,7 +7,7 @@ The real command line, in this process:
 
 For every seed S and model (grey box starting from gravity 12, pole half-length 0.8 m and a
 7 N push where CartPole-v1 has 9.8, 0.5 m and 10 N; hybrid with the same wrong physics plus a
-network; neural: a network alone), ``identify.loop`` records real steps (random pushes
+network; neural: a network alone), ``runs.loop`` records real steps (random pushes
 first, then the current controller with a random push on 10 % of the steps), fits the model
 to all of them, trains a controller through it and evaluates it on CartPole-v1 over 100
 episodes with reset seeds 1000-1099 (as ``benchmarks/compare.py`` evaluates PPO and DQN),

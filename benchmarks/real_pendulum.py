@@ -7,7 +7,7 @@ The real command line, in this process:
 
 For every seed S and model (grey box starting from g = 8, friction 0.1 where Pendulum-v1 has
 g = 10 and none; hybrid with the same wrong physics plus a network; neural: a network alone),
-``identify.loop`` records real episodes (random torques first, then the current controller
+``runs.loop`` records real episodes (random torques first, then the current controller
 with action noise 0.1 of the half range), fits the model to all of them, trains a controller
 through it and evaluates it on Pendulum-v1 over 100 episodes with reset seeds 1000-1099 (as
 ``benchmarks/compare.py`` evaluates SAC), until a controller reaches -150 over the 100 episodes or after --max-rounds rounds (3). The

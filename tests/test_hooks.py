@@ -66,7 +66,7 @@ class Lazy(Base):
 def test_the_built_in_systems_register_their_run_hooks(name):
     """The trebuchet and the swing-ups are judged and drawn their own way: their plugins
     register for their classes when a hook first meets one."""
-    from diffcontrol.runs._figures import animate_run, write_figures
+    from diffcontrol.plots import animate_run, write_figures
 
     task = diffcontrol.make(name)
     _hooks.load_plugins(type(task))

@@ -69,7 +69,7 @@ def test_loop_refuses_other_spaces_and_unknown_start_before_writing(tmp_path, ca
     assert main(["loop", "pendulum", "--start", "gravity=8", "--out", str(out)]) == 2
     assert "no parameter 'gravity'" in capsys.readouterr().err
     with pytest.raises(ConfigError, match="cannot fit a model of 'blind-pendulum'"):
-        identify.loop(_Blind(), out)  # a task that cannot reconstruct its state
+        diffcontrol.runs.loop(_Blind(), out)  # a task that cannot reconstruct its state
     for flag in ("--explore-noise", "0.1"), ("--real-steps", "100"):
         assert main(["loop", "trebuchet", *flag, "--out", str(out)]) == 2
         assert f"{flag[0]} applies to Gymnasium episodes" in capsys.readouterr().err

@@ -18,9 +18,8 @@ import importlib as _importlib
 import importlib.util as _importlib_util
 
 from . import _gym_ids
+from ._version import __version__ as __version__
 from .errors import ConfigError, DiffcontrolError
-
-__version__ = "0.1.0"
 
 # The public names are imported when first used (PEP 562), so that `import diffcontrol` and
 # `diffcontrol --help` do not import JAX, and so that this module imports none of the

@@ -36,10 +36,10 @@ def default_cache_dir() -> Path:
 def checks_as_nan() -> None:
     """``EQX_ON_ERROR=nan`` unless it is set: Equinox's runtime checks (Diffrax's, inside every
     ODE solve) become NaN instead of host callbacks, so that the persistent cache can store the
-    programs of a continuous-time run (before, it compiled everything again each time). A
-    failed check is then a non-finite value, which the training driver reports. Equinox reads
-    the variable once, when first imported: the command line calls this before any import of
-    JAX; a process that imported Equinox earlier keeps its own setting."""
+    programs of a continuous-time run. A failed check is then a non-finite value, which the
+    training driver reports. Equinox reads the variable once, when first imported: the
+    command line calls this before any import of JAX; a process that imported Equinox earlier
+    keeps its own setting."""
     os.environ.setdefault("EQX_ON_ERROR", "nan")
 
 
@@ -85,9 +85,9 @@ youngest objects every 10,000 net allocations instead of Python's 700 (3.11, 3.1
 thousands of objects, and at Python's thresholds the collector runs hundreds of times while
 a program is traced, the full collections among them walking everything JAX has made; here
 it runs a twentieth as often, and a full collection still comes every million or so net
-allocations, so a long command's cyclic garbage is freed as it runs (docs/benchmarks.md,
-"Fewer garbage collections", has the figures, and those of older generations at 50 and 50,
-tried first). Not set by the library itself: a Python caller's collector is its own."""
+allocations, so a long command's cyclic garbage is freed as it runs (figures in
+docs/benchmarks.md, "Fewer garbage collections"). Not set by the library itself: a Python
+caller's collector is its own."""
 
 
 FAST_COMPILE = {"xla_backend_optimization_level": 1, "xla_cpu_use_fusion_emitters": False}
@@ -96,19 +96,16 @@ older CPU emitters instead of the fusion emitters (which compile every fusion as
 module). For programs that run once per run (a run's start, the reference solve a report
 quotes, the throw a figure draws), where compiling is most of their cost. Each caller names
 those that keep its results: the defaults' bits for a run's start, float rounding where a
-result is only reported or drawn (each caller says what it measured)."""
+result is only reported or drawn (each caller says which)."""
 
 
 ONE_CORE = {"xla_cpu_parallel_codegen_split_count": 1}
 """For a program compiled with the older CPU emitters by a process that may run on one core
 only: XLA splits a CPU program into modules that LLVM compiles in parallel, which on one core
-only adds work. On one core it compiles such programs 10-30 % faster (CartPole's chunk 0.75 ->
-0.63 s, its start 0.46 -> 0.37 s, the swing-ups' evaluations 0.1 s less) with the same bits
-on every program compared (``benchmarks/compile_options.py``) but the trebuchet's evaluation,
-declared with other bits anyway, whose throws round differently again by about 1e-7 (whole
-runs on one core and on two return the same controllers); on two cores the split is
-faster, and for programs with the fusion emitters it gains nothing on one core either, so it
-is left there. ``fast_options`` adds it."""
+only adds work. Without the split the programs keep their bits (the trebuchet's evaluation,
+declared with other bits anyway, rounds its throws differently by about 1e-7). On two cores
+the split pays, and programs with the fusion emitters gain nothing from dropping it, so it is
+left there. ``fast_options`` adds it."""
 
 
 def _one_core() -> bool:

@@ -228,10 +228,8 @@ def _draw_layers(
 
 _DRAW_LAYERS = FastJit(_draw_layers, *FAST_COMPILE, static_argnums=(1, 2, 3))
 """``_draw_layers`` as one compiled program per shape, for a network made outside any trace (a
-model to fit, a loaded file's skeleton): drawn op by op, its weights took one program per
-layer's weight and bias, about 0.13 s of compiling each on one core. On a CPU the same bits
-(checked against the op-by-op code under XLA's defaults, docs/benchmarks.md); not compared on
-a GPU, where only the level applies."""
+model to fit, a loaded file's skeleton): drawn op by op, every layer's weight and bias would
+compile a program of its own. On a CPU it draws the same bits as the op-by-op code."""
 
 
 def _initial_layers(

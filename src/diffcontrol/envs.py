@@ -2,11 +2,11 @@
 
 ``import diffcontrol`` registers one environment per registered task
 (``diffcontrol/Pendulum-v0``, ``diffcontrol/PendulumUnclipped-v0``, ``diffcontrol/CartPole-v0``,
-``diffcontrol/Trebuchet-v0``, and the swing-ups below), so any reinforcement-learning library that takes a Gymnasium
-environment can train on exactly the simulator that diffcontrol differentiates through: the
-same ``task.reset`` distribution, the same ``task.step`` (dynamics, reward, termination) under
-one ``jax.jit``, the same observation, and the task's standard episode length as Gymnasium's
-``max_episode_steps``.
+``diffcontrol/Trebuchet-v0``, and the swing-ups below), so any reinforcement-learning library
+that takes a Gymnasium environment can train on exactly the simulator that diffcontrol
+differentiates through: the same ``task.reset`` distribution, the same ``task.step``
+(dynamics, reward, termination) under one ``jax.jit``, the same observation, and the task's
+standard episode length as Gymnasium's ``max_episode_steps``.
 
 Spaces follow the task's action head:
 
@@ -68,7 +68,7 @@ def _compiled(task: Task, params: Any, nominal: bool) -> tuple[Any, Any]:
     """Jitted ``reset(key)`` and ``step(state, action)`` of ``task`` with ``params`` built in.
 
     The parameters are closed over (constants of the compiled programs): fewer arguments to
-    flatten per call makes a step several times cheaper to dispatch. The programs of the
+    flatten per call makes a step much cheaper to dispatch. The programs of the
     nominal parameters are shared by every environment of the task, so making many
     environments (an evaluation pool) compiles once.
     """

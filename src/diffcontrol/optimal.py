@@ -10,9 +10,8 @@ actions ``a`` on an even grid between the task's action bounds, and ``V_{t+1}`` 
 points by multilinear (for two dimensions bilinear) interpolation. The greedy controller
 ``a_t(x) = argmax_a r(x, a) + V_{t+1}(f(x, a))`` at the true, off-grid state is an achievable
 controller, so its return on the exact dynamics is a lower bound on the best mean return; the
-value table's own prediction ``V_0`` converges to the same figure as the grid is refined (for
-Pendulum-v1 on Gymnasium's seeds 0-99 both are about -132.8 with 801 x 801 points and 41
-torques).
+value table's own prediction ``V_0`` converges to the same figure as the grid is refined
+(docs/planning.md has Pendulum-v1's).
 
 Everything runs under ``jit``: one ``lax.scan`` over time, inside it one over the actions (a
 running maximum, so memory is a few arrays of the grid's size whatever the number of actions),

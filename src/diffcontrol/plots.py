@@ -1,4 +1,6 @@
-"""PNG plots: the learning curve, and the states and actions of one rollout."""
+"""PNG plots: the learning curve, the states and actions of one rollout, and what a run
+directory shows of a task: its pictures (``write_figures``) and its animation (``animate_run``),
+functions of a task that a task overrides as ``tasks._hooks`` says."""
 
 from __future__ import annotations
 
@@ -11,8 +13,11 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from .evaluation import Recording  # noqa: E402
-from .tasks import Task  # noqa: E402
+from .animation import animate, can_draw  # noqa: E402
+from .errors import ConfigError  # noqa: E402
+from .evaluation import Recording, record_episode  # noqa: E402
+from .tasks import ContinuousTask, Task  # noqa: E402
+from .tasks._hooks import task_hook  # noqa: E402
 
 
 def _save(fig: Any, path: str | Path) -> Path:
@@ -140,3 +145,41 @@ def sweep_plot(
     ax.legend(loc="best", fontsize=8)
     fig.tight_layout()
     return _save(fig, path)
+
+
+@task_hook
+def write_figures(task: Any, run: Any, out: Any, animation: bool = True) -> list[str]:
+    """Write the run's pictures into the directory ``out``; returns the file names.
+
+    Default: one Gymnasium episode (reset seed 0, in the run's real system where it has one)
+    as ``rollout.png`` (states, actions, rewards) and, where the task draws itself (its
+    ``frames``) and ``animation``, ``rollout.gif``; none for a continuous-time task.
+    """
+    rec = record_episode(run.policy, task, seed=0, real=run.real_env)
+    rollout(rec, task, out / "rollout.png")
+    files = ["rollout.png"]
+    if animation and can_draw(task):
+        animate(rec, task, out / "rollout.gif")
+        files.append("rollout.gif")
+    return files
+
+
+@write_figures.register(ContinuousTask)
+def _no_figures(task: Any, run: Any, out: Any, animation: bool = True) -> list[str]:
+    return []
+
+
+@task_hook
+def animate_run(task: Any, run: Any, path: Any, seed: int = 0, **options: Any) -> str:
+    """Write an animation of the run to ``path``; returns a one-line description.
+
+    Default: one Gymnasium episode with reset seed ``seed``, drawn by the task's ``frames``.
+
+    Raises:
+        ConfigError: the task does not draw itself.
+    """
+    if not can_draw(task):
+        raise ConfigError(f"task {task.name!r} cannot draw itself (it defines no frames())")
+    rec = record_episode(run.policy, task, seed=seed, real=run.real_env)
+    animate(rec, task, path)
+    return f"return {rec.total_return:.1f}, {len(rec.rewards)} steps"

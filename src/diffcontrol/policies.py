@@ -45,6 +45,7 @@ from typing import Any
 import jax
 import numpy as np
 
+from ._version import __version__
 from .controllers import ACTIVATIONS, HEADS, MLPController
 from .errors import ConfigError, ModelFileError
 from .io import now_iso, read_json
@@ -92,7 +93,6 @@ def controller_to_dict(controller: MLPController, task: Any, metadata: dict | No
 def model_document(task: Any, controller: MLPController, config: Any, metrics: dict) -> dict:
     """The ``model.json`` document of a controller trained for ``task`` with ``config``; its
     metadata records the version, the seed, the training time and the settings."""
-    from . import __version__
 
     source = getattr(task, "source", None)  # the import path of a user's task
     return controller_to_dict(
@@ -131,7 +131,7 @@ def planner_document(
          "metadata": {...}}
 
     It has no ``network``: the controller is the task's model and a solver, so it runs with
-    JAX and the task, not with NumPy alone (``runs.planner_policy`` builds it back).
+    JAX and the task, not with NumPy alone (``mpc.planner_policy`` builds it back).
     """
     controller = {"type": "planner", "settings": dict(settings), "model": dict(model)}
     if value is not None:

@@ -112,8 +112,8 @@ SOLVERS: dict[str, str] = {
 }
 """Adaptive solvers by name (their Diffrax classes): explicit Runge-Kutta pairs, and
 ``kvaerno5`` (implicit, for stiff closed loops such as sharp Coulomb friction). Diffrax is
-imported by the first solve, not with this module: a discrete-time run never loads it
-(a quarter of a second of every command's start-up)."""
+imported by the first solve, not with this module: a discrete-time run never loads it,
+and no command's start-up waits for it."""
 
 # How a loss is differentiated through the solve (``GRADIENT_METHODS``):
 #

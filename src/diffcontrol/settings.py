@@ -1,5 +1,5 @@
 """Settings of the work around training: a recording (``identify.record_data``), a model fit
-(``identify.fit_dir``), a loop on a real system (``identify.loop``), a comparison with RL
+(``identify.fit_dir``), a loop on a real system (``runs.loop``), a comparison with RL
 (``compare.run_comparison``) and a planning controller (``runs.plan_run``).
 Frozen, typed dataclasses, as ``config`` holds the training ones: they validate on
 construction, and their fields are the command line's flags (``diffcontrol record/fit/loop/compare``:
@@ -137,7 +137,7 @@ class FitConfig(_Settings):
 
 @dataclass(frozen=True)
 class LoopConfig(_Settings):
-    """Settings of ``identify.loop``: record -> fit -> train on a real system, a few rounds."""
+    """Settings of ``runs.loop``: record -> fit -> train on a real system, a few rounds."""
 
     model: str = _opt("what to fit", "params", choices=MODELS)
     names: tuple[str, ...] | None = _opt(

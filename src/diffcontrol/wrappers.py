@@ -3,8 +3,8 @@
 ``PendulumFriction`` adds viscous joint friction to Gymnasium's own ``Pendulum-v1`` (which has
 none), exactly where ``diffcontrol.systems.pendulum`` puts it: a torque ``-friction *
 theta_dot`` added to the clipped torque. With a different gravity
-(``gymnasium.make("Pendulum-v1", g=12.0)``) it is the mismatched "real" pendulum of issue 6,
-registered as ``diffcontrol/PendulumFriction-v0``::
+(``gymnasium.make("Pendulum-v1", g=12.0)``) it is the mismatched "real" pendulum of the
+fitting demonstration, registered as ``diffcontrol/PendulumFriction-v0``::
 
     env = gymnasium.make("diffcontrol/PendulumFriction-v0", g=12.0, friction=0.1)
     # or, on an environment you already have:

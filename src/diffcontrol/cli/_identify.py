@@ -1,6 +1,6 @@
 """``diffcontrol record``, ``fit`` and ``loop``: trajectories recorded to CSV or NPZ
 (``identify.record_data``), a model of a task's system learnt from them (``identify.fit_dir``),
-and record -> fit -> train on a real system (``identify.loop``)."""
+and record -> fit -> train on a real system (``runs.loop``)."""
 
 from __future__ import annotations
 
@@ -89,11 +89,11 @@ def cmd_fit(args: argparse.Namespace) -> int:
 
 
 def cmd_loop(args: argparse.Namespace) -> int:
-    from .. import identify, tasks
+    from .. import runs, tasks
 
     config = config_of(LoopConfig, args)
     more = {"env_kwargs": dict(args.env_arg), "resume": args.resume, "progress": say(args)}
-    identify.loop(tasks.resolve(args.task), args.out, config, env_id=args.env, **more)
+    runs.loop(tasks.resolve(args.task), args.out, config, env_id=args.env, **more)
     return 0
 
 

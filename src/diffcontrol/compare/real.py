@@ -2,7 +2,7 @@
 
 ``diffcontrol compare`` counts the simulated episodes diffcontrol trains on, which is right
 when the simulator is the system. Here diffcontrol may not use the task's simulator as the
-system: it learns a model by acting on the real Gymnasium environment (``identify.loop``:
+system: it learns a model by acting on the real Gymnasium environment (``runs.loop``:
 explore, fit, train through the fit, act) and every real environment step it takes is
 counted: the random exploration and every episode its controllers record (with exploration
 noise); the evaluation episodes are not, as for RL. A round records a budget of real steps
@@ -85,12 +85,12 @@ def run_real_comparison(
         start: the wrong physics the grey box and hybrid start from (default the task's
             ``real_start``: Pendulum g = 8, friction 0.1; CartPole gravity 12, length 0.8,
             force_mag 7).
-        members: networks of the hybrid's and the neural model's ensembles (``identify.loop``;
+        members: networks of the hybrid's and the neural model's ensembles (``runs.loop``;
             1, one network; the grey box has none).
         controllers: what acts on the real system each round, each a row of its own:
             ``train`` (an MLP trained through the fitted model) and/or ``plan`` (a planner
             through it, ``task.loop_planner()``).
-        explore_noise: action noise while a controller records (``identify.loop``).
+        explore_noise: action noise while a controller records (``runs.loop``).
         updates: gradient updates of each round's training (default the task's, which stops
             early at its target return).
         fit_steps: Adam steps of each round's fit (default the model's: ``LoopConfig``).
@@ -104,7 +104,7 @@ def run_real_comparison(
         ConfigError: a task without a threshold, an unknown model, an RL file of another
             evaluation protocol; RunDirectoryError: ``out_dir`` holds other things.
     """
-    from ..identify import loop
+    from ..runs import loop
     from ..settings import LoopConfig
 
     task = resolve(task) if isinstance(task, str) else task
@@ -251,7 +251,7 @@ def _as_run(
     return {
         "method": f"diffcontrol ({label})",
         "algo": "real-system loop",
-        "source": "identify.loop on the real environment",
+        "source": "runs.loop on the real environment",
         "seed": seed,
         "config": {**state["settings"], "start": state.get("start")},
         "env_steps": last["env_steps"],

@@ -1,4 +1,4 @@
-"""Learning models of a system from recorded data, and the loop that uses them.
+"""Learning models of a system from recorded data.
 
 - **Data** (``identify.data``): the trajectory table ``TrajectoryData`` and its CSV/NPZ
   files (``diffcontrol-trajectories``), every system's data (a single measured outcome is a
@@ -17,13 +17,11 @@
   ``prediction.png``); ``read_fitted`` and ``fitted_model`` read it back, and
   ``real_system`` names the system its data came from (an environment id read from a file is
   used only where it needs no import).
-- **The loop**: ``loop(task, out, LoopConfig(...))``: record -> fit -> train, a few rounds
-  (``FitConfig`` and ``LoopConfig`` are in ``diffcontrol.settings``).
+(The record -> fit -> train loop that uses them is ``diffcontrol.runs.loop``.)
 """
 
 from . import data
 from ._fit import FitDir, fit, fit_dir, save_fit
-from ._loop import loop
 from ._shooting import HORIZONS, MODEL_TYPES, NETWORK_MODELS, FitResult
 from .data import TrajectoryData, concat, read_trajectories
 from .ensemble import Ensemble, mean_spread
@@ -69,7 +67,6 @@ __all__ = [
     "fit_parameters",
     "fitted_model",
     "fitted_physics",
-    "loop",
     "mean_spread",
     "model_task",
     "predict",

@@ -11,6 +11,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from .._version import __version__
 from ..errors import ConfigError, RunDirectoryError
 from ..settings import FitConfig
 from ._routes import model_route
@@ -184,7 +185,6 @@ def save_fit(
 ) -> dict:
     """Write ``out/fitted.json``: the format's head, ``body`` (the route's model, settings,
     data and prediction errors) with how the fit ended, and when and by what; returns it."""
-    from .. import __version__
     from ..io import now_iso, write_json, write_json_new
 
     head = {"format": FITTED_FORMAT, "version": 1, "task": task.name, "model": result.model_type}

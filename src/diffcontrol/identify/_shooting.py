@@ -187,7 +187,7 @@ def standard_errors(residual_fn, values: jax.Array, *args: Any, size: int | None
     else:
         r, jac = residual_fn(values), jax.jacfwd(residual_fn)(values)  # [R], [R, p]
     # The rest in NumPy (float64): a few small matrices, where JAX would compile a program
-    # for each operation (about 0.4 s on one core, once per process).
+    # for each operation.
     r, jac = np.asarray(r, np.float64), np.asarray(jac, np.float64)
     dof = max((r.size if size is None else size) - values.size, 1)
     sigma2 = np.sum(r**2) / dof

@@ -85,9 +85,9 @@ def _hold_solve(model: Any, state, force, dt, substeps: int):
 
     Plain JAX rather than ``diffrax.diffeqsolve``: with a fixed step there is nothing to adapt,
     and Diffrax's step loop (checkpointed ``while_loop``s, also over the stages of one step)
-    made the fit about 10x slower under ``vmap`` over thousands of windows and cannot be
-    differentiated in forward mode, which the Levenberg-Marquardt refinement and the standard
-    errors use. The recorded "real" data is solved adaptively by Diffrax.
+    is much slower under ``vmap`` over thousands of windows and cannot be differentiated in
+    forward mode, which the Levenberg-Marquardt refinement and the standard errors use. The
+    recorded "real" data is solved adaptively by Diffrax.
     """
     h = dt / substeps
 

@@ -22,6 +22,7 @@ import numpy as np
 from gymnasium import spaces
 
 from .. import io
+from .._version import __version__
 from ..envs import make_env
 from ..errors import ConfigError
 from ..io import now_iso
@@ -237,7 +238,6 @@ def record(
     env.close()
     if source is None:
         source = "random actions" if policy is None else f"policy {policy!r}"
-    from .. import __version__
 
     metadata = {
         "env_id": env_id,

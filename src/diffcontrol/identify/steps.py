@@ -20,14 +20,10 @@ steps (optimistix) on the residuals. Everything runs in float64.
 ``sqrt(diag(cov))``. The overlapping windows reuse every recorded point up to ``window`` times
 and carry the noise of their start state through the whole window, so the residuals are not
 independent and this textbook formula is too narrow; the covariance is therefore multiplied by
-``window`` (each recorded point counted once). Checked against an episode-clustered sandwich
-estimate on 8 noisy Pendulum data sets: the two agree within a factor of 2, and the truth lies
-within 1.5 of these standard errors in every one (``benchmarks/fit_pendulum.py``: within 1.2).
-The standard errors do not include the small bias that sensor noise in the start states
-causes (errors in variables): about +0.04 % on g and +0.4 % on the friction in that benchmark.
-Parameters that the data cannot tell apart give a singular ``J^T J`` and the standard error
-``inf`` (for the Pendulum, g, m and l enter only as ``g / l`` and ``1 / (m l^2)``: fit at most
-two of them).
+``window`` (each recorded point counted once). The standard errors do not include the small
+bias that sensor noise in the start states causes (errors in variables). Parameters that
+the data cannot tell apart give a singular ``J^T J`` and the standard error ``inf`` (for the
+Pendulum, g, m and l enter only as ``g / l`` and ``1 / (m l^2)``: fit at most two of them).
 
 **Divergence** is reported, not hidden: the best parameters seen so far are kept, a
 non-finite loss stops the fit with ``diverged=True`` and a message, and no NaN is returned.
@@ -137,9 +133,8 @@ octave their number lies in, where that is larger)."""
 def padded_size(n: int) -> int:
     """``n`` rounded up to a multiple of ``PAD_ROWS`` (256), or above 2,048 of a quarter of its
     octave (2,560, 3,072, ..., 5,120, 6,144, ...): at most 255 rows or a quarter more of work,
-    and one compiled fit for the data sets of a round's step budget (CartPole's 250 real steps
-    are 9 to 15 episodes: 115 to 169 windows of 10 steps, all padded to 256; a neural model's
-    1,000 steps 550 to 650 windows, padded to 768)."""
+    and one compiled fit for the data sets of a round's step budget (a CartPole round of 250
+    real steps gives 115 to 169 windows of 10 steps, all padded to 256)."""
     step = max(PAD_ROWS, 2 ** ((max(n, 1) - 1).bit_length() - 3))
     return -(-n // step) * step
 

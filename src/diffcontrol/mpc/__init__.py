@@ -24,6 +24,7 @@ differentiable in the state and the model's parameters, through the solver's ite
 from ._config import planner_from_config
 from ._discretise import DiscretisedTask, discretise, ode_closed_loop, ode_episode
 from ._distil import distil, labelled_episodes
+from ._document import make_planner_policy, planner_policy, planning_model
 from ._ilqr import ILQR
 from ._learn import ValueResult, closed_loop_loss, learn_value, load_value
 from ._planner import Planner, make_planner
@@ -50,7 +51,10 @@ __all__ = [
     "learn_value",
     "load_value",
     "make_planner",
+    "make_planner_policy",
     "ode_closed_loop",
     "ode_episode",
     "planner_from_config",
+    "planner_policy",
+    "planning_model",
 ]

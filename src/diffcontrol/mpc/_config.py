@@ -40,8 +40,8 @@ def planner_from_config(
     grid optimum (``optimal.solve`` with that many points per state axis and
     ``config.value_levels`` actions, solved here with the same model and parameters; only
     ``V_0`` is kept). The table is solved again each time a planner is built from a file,
-    rather than stored: it is deterministic given the settings, and for Pendulum's 401 grid it
-    takes about half a minute on one core against 130 MB of values. A learned terminal value
+    rather than stored: it is deterministic given the settings, and a fine grid's values would
+    dwarf the file. A learned terminal value
     (``value``, an ``mpc.ValueNetwork`` from ``mpc.learn_value``) is stored: it is the terminal
     cost instead.
 

@@ -201,8 +201,9 @@ def distil(
         A ``diffcontrol.TrainResult`` (``result.save(dir)``, then ``diffcontrol.load(dir)``
         and ``diffcontrol.evaluate``), whose ``metrics["curve"]`` has one point per round
         (the MLP's evaluation return, its action error on the round's new states before the
-        fit and on all the data after it, how many states were labelled) and ``metrics["distillation"]`` the settings, the planner's own
-        simulated return and the number of planner calls.
+        fit and on all the data after it, how many states were labelled) and
+        ``metrics["distillation"]`` the settings, the planner's own simulated return and the
+        number of planner calls.
 
     Raises:
         ConfigError: a count out of range, ``beta`` outside ``[0, 1]``, a non-positive learning

@@ -1,5 +1,5 @@
 """Planner run directories: ``plan_run`` (``diffcontrol plan``) writes a planning controller as
-a run, and ``planner_policy`` builds it back from ``model.json`` (``diffcontrol.load``,
+a run, and ``mpc.planner_policy`` builds it back from ``model.json`` (``diffcontrol.load``,
 ``evaluate``, ``animate``).
 
 A planner's ``model.json`` (see ``policies.planner_document``) holds its settings and the model it
@@ -22,10 +22,12 @@ from typing import Any
 import numpy as np
 
 from .. import io, policies
+from .._run_files import Run, mark_complete, release_claim, save_run
+from .._version import __version__
 from ..errors import ConfigError, ModelFileError
+from ..mpc import ValueNetwork, make_planner_policy
 from ..settings import PlanConfig
-from ..tasks import AnyTask, resolve
-from ._files import Run, mark_complete, release_claim, save_run
+from ..tasks import AnyTask, resolve, task_params
 
 
 @dataclasses.dataclass
@@ -43,8 +45,6 @@ class PlanResult:
     value: Any = None  # a learned mpc.ValueNetwork as the terminal cost, stored in model.json
 
     def model_document(self, metrics: dict) -> dict:
-        from .. import __version__
-
         meta = {"diffcontrol_version": __version__, "created": metrics["created"]}
         value = None if self.value is None else self.value.to_json()
         problem = self.policy.planner.problem  # the planner's own bounds (the task may have none)
@@ -52,75 +52,6 @@ class PlanResult:
         doc = policies.planner_document(self.task, self.plan.to_json(), self.model, meta, value)
         doc["action"].update(low=bounds[0], high=bounds[1])
         return doc
-
-
-def planning_model(task: AnyTask, model: dict, where: str = "model.json") -> tuple[AnyTask, Any]:
-    """The task (with its simulator, or a fitted hybrid/neural model's) and the parameters a
-    planner's ``model`` entry names.
-
-    Raises:
-        ModelFileError: a fitted model of another task, or a malformed entry.
-    """
-    from ..training import task_params
-
-    if model.get("kind") == "simulator":
-        return task, task_params(task)
-    from ..identify.fitted import fitted_physics, fitted_task
-
-    doc = model.get("fitted")
-    if model.get("kind") != "fitted" or not isinstance(doc, dict):
-        raise ModelFileError(f"{where}: the planner's model is neither the simulator nor fitted")
-    try:
-        fitted_physics(task, doc)  # refuses a model of another task
-    except ConfigError as e:
-        raise ModelFileError(f"{where}: {e}") from None
-    if doc.get("model") == "params":
-        return task, task_params(task, tuple(sorted(doc["all_parameters"].items())))
-    fitted = fitted_task(task, doc)  # its default parameters are the model
-    return fitted, fitted.default_params()
-
-
-def planner_policy(task: AnyTask, doc: dict, progress: Callable[[str], None] | None = None) -> Any:
-    """The ``mpc.PlannerPolicy`` of a planner's ``model.json`` document, for ``task`` (needs
-    JAX; a terminal value grid is solved again from the stored settings).
-
-    Raises:
-        ModelFileError: the document is of another task, or its settings do not fit the task.
-    """
-    if doc["task"] != task.name:
-        raise ModelFileError(
-            f"the planner in this model.json plans through task {doc['task']!r}'s model, not "
-            f"{task.name!r}'s; open it with its own task"
-        )
-    config = PlanConfig.from_json(doc["controller"]["settings"])
-    value = None
-    if "value" in doc["controller"]:
-        from ..mpc import ValueNetwork
-
-        try:
-            value = ValueNetwork.from_json(task, doc["controller"]["value"])
-        except ModelFileError as e:
-            raise ModelFileError(f"model.json: {e}") from None
-    try:
-        return _policy(task, config, doc["controller"]["model"], progress, value)
-    except ConfigError as e:
-        raise ModelFileError(
-            f"model.json: task {task.name!r} cannot take its planner: {e}"
-        ) from None
-
-
-def _policy(
-    task: AnyTask, config: PlanConfig, model: dict, progress: Any, value: Any = None
-) -> Any:
-    """A ``PlannerPolicy``, or for a planner through a continuous task's discretisation a
-    ``SampledPlannerPolicy`` (``policy(state)``, held for ``dt``)."""
-    from ..mpc import DiscretisedTask, PlannerPolicy, SampledPlannerPolicy, planner_from_config
-
-    model_task, params = planning_model(task, model)
-    planner = planner_from_config(model_task, config, params, progress=progress, value=value)
-    if isinstance(planner.task, DiscretisedTask):
-        return SampledPlannerPolicy(planner)
-    return PlannerPolicy(planner)
 
 
 def read_value(task: AnyTask, value: Any) -> Any:
@@ -131,8 +62,6 @@ def read_value(task: AnyTask, value: Any) -> Any:
         ConfigError: a network of another task, or something else; ModelFileError: a file
             that is missing, not JSON, or not a value network of ``task`` of sound shapes.
     """
-    from ..mpc import ValueNetwork
-
     if isinstance(value, str | Path):
         doc = io.read_json(value, "value network")
         try:
@@ -195,8 +124,6 @@ def plan_run(
     """
     import time
 
-    from ..training import task_params
-
     task = resolve(task) if isinstance(task, str) else task
     config = task.default_plan_config() if config is None else config
     unknown = set(settings or {}) - {f.name for f in dataclasses.fields(PlanConfig)}
@@ -219,7 +146,7 @@ def plan_run(
     out = io.prepare_run_dir(out_dir, run, resume=False)
     try:
         t0 = time.perf_counter()
-        policy = _policy(task, config, info, say, value)
+        policy = make_planner_policy(task, config, info, say, value)
         metrics = {
             "created": io.now_iso(),
             "planner": {"settings": config.to_json(), "build_seconds": time.perf_counter() - t0},

@@ -21,10 +21,10 @@ from pathlib import Path
 from typing import Any
 
 from .. import io, policies
+from .._run_files import METRICS_FILE, MODEL_FILE, mark_complete, read_run_file, save_run
 from .._shell import command as shell_command
 from ..errors import ConfigError, RunDirectoryError
 from ..tasks import named_by_file, resolve
-from ._files import METRICS_FILE, MODEL_FILE, mark_complete, read_run_file, save_run
 
 SWEEP_FILE = "sweep.json"
 SWEEP_FORMAT = "diffcontrol-sweep"
@@ -154,7 +154,7 @@ def sweep_dir(
     best = max(range(len(rows)), key=lambda i: _rank(rows[i]["eval_return"]))
     best_dir = out / doc["members"][best]
     if not (best_dir / "learning_curve.png").exists():
-        from ._files import open_run
+        from ._open import open_run
 
         run = open_run(best_dir, the_task, real=None)
         member = _as_result(run)

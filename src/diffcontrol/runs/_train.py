@@ -16,10 +16,10 @@ from pathlib import Path
 from typing import Any
 
 from .. import io
+from .._run_files import Run, mark_complete, read_run_file, release_claim, save_run
 from .._shell import command as shell_command
 from ..errors import ConfigError, Interrupted, RunDirectoryError, TrainingDiverged
 from ..tasks import AnyTask, named_by_file, resolve
-from ._files import Run, mark_complete, read_run_file, release_claim, save_run
 
 
 class RunInterrupted(Interrupted):

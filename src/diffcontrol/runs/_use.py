@@ -7,9 +7,10 @@ from pathlib import Path
 from typing import Any
 
 from .. import io
+from .._run_files import Run
 from ..errors import ConfigError
 from ..evaluation import evaluate_run
-from ._files import Run, open_run
+from ._open import open_run
 
 
 def evaluate_dir(
@@ -116,7 +117,7 @@ def animate_dir(
     """Write the animation of the controller in ``run_dir`` (``animate_run``) to ``out`` (a
     new ``.gif``; default ``run_dir/rollout.gif``, replaced). ``seed`` resets the episode;
     ``target`` and ``wind`` are an aiming task's. Returns the path and what it shows."""
-    from ._figures import animate_run  # matplotlib
+    from ..plots import animate_run  # matplotlib
 
     run = open_run(run_dir, task=task)
     path = Path(out) if out else Path(run_dir) / "rollout.gif"

@@ -32,15 +32,11 @@ class TrebuchetParams(eqx.Module):
 
     The throw runs as three scans, one a phase: at most ``ground_steps`` steps of ``dt`` on
     the ground, ``hang_steps`` on the sling, and ``max_steps`` in all. A throw that runs out
-    of a budget reports ``landed=False``. The defaults come from sweeps in float32 (the
-    original single scan without budgets over winds -20 to 20 m/s in steps of 2, angles
-    0.05-90 degrees in steps of 1 and 21-600 lb in steps of 10; this implementation over the
-    same grid, 10^5 uniform random throws in that box, and fine grids of its corners).
-    Lift-off takes 14 steps at 600 lb, 36 at 30 lb, 44 at 25 lb and 57 at 21 lb, whatever the
-    wind and angle. Release follows after at most 40 steps from 30 lb up (47 at 25 lb). The
-    longest flight takes 422 steps, and the slowest throw 452 in all (7.5 s: about 20 m/s of
-    tail wind, 67 degrees and 530 lb). So every throw with ``|wind| <= 20`` m/s and 25-600 lb
-    lands within the default budgets, as in the original.
+    of a budget reports ``landed=False``. The defaults cover sweeps in float32 over winds of
+    -20 to 20 m/s, angles of 0.05-90 degrees and 21-600 lb: from 25 lb up, lift-off takes at
+    most 44 steps, release at most 47 more, and the slowest throw 452 in all. So every throw
+    with ``|wind| <= 20`` m/s and 25-600 lb lands within the default budgets, as in the
+    original.
     """
 
     pivot_height: float = 5.0 * FT
@@ -77,9 +73,7 @@ class TrebuchetParams(eqx.Module):
     """Most steps of ``dt`` in a whole throw (10 s at the default ``dt``), and ``simulate``'s
     per-step arrays have ``max_steps + 1`` rows. The flight's scan has ``max_steps - 2``
     steps (a throw spends at least one on the ground and one on the sling), so that the flight
-    gets every step the earlier phases leave, as in the original. The flight is about 40 % of
-    the cost of a batched gradient: ``max_steps=460`` still lands every throw of the sweeps
-    above, and saves about 10 % of it."""
+    gets every step the earlier phases leave, as in the original."""
     ground_steps: int = eqx.field(static=True, default=45)
     """Most steps on the ground, lift-off (or the slack sling) included (0.75 s)."""
     hang_steps: int = eqx.field(static=True, default=50)

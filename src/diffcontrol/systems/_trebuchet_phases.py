@@ -14,9 +14,8 @@ location code, which does not test them again. The same expression can round dif
 different compiled contexts (vectorised or not, in a loop or unrolled, fused one way or
 another), so a value near 0 could pass a test in one place and fail it in another. For the
 same reason the root finder accepts a Newton step that leaves its bracket by rounding: once
-converged, the sign of the test is noise. Bisecting there, as the original does, moved a root
-found to rounding by 0.003 of a step in a case seen (in vmapped code), and the one Newton step
-after the search left 1e-5 m of error in the distance (in float64).
+converged, the sign of the test is noise, and bisecting on it, as the original does, would
+move a converged root.
 """
 
 from __future__ import annotations
@@ -33,7 +32,7 @@ rounding."""
 
 # Rematerialise each step in the backward pass, except for the event tests' outcomes:
 # recomputing a step is cheaper than storing its many small intermediates, and memory stays
-# O(carry). Saving the outcomes spares the backward pass the tests (about 10 % of its time).
+# O(carry). Saving the outcomes spares the backward pass the tests.
 _REMAT = jax.checkpoint_policies.save_only_these_names("event")
 
 

@@ -333,7 +333,7 @@ def shoot(
     be wrong, absurd or NaN (quirk 5; ``simulate`` reports ``diverged``). At
     ``(-2, 45, 200)`` the distance is 74.76 m and the gradient is ``(4.025, -0.9964, 0.05037)``;
     the post reports ``(4.02, -0.99, 0.051)``. With three inputs, forward mode (``jax.jacfwd``,
-    as the original's ForwardDiff) costs about half of ``jax.grad`` on a CPU.
+    as the original's ForwardDiff) is the cheaper one on a CPU.
     """
     p = params or TrebuchetParams()
     run = jnp.vectorize(lambda w, a, m: _run(w, a, m, p, record=False))

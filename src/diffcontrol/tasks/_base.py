@@ -339,8 +339,8 @@ class Task(_TaskBase):
         """The planner (a ``PlanConfig``) that acts through a fitted model in ``loop
         --controller plan`` and in ``compare --real``'s planner rows. Default: box-iLQR with
         H = 10 and the terminal cost ``-V_0`` of a 201-point grid optimum solved through the
-        fitted model, where the task has a state grid (the Pendulum; measured in
-        docs/planning.md), else ``default_plan_config()``."""
+        fitted model, where the task has a state grid (the Pendulum; see docs/planning.md),
+        else ``default_plan_config()``."""
         from ..settings import PlanConfig
 
         if self.state_grid(self.default_params()):

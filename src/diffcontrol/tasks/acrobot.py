@@ -34,49 +34,17 @@ class Acrobot(Task):
       it, whose sum is a soft time-to-goal: it teaches when to cross the line, which pure
       pumping does not. Its slope is non-zero only within a few ``s`` of the line, where the
       pumping has brought the tip.
-    - ``power``: the pumping term alone (learns the ``tau = sign(theta2_dot)`` pump, about
-      -84 in Gymnasium).
+    - ``power``: the pumping term alone (learns the pump ``tau = sign(theta2_dot)``).
 
-    Why not the tip height or the energy themselves: near the hanging rest state both are
-    quadratic in the swing's amplitude, their gradient vanishes there, and training on them
-    (tried: a soft hinge on ``h``, the squared energy shortfall) settles on standing still.
-    Training ranks evaluation points by Gymnasium's return in the simulator (``keep_best``),
-    so the loss only has to lead there.
+    Not the tip height or the energy themselves: near the hanging rest state both are
+    quadratic in the swing's amplitude, so their gradient vanishes there and training on them
+    settles on standing still. Training ranks evaluation points by Gymnasium's return in the
+    simulator (``keep_best``), so the loss only has to lead there.
 
-    The defaults train a population of 4 controllers side by side (``population=4``): from
-    some initialisations the untrained controller rests where the ``pump`` gradient is about
-    zero and never starts swinging (training seed 3 alone: -500); the best of four
-    swung up on every training seed 0-4 (Gymnasium, seeds 0-99: -81 to -85). That still
-    misses the issue's -80 by 1 to 5 (the hand policy ``sign(theta2_dot - 0.4 theta1_dot)``:
-    -78). Tried on some or all of seeds 0-4, none at -80 on every seed: population 8; goal weight
-    ``w`` 4, 6, 10 or 15 and softness ``s`` 1; 100-step windows; the power with the first
-    link's share weighted up, ``-tau (theta2_dot - k theta1_dot)``, ``k`` 0.25 or 0.4; the
-    power gated off above 35 J; a lower learning rate over twice the updates. Also tried, as a
-    second phase from the pumping controllers (windows 10 to 100, batch 128, learning rate
-    1e-4 to 1e-3): the soft expected episode length ``sum_t S_t`` with the soft survival
-    ``S_t = prod_{u <= t} (1 - sigmoid((h_u - 1) / s))``, ``s`` 0.2 to 0.5, and the ``pump``
-    loss gated by ``S_t``; in the first phase, the power softly gated off above 60 J, a
-    bigger goal weight with a sharper step, and Gumbel noise on the logits while training.
-    None was clearly better than the ``pump`` defaults over many starts: the soft episode
-    length's gradient through 10 to 100 chaotic steps made the controllers slower, not faster
-    (the noise only stopped that, and kept every population member from resting). And one
-    step of policy iteration with the simulator (Bertsekas' rollout: each action tried, then
-    the trained controller to the goal), distilled by DAgger with cross-entropy over 1 to 3
-    rounds: the rollout teacher itself scores -64 to -67, but its labels change under 0.01 rad
-    perturbations and no network learns them (held-out agreement about 50 %, as the
-    controller's own), and neither does a fit weighted by how much the choice matters
-    (cost-sensitive classification). Evolution strategies on Gymnasium's return itself, after
-    BPTT, come closest but not to the bar on every seed, at about five times the time; figures in
-    docs/benchmarks.md, "Acrobot".
-
-    Note that the power term pays for swinging on rather than finishing (a restarted episode
-    gains little power), which the goal term only offsets within ``s`` of the line: the
-    longest episodes (about 5 % over 120 steps) hold one torque while the first link spins at
-    its speed limit, which turns the motor's work into the clip's losses.
-
-    The bar is a mean over one fixed set of 100 starts, and the hand policy's -78 there is
-    its luckiest block of 100 seeds (``benchmarks/acrobot.py --hand-policy``); over seeds
-    0-999 it scores about -82 and the trained controllers -82 to -84 (docs/benchmarks.md).
+    The power term pays for swinging on rather than finishing, which the goal term only
+    offsets within ``s`` of the line: the longest episodes hold one torque while the first
+    link spins at its speed limit, which turns the motor's work into the clip's losses.
+    Figures, and the losses compared with these, are in docs/benchmarks.md, "Acrobot".
     """
 
     positive_params = (
@@ -84,8 +52,7 @@ class Acrobot(Task):
         "link_com_pos_2", "link_moi", "dt", "max_vel_1", "max_vel_2",
     )  # fmt: skip
     name = "acrobot"
-    # benchmarks/compile_options.py: the older emitters change the chunk's bits and slow the
-    # evaluation 2.7x
+    # Not the older emitters: they change the chunk's bits and slow the evaluation.
     fast_compile = {
         "chunk": ("xla_backend_optimization_level",),
         "evaluate": ("xla_backend_optimization_level",),

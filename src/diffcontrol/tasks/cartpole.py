@@ -26,9 +26,8 @@ class CartPole(Task):
     """
 
     name = "cartpole"
-    # benchmarks/compile_options.py: the evaluation keeps its bits; the chunk's change (the
-    # weights by up to 3e-6), but whole runs (--runs) give the documented returns, the
-    # same episodes to 475 and the same returned update, and it compiles in 0.7 s, not 1.9 s
+    # The evaluation keeps its bits; the chunk's weights round differently (by up to 3e-6),
+    # but whole runs give the documented returns.
     fast_compile = {
         program: ("xla_backend_optimization_level", "xla_cpu_use_fusion_emitters")
         for program in ("chunk", "evaluate")
@@ -68,8 +67,8 @@ class CartPole(Task):
     def real_steps_per_round(self, model: str) -> int:
         # A random episode lasts ~20 steps, a good controller's 500: a round records real steps,
         # not episodes. 250 random steps (~12 episodes) determine the grey box's 3 parameters
-        # and the hybrid's correction, so 2 rounds stay within issue 14's 500 steps; a network
-        # alone needs its 1,000 transitions (2 rounds: 2,000).
+        # and the hybrid's correction, so 2 rounds stay within a budget of 500 real steps; a
+        # network alone needs its 1,000 transitions (2 rounds: 2,000).
         return 250 if model in ("params", "hybrid") else super().real_steps_per_round(model)
 
     def data_columns(self):

@@ -35,20 +35,18 @@ class MountainCarContinuous(Task):
       the car at rest on the flag. Every step spent short of the flag's energy costs, which
       drives the car out in finite time; the action cost keeps the pushes gentle, since energy
       grows by ``power * a`` per unit of distance and small pushes over more swings reach the
-      flag for a fraction of the cost of full throttle (``a = 0.3 sign(velocity)`` scores
-      about 97.7 in Gymnasium, ``a = sign(velocity)`` about 89). Why a logarithm: pumping
-      grows the energy geometrically, and the linear deficit's gradient is proportional to
+      flag for a fraction of the cost of full throttle. Why a logarithm: pumping grows the
+      energy geometrically, and the linear deficit's gradient is proportional to
       the energy, so a car started near the bottom (tiny swings) hardly pulls on the weights
       and the controller learns to leave it there; ``d log L = dL / L`` gives every swing the
       same pull. Why a margin: the discrete step does not conserve ``E`` exactly, so a car
       with exactly ``L_goal`` can fall short of the flag, where an unmargined deficit is
       already 0 and stops asking for more. ``deficit_weight`` sets the trade-off between time
-      and effort (0.05: about 165 steps to the flag; 0.03 is cheaper but at times learns
-      to fall short everywhere).
+      and effort (a much lower weight at times learns to fall short everywhere).
     - ``cost``: Gymnasium's own ``-reward``. Its gradient is that of the action cost alone, so
       BPTT from it learns to stand still (a return of about 0), unless every window ends on
       the value of the steps left, ``V_t`` of the grid optimum (``value_grid`` with
-      ``value_time``: the recipe ``grid-value``, 96-99 on Gymnasium's seeds 0-99).
+      ``value_time``: the recipe ``grid-value``).
     """
 
     name = "mountain-car-continuous"
@@ -122,8 +120,7 @@ class MountainCarContinuous(Task):
     def default_config(self) -> TrainConfig:
         # Windows of 100 steps, longer than a small swing's period (2 pi / sqrt(3 gravity),
         # about 73 steps), so a window sees what a push does over a whole swing; 64 cars side
-        # by side. The return plateaus at about 97 after ~200 updates (benchmarks/
-        # mountain_car.py); keep_best guards against an update that overshoots.
+        # by side; keep_best guards against an update that overshoots.
         return TrainConfig(
             updates=500,
             batch=64,
@@ -141,8 +138,8 @@ class MountainCarContinuous(Task):
     def loop_planner(self) -> Any:
         """The task's own planner (``default_plan_config``), not the grid-valued one a task with
         a state grid gets by default: its terminal cost ``-V_0`` makes waiting free here (a car
-        at rest can still reach the flag within a whole episode), and that planner stays at
-        rest (a return of -2.0 against 97.7)."""
+        at rest can still reach the flag within a whole episode), so that planner stays at
+        rest."""
         return self.default_plan_config()
 
     def recipes(self) -> dict[str, dict[str, Any]]:
@@ -151,9 +148,8 @@ class MountainCarContinuous(Task):
             # ends on the value V_t of the grid dynamic program (101 x 101 states, 41 forces),
             # with the steps the episode has left. V_0 would not do: with a whole episode
             # always ahead, a car at rest can still reach the flag, so standing still costs
-            # nothing and BPTT learns it (a return of 0; docs/benchmarks.md).
-            # 1,000 updates with keep-best on 256 simulated starts: 500 on 64 left some
-            # starts at rest on two seeds of five, 50-step windows one.
+            # nothing and BPTT learns it. 1,000 updates with keep-best on 256 simulated starts:
+            # fewer updates or starts can leave some starts at rest.
             "grid-value": dict(
                 loss="cost",
                 window=20,

@@ -24,7 +24,7 @@ class Pendulum(Task):
     """
 
     name = "pendulum"
-    # benchmarks/compile_options.py: level 1 changes the chunk's bits in the original recipe
+    # The evaluation only: level 1 changes the chunk's bits in the original recipe.
     fast_compile = {"evaluate": ("xla_backend_optimization_level",)}
     summary = "Pendulum-v1 swing-up by BPTT through the exact Gymnasium dynamics (torque |u| <= 2)"
     gym_id = "Pendulum-v1"
@@ -99,12 +99,11 @@ class Pendulum(Task):
         raise KeyError(name)
 
     def default_config(self) -> TrainConfig:
-        # Truncated BPTT over 20-step windows with carried state: shorter windows (10-15) are
-        # too myopic to learn the swing-up, longer ones (>= 22-25) fall into the constant-torque
-        # local minimum (about -830). A run sometimes drifts late into a "hold it at the side"
-        # trap for starts near the bottom, so the best of the evaluation points on 256
-        # simulated episodes is kept (keep_best), and training stops once one reaches -145.
-        # Measured: -142..-144 on Gymnasium's seeds 0-99 (benchmarks/core.py).
+        # Truncated BPTT over 20-step windows with carried state: shorter windows are too
+        # myopic to learn the swing-up, longer ones fall into the constant-torque local
+        # minimum. A run sometimes drifts late into a "hold it at the side" trap for starts
+        # near the bottom, so the best of the evaluation points on 256 simulated episodes is
+        # kept (keep_best), and training stops once one reaches -145.
         return TrainConfig(
             updates=3000,
             batch=64,
@@ -142,12 +141,9 @@ class Pendulum(Task):
                 target_return=float("nan"),
                 keep_best=False,  # the original keeps the last weights
             ),
-            # The window curriculum: 20-step windows alone level off about 10 below the optimum
-            # (they cannot credit a push with a swing-up seconds later), so the last 2000 of
-            # 5000 updates use 80-step windows from the short window's controller; no early
-            # stop. About 6 better than the defaults on Gymnasium's seeds 0-99, at 2.5x their
-            # time (docs/benchmarks.md); 40-step final windows did less, 100-120-step ones
-            # diverged late.
+            # The window curriculum: 20-step windows alone level off below the optimum (they
+            # cannot credit a push with a swing-up seconds later), so the last 2000 of 5000
+            # updates use 80-step windows from the short window's controller; no early stop.
             "long-windows": dict(
                 updates=5000,
                 final_window=80,
@@ -156,12 +152,10 @@ class Pendulum(Task):
             ),
             # Windows credited with the return to go: at the end of every 10-step window the
             # loss also has minus the value V_0 of the state left, from the grid dynamic
-            # program (201 x 201 states, 41 torques: about 2 s), so a push is credited with the
-            # swing-up it leads to without a long window's local minima. 12,000 updates on 64
-            # simulations, no early stop, the best of 512 simulated starts kept: -134.6 to
-            # -135.9 on Gymnasium's seeds 0-99 for training seeds 0-4 (docs/benchmarks.md),
-            # 1.4-2.3 % from the optimum, in about 1.6x the defaults' training time. For tasks
-            # with a state grid; lr 1e-2 diverged late, 20-step windows did less.
+            # program (201 x 201 states, 41 torques), so a push is credited with the swing-up
+            # it leads to without a long window's local minima. 12,000 updates on 64
+            # simulations, no early stop, the best of 512 simulated starts kept. For tasks
+            # with a state grid.
             "grid-value": dict(
                 updates=12_000,
                 window=10,
@@ -182,7 +176,7 @@ class PendulumUnclipped(Pendulum):
     """
 
     name = "pendulum-unclipped"
-    # benchmarks/compile_options.py: level 1 changes the chunk's bits in the original recipe
+    # The evaluation only: level 1 changes the chunk's bits in the original recipe.
     fast_compile = {"evaluate": ("xla_backend_optimization_level",)}
     summary = "the 2019 original's Pendulum: unclipped torque, 1000-step episodes"
     episode_length = 1000

@@ -12,8 +12,8 @@ Built-in losses (``theta`` wrapped to ``[-pi, pi)``, sums over the ``N`` saves, 
 - ``limited``: the above ``+ 0.1 sum(x^2)/N + 0.001 max(F^2)``, the post's "motor can't give
   60 N" variant over 10 s, where the controller should pump energy like a child on a swing.
 - ``limited_hold``: ``limited + theta_dot_N^2``: also arrive at rest. The post's ``limited``
-  does not ask for ``theta_dot = 0`` at the end, and its low-force (pumping) solutions reach
-  the top just at t = 10 s still turning at 1-2 rad/s (measured; ``benchmarks/swingup.py``).
+  does not ask for ``theta_dot = 0`` at the end, and its low-force (pumping) solutions can
+  reach the top just at t = 10 s still turning.
 - ``energy``: the swing-up loss ``+ ENERGY_WEIGHT * E_N``, with ``E`` the energy dissipated
   by friction, integrated as a state of the ODE (the post's "add a friction term and tag on a
   frictional power integral").
@@ -133,8 +133,7 @@ def limited_hold_end(params: cp.SwingUpParams, y: Array) -> Array:
     times the loss's end terms ``4 * 2 (1 - cos theta) + x_dot^2 + theta_dot^2`` (the angle
     smoothed). Those have a small weight because a plan ends at any phase of the pump: at
     full weight, ``theta_dot^2`` at the bottom of a swing (``4 g / L`` with the upright
-    energy) outweighs the energy gap, and the planner stops pumping (measured: it never
-    gets above a fifth of the upright energy).
+    energy) outweighs the energy gap, and the planner stops pumping.
     """
     p = params
     mgl = p.pole_mass * p.g * p.length
@@ -151,7 +150,7 @@ def energy_rate(params: cp.SwingUpParams, y: Array, force: Array) -> Array:
 
     The weight per second is 1, three times the loss's own ``sum(theta^2) / N`` over the
     friction swing-up's 3 s: a plan sees 2 s ahead and meets its end terms at its own end, not
-    the task's, and the heavier weight swings up sooner (measured: docs/planning.md).
+    the task's, and the heavier weight swings up sooner (docs/planning.md).
     """
     del params, force
     return PLAN_ANGLE_WEIGHT * 2 * (1 - jnp.cos(y[2]))
@@ -189,8 +188,8 @@ class CartPoleSwingUp(ContinuousTask):
     """Swing the post's cart-pole up from hanging down in 1 s, and stop (the post's loss)."""
 
     name = "cartpole-swingup"
-    # benchmarks/compile_options.py: either option changes the chunk's bits, and level 1
-    # changes the limited and friction swing-ups' evaluations (each class declares its own)
+    # Not for the chunk: either option changes its bits; level 1 also changes the limited and
+    # friction swing-ups' evaluations (each class declares its own).
     fast_compile = {"evaluate": ("xla_cpu_use_fusion_emitters",)}
     # its one controller unbatched: the same weights to the bit in its defaults and the
     # original recipe, not in the limited swing-up's original recipe (each class its own)
@@ -255,10 +254,9 @@ class CartPoleSwingUp(ContinuousTask):
         return PLANNING_COSTS[name][1] if name in PLANNING_COSTS else None
 
     def default_plan_config(self):
-        """The planner measured on the actuator-limited swing-up (docs/planning.md): the
-        force held for 0.05 s, 40 of them planned (2 s), 5 box-iLQR iterations from the warm
-        start and both bounds. No force bound: this 1 s task's force is not limited (pass
-        ``action_bound``)."""
+        """The planner of the actuator-limited swing-up (docs/planning.md): the force held for
+        0.05 s, 40 of them planned (2 s), 5 box-iLQR iterations from the warm start and both
+        bounds. No force bound: this 1 s task's force is not limited (pass ``action_bound``)."""
         from ..settings import PlanConfig
 
         return PlanConfig(horizon=40, iterations=5, dt=0.05)
@@ -266,7 +264,7 @@ class CartPoleSwingUp(ContinuousTask):
     def default_config(self) -> ODETrainConfig:
         # The post's recipe (Tsit5 at reltol 1e-3 / abstol 1e-6, 50 saves, 3-8-1 tanh net with
         # Glorot init, Adam 0.05) with 1000 updates, as in the post's text (the repository ran
-        # 1500). Measured in benchmarks/swingup.py.
+        # 1500: the ``original`` recipe).
         return ODETrainConfig(horizon_s=1.0, saves=50, updates=1000, learning_rate=0.05)
 
     # --- a run is judged by a reference solve and drawn as a cart-pole (builtin.swingup) ---
@@ -317,9 +315,8 @@ class CartPoleSwingUpLimited(CartPoleSwingUp):
         )
 
     def default_plan_config(self):
-        """The swing-up's planner with the force within 5 N: upright at 10 s from all 17
-        starts of ``benchmarks/mpc_swingup.py`` (docs/planning.md), below the trained
-        controller's peak force of 5.7-6 N."""
+        """The swing-up's planner with the force within 5 N, below the trained controller's
+        peak force (docs/planning.md)."""
         return super().default_plan_config().replace(action_bound=5.0)
 
     def recipes(self) -> dict[str, dict[str, Any]]:
@@ -336,7 +333,7 @@ class CartPoleSwingUpFriction(CartPoleSwingUp):
 
     Friction: viscous 1 N s/m and Coulomb 0.5 N on the cart, viscous 0.1 N m s/rad in the
     joint. The horizon is 3 s: within the post's 1 s there is no slower, cheaper way up, so
-    an energy term has nothing to trade (measured: about 14.7 J lost with or without it).
+    an energy term has nothing to trade.
     """
 
     name = "cartpole-swingup-friction"
@@ -349,10 +346,9 @@ class CartPoleSwingUpFriction(CartPoleSwingUp):
         return cp.SwingUpParams(cart_viscous=1.0, cart_coulomb=0.5, pole_viscous=0.1)
 
     def default_plan_config(self):
-        """The planner of the task's own loss, ``energy`` (named, so that a planner saved
-        without a loss name, before this default, keeps its ``limited_hold``): the force
-        within 40 N and 10 box-iLQR iterations per step, the swing-ups' 0.05 s and 2 s
-        otherwise (``benchmarks/plan_swingup_friction.py``, docs/benchmarks.md)."""
+        """The planner of the task's own loss, ``energy`` (named, so that a saved planner
+        without a loss name still reads as ``limited_hold``): the force within 40 N and 10
+        box-iLQR iterations per step, the swing-ups' 0.05 s and 2 s otherwise."""
         return (
             super().default_plan_config().replace(loss="energy", action_bound=40.0, iterations=10)
         )

@@ -62,11 +62,10 @@ class TrebuchetAiming(Task):
     """
 
     name = "trebuchet"
-    # benchmarks/compile_options.py: the evaluation program compiles in about half the time
-    # with both options; its returns move by float32 rounding (the curve's simulated
-    # evaluations in their 5th-6th digit), but whole runs (--runs) return the same update with
-    # the same weights: the returned controller and every figure of it are the defaults'. The
-    # chunk keeps XLA's defaults (either option moves the trained weights and the mean miss).
+    # The evaluation's returns move by float32 rounding with both options, but whole runs
+    # return the same update with the same weights: the returned controller and every figure
+    # of it are the defaults'. The chunk keeps XLA's defaults (either option moves the trained
+    # weights and the mean miss).
     fast_compile = {"evaluate": ("xla_backend_optimization_level", "xla_cpu_use_fusion_emitters")}
     summary = "aim the 2019 post's differentiable trebuchet: (target, wind) -> (angle, weight)"
     gym_id = None
@@ -135,9 +134,8 @@ class TrebuchetAiming(Task):
         raise KeyError(name)
 
     def default_config(self) -> TrainConfig:
-        # Measured (1,000 updates, seed 0): mean |miss| 0.78 m with the squared miss, 0.30 m
-        # with huber_miss and 0.27 m with abs_miss (the unreachable targets' pull on the
-        # shared weights is bounded); 2,000 updates of abs_miss at lr 1e-2: 0.14 m.
+        # abs_miss, not the original's squared miss: the unreachable targets' pull on the
+        # shared weights is bounded.
         return TrainConfig(
             updates=2000,
             batch=64,
@@ -247,14 +245,13 @@ class TrebuchetAiming(Task):
 SHOOT_CHUNK = 1000
 """Throws per call of ``shoot_in_chunks``'s one compiled program: ``evaluate_aiming``'s 1,000
 targets are one call, and the reachability searches and ``diffcontrol aim`` run through the same
-program, so an evaluation compiles the throw once (about 2.5 s) rather than once per caller."""
+program, so an evaluation compiles the throw once rather than once per caller."""
 
 _SHOOT = jax.jit(tb.shoot)
 _SIMULATE = FastJit(tb.simulate, "xla_cpu_use_fusion_emitters")
 """``TrebuchetTask.throw``'s program. The throw is only drawn (the run's figure and GIF), so
-it is compiled with the older CPU emitters: 0.6 s instead of 1.4 s on one core, the same throw
-to float32 rounding (the example throw's distance moved by 1.5e-5 m). Level 1 would save
-0.06 s more."""
+it is compiled with the older CPU emitters, quicker to compile and the same throw to float32
+rounding."""
 _PADDING = (0.0, 45.0, 200.0)
 """The wind, angle and weight of the padding throws: an ordinary throw, quick to land."""
 
@@ -350,9 +347,8 @@ def aim_directly(
     coordinates ``z = (angle / 40 deg, weight / 200 lb)``: the minimum-norm step
     ``dz = -r J / |J|^2`` with the gradient ``J`` of the miss, projected onto the
     heads' bounds, with a trust region and the coordinates held at a bound frozen.
-    Elementwise over batches; jit it. Measured from the default start: 95 % of reachable
-    random targets within 1 cm after 20 steps; the rest are near the longest throw of their
-    wind, where the angle's derivative vanishes and the iteration stalls (check ``miss_m``).
+    Elementwise over batches; jit it. Near the longest throw of a wind the angle's derivative
+    vanishes and the iteration can stall short of the target (check ``miss_m``).
 
     It returns ``(angle_deg, weight_lb, miss_m)`` after ``iterations`` steps.
     """

@@ -23,6 +23,7 @@ from jaxtyping import Array, PRNGKeyArray, PyTree
 
 from .. import _timing, io, policies
 from .._jax_setup import compile_with
+from .._run_files import save_run
 from ..checks import validate_task
 from ..controllers import MLPController
 from ..errors import ConfigError, TrainingDiverged
@@ -58,8 +59,6 @@ class TrainResult:
         curve and the task's pictures; returns the names written. ``options`` are those of
         ``diffcontrol.runs.save_run`` (``final_eval``, ``animation``, ``real``, ``progress``).
         """
-        from ..runs import save_run
-
         return save_run(self, out_dir, **options)[1]
 
 

@@ -79,7 +79,7 @@ class SwingUpModel(eqx.Module):
     """A fitted model of the swing-up cart-pole (module docstring).
 
     Attributes:
-        kind: one of ``MODEL_KINDS``.
+        model_type: one of ``MODEL_TYPES``.
         params: the physical parameters (for ``hybrid``, the frictionless nominal ones; unused
             by ``neural``).
         correction: the network of ``hybrid`` (2 inputs ``(x_dot, theta_dot)``, 2 outputs
@@ -144,8 +144,8 @@ class FittedSwingUpParams(cp.SwingUpParams):
     model's physical parameters, as ``SwingUpParams``, and its network (``correction``).
 
     The network travels as an argument, not as constants baked into the programs, so a refit
-    (the next fit of a benchmark's round or seed) runs the programs already compiled for a
-    model of the same shape instead of compiling its own.
+    (the next round's or seed's) runs the programs already compiled for a model of the same
+    shape instead of compiling its own.
     """
 
     correction: Any = None
@@ -160,11 +160,11 @@ class FittedSwingUp(CartPoleSwingUp):
 
     Everything but the vector field is the wrapped task's: losses, horizon, training
     configuration, controller, planning losses and planner settings. The parameters that
-    ``train`` passes (and ``config.params`` overrides) are the model's: its physical ones and, for a model with a network, the
-    network (``FittedSwingUpParams``), an argument of the compiled programs that only the
-    controller's training does not change. Like the physical parameters, the network in a
-    run's parameters is in the run's precision (float32 unless x64 is on), also where a
-    float64 reference solve uses them (measured: a loss 6e-8 from the float64 network's).
+    ``train`` passes (and ``config.params`` overrides) are the model's: its physical ones and,
+    for a model with a network, the network (``FittedSwingUpParams``), an argument of the
+    compiled programs that only the controller's training does not change. Like the physical
+    parameters, the network in a run's parameters is in the run's precision (float32 unless
+    x64 is on), also where a float64 reference solve uses them.
     """
 
     def __init__(self, task: CartPoleSwingUp, model: SwingUpModel):

@@ -7,7 +7,7 @@ from typing import Any
 
 from ... import io
 from ...evaluation import ContinuousRecording, evaluate_run, simulate_continuous
-from ...runs._figures import animate_run, write_figures
+from ...plots import animate_run, write_figures
 from ...tasks import CartPoleSwingUp
 from .draw import animate_swingup, plot_swingup
 from .judge import swingup_result

@@ -13,10 +13,10 @@ positive nominal value, ``value = z`` for a nominal 0): Adam (optax) for ``steps
 up to ``lm_steps`` Levenberg-Marquardt steps, each kept only if it lowers the loss. One compiled
 program computes the residuals and their Jacobian (forward mode: one pass per fitted parameter)
 and serves all three stages, Adam (its gradient is ``2 J^T r / N``), Levenberg-Marquardt and the
-standard errors. Why not ``identify.steps``' scan of Adam steps and optimistix: the trebuchet's
-three phase scans take about 10-15 s to compile, and separate programs for the Adam scan, the
-optimistix solve and the Jacobian of the standard errors would take three times that; a
-throw batch costs milliseconds, so the host loop's per-step overhead does not matter.
+standard errors. Why not ``identify.steps``' scan of Adam steps and optimistix: compiling the
+trebuchet's three phase scans is most of a fit's cost, and separate programs for the Adam
+scan, the optimistix solve and the Jacobian of the standard errors would compile them three
+times; a throw batch is quick to run, so the host loop's per-step overhead does not matter.
 
 **Uncertainty** from the curvature at the fit (Gauss-Newton, as in ``identify.steps``):
 ``cov = sigma^2 (J^T J)^-1``, ``sigma^2 = r^T r / (N - p)``; each throw is one independent

@@ -5,7 +5,7 @@ from __future__ import annotations
 from typing import Any
 
 from ...evaluation import evaluate_run
-from ...runs._figures import animate_run, write_figures
+from ...plots import animate_run, write_figures
 from ...tasks import TrebuchetAiming
 from .draw import animate_throw, plot_throw
 from .judge import evaluate_aiming

@@ -23,14 +23,22 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from .._run_files import save_run
+from ..envs import env_id as own_id
 from ..errors import ConfigError, RunDirectoryError
+from ..evaluation import evaluate
+from ..identify import fit_dir
+from ..identify._rounds import NoisyPolicy, model_error, parse_start, predictor_of, start_params
+from ..identify.data import concat, read_trajectories, write_trajectories
+from ..identify.recording import check_spaces, make_env, record, record_task
 from ..io import now_iso, read_json, write_figure, write_json
 from ..policies import read_model
 from ..settings import FitConfig, LoopConfig
-from ._fit import fit_dir
-from ._rounds import NoisyPolicy, model_error, parse_start, predictor_of, start_params
-from .data import concat, read_trajectories, write_trajectories
-from .recording import check_spaces, make_env, record, record_task
+from ..tasks import Task
+from ..training import resolve_config, train
+from ._open import load_policy
+from ._plan import plan_run
+from ._train import fitted_training
 
 LOOP_FILE = "loop.json"
 
@@ -77,10 +85,6 @@ def loop(
         RunDirectoryError: ``out`` holds another loop (or, without ``resume``, any loop), or
             other files.
     """
-    from ..envs import env_id as own_id
-    from ..runs import fitted_training, load_policy, plan_run, save_run
-    from ..tasks import Task
-    from ..training import resolve_config, train
 
     if not isinstance(task, Task):
         raise ConfigError(
@@ -313,7 +317,6 @@ def _evaluate(
 ) -> dict:
     """The round's controller (``policy_of(here / "run")``) on the real system, reset seeds
     ``seed ...`` (kept in ``here/eval.json`` so that a resumed loop does not run it twice)."""
-    from ..evaluation import evaluate
 
     path = here / "eval.json"
     if path.exists():
