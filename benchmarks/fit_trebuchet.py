@@ -37,9 +37,9 @@ from _common import machine  # noqa: E402
 
 import diffcontrol  # noqa: E402
 from diffcontrol import identify, io, policies  # noqa: E402
+from diffcontrol.builtin.trebuchet import system as tb  # noqa: E402
 from diffcontrol.builtin.trebuchet.fit import distance_errors  # noqa: E402
 from diffcontrol.builtin.trebuchet.judge import evaluate_aiming  # noqa: E402
-from diffcontrol.systems import trebuchet as tb  # noqa: E402
 
 TRUTH = {"drag_coefficient": 1.5, "wind_factor": 1.5}
 REAL = tb.TrebuchetParams(**TRUTH)

@@ -60,7 +60,7 @@ def aiming_speed(run_dir: str, n_direct: int) -> dict:
     import jax
 
     import diffcontrol
-    from diffcontrol.tasks import trebuchet as aim
+    from diffcontrol.builtin.trebuchet import task as aim
 
     policy = diffcontrol.load(run_dir)
     rng = np.random.default_rng(1)

@@ -17,12 +17,12 @@ import pytest
 import diffcontrol
 from diffcontrol.builtin.trebuchet import fit as ft
 from diffcontrol.builtin.trebuchet import record as rec
+from diffcontrol.builtin.trebuchet import system as tb
 from diffcontrol.builtin.trebuchet.throws import Throws, read_throws, throws_of, throws_table
 from diffcontrol.cli import main
 from diffcontrol.errors import ConfigError, DataFileError, InsufficientDataError
 from diffcontrol.identify import fit, read_trajectories
 from diffcontrol.identify.data import TrajectoryData, write_trajectories
-from diffcontrol.systems import trebuchet as tb
 
 TRUTH = {"drag_coefficient": 1.5, "wind_factor": 1.5}
 REAL_ARGS = [f"--env-arg={n}={v}" for n, v in TRUTH.items()]

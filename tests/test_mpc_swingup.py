@@ -13,10 +13,15 @@ import pytest
 
 import diffcontrol
 from diffcontrol import mpc
+from diffcontrol.builtin.swingup.system import SwingUpParams, wrap_angle
+from diffcontrol.builtin.swingup.task import (
+    ENERGY_WEIGHT,
+    energy_end,
+    energy_rate,
+    limited_hold_end,
+)
 from diffcontrol.errors import ConfigError
 from diffcontrol.rollout import solve_closed_loop
-from diffcontrol.systems.cartpole_swingup import SwingUpParams, wrap_angle
-from diffcontrol.tasks.swingup import ENERGY_WEIGHT, energy_end, energy_rate, limited_hold_end
 
 STATES = [
     [0.0, 0.0, math.pi, 0.0, 0.0, 0.0],  # hanging at rest

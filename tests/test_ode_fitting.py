@@ -18,6 +18,7 @@ import pytest
 
 import diffcontrol
 from diffcontrol.builtin.swingup import fitted as of
+from diffcontrol.builtin.swingup import system as cp
 from diffcontrol.builtin.swingup.fitted import (
     FittedSwingUp,
     frictionless,
@@ -25,7 +26,6 @@ from diffcontrol.builtin.swingup.fitted import (
 )
 from diffcontrol.errors import ConfigError, DataFileError, InsufficientDataError
 from diffcontrol.identify.data import TrajectoryData
-from diffcontrol.systems import cartpole_swingup as cp
 
 REAL = cp.SwingUpParams(cart_viscous=1.0, cart_coulomb=0.5, pole_viscous=0.1, pole_coulomb=0.05)
 

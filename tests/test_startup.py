@@ -88,20 +88,20 @@ def test_builtin_gymnasium_ids_match_the_tasks():
     """The ids registered without JAX at import are those the tasks themselves give."""
     import gymnasium
 
-    from diffcontrol import _gym_ids, envs, tasks
+    from diffcontrol import _registry, envs, tasks
 
     ids = set(envs.register_all())
-    table = {row[0]: row for row in _gym_ids.BUILTIN if row[2] is not None}
-    own = [tasks.make(n) for n in tasks.names()]
-    builtin = {envs.env_id(t) for t in own if type(t).__module__.startswith("diffcontrol.tasks.")}
-    assert set(table) == builtin & ids
-    for env_id, (_, entry_point, task, steps, threshold) in table.items():
+    for row in _registry.BUILTIN:
+        task = tasks.make(row.name)
+        assert f"{type(task).__module__}:{type(task).__qualname__}" == row.path
+        env_id = envs.env_id(task)
+        assert env_id == f"diffcontrol/{row.env_name}-v0" and env_id in ids
         spec = gymnasium.registry[env_id]
         assert (spec.entry_point, spec.kwargs, spec.max_episode_steps, spec.reward_threshold) == (
-            entry_point,
-            {"task": task},
-            steps,
-            threshold,
+            f"diffcontrol.envs:{row.env}",
+            {"task": row.name},
+            row.steps,
+            row.threshold,
         ), env_id
 
 
@@ -119,12 +119,12 @@ def test_list_without_jax_names_every_builtin_task():
 
 def test_the_list_table_is_the_tasks_own():
     """``list`` reads a JAX-free table: it must say what the tasks themselves say."""
-    from diffcontrol import _task_list, tasks
+    from diffcontrol import _registry, tasks
 
-    own = [tasks.make(n) for n in tasks.names()]
-    builtin = [t for t in own if type(t).__module__.startswith("diffcontrol.tasks.")]
-    table = [(t.name, t.summary, tuple(t.losses), tuple(t.recipes())) for t in builtin]
-    assert list(_task_list.BUILTIN) == table
+    table = [(r.name, r.summary, r.losses, r.recipes) for r in _registry.BUILTIN]
+    own = [tasks.make(r.name) for r in _registry.BUILTIN]
+    assert table == [(t.name, t.summary, tuple(t.losses), tuple(t.recipes())) for t in own]
+    assert tasks.names()[: len(table)] == [row[0] for row in table]
 
 
 def test_list_in_a_process_with_the_tasks_imported_shows_registered_ones_too(capsys):
@@ -387,8 +387,8 @@ def test_the_drawn_throw_compiled_for_speed_lands_where_the_defaults_do(monkeypa
 
     import diffcontrol
     from diffcontrol import _jax_setup
-    from diffcontrol.systems import trebuchet as tb
-    from diffcontrol.tasks import trebuchet
+    from diffcontrol.builtin.trebuchet import system as tb
+    from diffcontrol.builtin.trebuchet import task as trebuchet
 
     seen = []
 

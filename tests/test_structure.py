@@ -96,8 +96,8 @@ def test_no_import_cycle():
 
 
 LAYERS = [
-    "errors _version _gym_ids _shell _timing _interrupts _jax_setup io config settings "
-    "controllers policies _task_list",
+    "errors _version _registry _shell _timing _interrupts _jax_setup io config settings "
+    "controllers policies",
     "systems",
     "tasks",
     "rollout checks _checks",
@@ -142,7 +142,7 @@ def test_the_package_face_and_the_base_import_no_layer():
     graph = import_graph()
     base = {
         "diffcontrol.errors",
-        "diffcontrol._gym_ids",
+        "diffcontrol._registry",
         "diffcontrol._shell",
         "diffcontrol._version",
     }

@@ -30,12 +30,13 @@ from scipy.integrate import solve_ivp
 
 import diffcontrol
 from diffcontrol import rollout
+from diffcontrol.builtin.swingup import system as cp
 from diffcontrol.builtin.swingup.judge import swingup_result
+from diffcontrol.builtin.swingup.task import SwingUpTrajectory
 from diffcontrol.cli import main
 from diffcontrol.config import ODETrainConfig
 from diffcontrol.errors import ConfigError, SolverFailed
 from diffcontrol.evaluation import simulate_continuous
-from diffcontrol.systems import cartpole_swingup as cp
 from diffcontrol.training import make_ode_trainer, train
 
 from .conftest import TINY_SWINGUP
@@ -222,9 +223,7 @@ def test_force_read_back_matches_the_controller(swingup_run):
     np.testing.assert_allclose(policy(state), force, rtol=1e-5, atol=1e-4)
     names = ("t", "x", "x_dot", "theta", "theta_dot", "force", "impulse", "dissipated_energy")
     with jax.enable_x64(True):
-        tr = diffcontrol.tasks.SwingUpTrajectory(
-            *(jnp.asarray(data[k], jnp.float64) for k in names)
-        )
+        tr = SwingUpTrajectory(*(jnp.asarray(data[k], jnp.float64) for k in names))
         read_back = np.asarray(tr.impulse_force)[1:]
     trapezoid = (force[1:] + force[:-1]) / 2
     peak = np.max(np.abs(force))

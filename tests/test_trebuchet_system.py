@@ -1,4 +1,4 @@
-"""The trebuchet (``diffcontrol.systems.trebuchet``): the post's gradient, gradients against
+"""The trebuchet (``diffcontrol.builtin.trebuchet.system``): the post's gradient, gradients against
 finite differences, ``vmap``, physics sanity checks and input validation.
 
 Tolerances, and why:
@@ -30,8 +30,8 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
+from diffcontrol.builtin.trebuchet import system as tb
 from diffcontrol.errors import ConfigError
-from diffcontrol.systems import trebuchet as tb
 
 BLOG_POINT = (-2.0, 45.0, 200.0)
 BLOG_GRADIENT = np.array([4.02, -0.99, 0.051])

@@ -10,10 +10,10 @@ import pytest
 
 import diffcontrol
 from diffcontrol import policies
+from diffcontrol.builtin.trebuchet import system as tb
+from diffcontrol.builtin.trebuchet import task as aim
 from diffcontrol.builtin.trebuchet.judge import evaluate_aiming
 from diffcontrol.cli import main
-from diffcontrol.systems import trebuchet as tb
-from diffcontrol.tasks import trebuchet as aim
 from diffcontrol.training import resolve_config, train
 
 shoot = jax.jit(tb.shoot)

@@ -17,7 +17,7 @@ from __future__ import annotations
 import importlib as _importlib
 import importlib.util as _importlib_util
 
-from . import _gym_ids
+from . import _registry
 from ._version import __version__ as __version__
 from .errors import ConfigError, DiffcontrolError
 
@@ -47,7 +47,7 @@ _LAZY = {
     "list_tasks": ("tasks", "names"),
 }
 
-_gym_ids.register()  # gymnasium.make("diffcontrol/<Name>-v0") for every built-in task
+_registry.register_envs()  # gymnasium.make("diffcontrol/<Name>-v0") for every built-in task
 
 
 def __getattr__(name: str):

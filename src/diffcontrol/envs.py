@@ -35,9 +35,9 @@ import jax.numpy as jnp
 import numpy as np
 from gymnasium import spaces
 
-from . import _gym_ids
+from . import _registry
 from . import tasks as _tasks
-from ._gym_ids import NAMESPACE, VERSION, env_name
+from ._registry import NAMESPACE, VERSION, env_name
 from .errors import ConfigError
 from .tasks import Task, register_env
 from .tasks import env_entry as _entry
@@ -61,7 +61,7 @@ _COMPILED: dict[str, tuple[Any, Any]] = {}
 
 def env_id(task: Any) -> str:
     """The Gymnasium id of ``task`` (an instance or a registered name): ``diffcontrol/<Name>-v0``."""
-    return _gym_ids.env_id(_tasks.make(task) if isinstance(task, str) else task)
+    return _registry.env_id(_tasks.make(task) if isinstance(task, str) else task)
 
 
 def _compiled(task: Task, params: Any, nominal: bool) -> tuple[Any, Any]:

@@ -71,7 +71,7 @@ def add_parsers(sub: Any) -> None:
 
 
 def cmd_list(args: argparse.Namespace) -> int:
-    from .._task_list import listing
+    from .._registry import listing
 
     print("\n".join(listing()))
     return 0

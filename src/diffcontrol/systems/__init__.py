@@ -4,16 +4,13 @@ No losses, policies or I/O live here. Each system documents where its derivative
 non-smooth.
 """
 
-from . import cartpole, pendulum, trebuchet
+from . import cartpole, pendulum
 from .cartpole import CartPoleParams
 from .pendulum import PendulumParams
-from .trebuchet import TrebuchetParams
 
 __all__ = [
     "cartpole",
     "pendulum",
-    "trebuchet",
     "CartPoleParams",
     "PendulumParams",
-    "TrebuchetParams",
 ]

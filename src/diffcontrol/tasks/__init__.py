@@ -1,9 +1,10 @@
 """Tasks: a system plus its losses, initial-state distribution and horizon, in a registry.
 
 ``make("pendulum")`` and the CLI share the registry, so a task registered from user code with
-``register`` is trainable from Python exactly like the built-in ones. ``resolve`` also finds a
-user's task by import path (``"my_tasks:Acrobot"``) or by the name an installed package gives
-it in the ``diffcontrol.tasks`` entry-point group.
+``register`` is trainable from Python exactly like the built-in ones. The built-in tasks are
+rows of one table (``diffcontrol._registry``), each made (its module imported) when first
+named. ``resolve`` also finds a user's task by import path (``"my_tasks:Acrobot"``) or by the
+name an installed package gives it in the ``diffcontrol.tasks`` entry-point group.
 """
 
 from __future__ import annotations
@@ -14,25 +15,14 @@ import os
 import sys
 from typing import Any
 
-from .. import _gym_ids
-from .._task_list import ENTRY_POINT_GROUP
+from .. import _registry
+from .._registry import BUILTIN, ENTRY_POINT_GROUP
 from ..errors import ConfigError, UnknownTaskError
 from ._base import ContinuousTask, StepLoss, Task, TrajectoryLoss, task_params
-from ._hooks import plugin
-from .acrobot import Acrobot
-from .cartpole import CartPole
-from .mountain_car import MountainCarContinuous
-from .pendulum import Pendulum, PendulumUnclipped
-from .swingup import (
-    CartPoleSwingUp,
-    CartPoleSwingUpFriction,
-    CartPoleSwingUpLimited,
-    SwingUpTrajectory,
-)
-from .trebuchet import TrebuchetAiming
 
 AnyTask = Task | ContinuousTask
 _REGISTRY: dict[str, AnyTask] = {}
+"""The tasks made or registered in this process, by name."""
 
 
 def supports_env(task: Any) -> bool:
@@ -44,9 +34,9 @@ def supports_env(task: Any) -> bool:
 def env_entry(task: Any) -> tuple[str, int] | None:
     """The environment class and the episode length (steps) for ``task``, if it has one."""
     if supports_env(task):
-        return f"{_gym_ids.ENVS}:TaskEnv", task.episode_length
+        return f"{_registry.ENVS}:TaskEnv", task.episode_length
     if isinstance(task, ContinuousTask):
-        return f"{_gym_ids.ENVS}:ContinuousTaskEnv", task.default_config().saves - 1
+        return f"{_registry.ENVS}:ContinuousTaskEnv", task.default_config().saves - 1
     return None
 
 
@@ -65,7 +55,7 @@ def register_env(task: Any) -> str:
             f"{task!r} is neither a Task nor a ContinuousTask, so it has no Gymnasium environment"
         )
     entry_point, steps = entry
-    eid = _gym_ids.env_id(task)
+    eid = _registry.env_id(task)
     if eid in registry:
         del registry[eid]
     register_gym(
@@ -83,9 +73,13 @@ def register(task: AnyTask) -> AnyTask:
     environment (``diffcontrol/<Name>-v0``) at once; returns it.
 
     Raises:
-        ValueError: a task of another class is registered under the same name.
+        ValueError: a task of another class is registered under the same name (a built-in
+            task's name included).
     """
-    if task.name in _REGISTRY and type(_REGISTRY[task.name]) is not type(task):
+    row = _registry.builtin(task.name)
+    own = f"{type(task).__module__}:{type(task).__qualname__}"
+    other = type(_REGISTRY[task.name]) if task.name in _REGISTRY else None
+    if (other is not None and other is not type(task)) or (row and row.path != own):
         raise ValueError(f"a different task is already registered as {task.name!r}")
     _REGISTRY[task.name] = task
     if env_entry(task) is not None:
@@ -99,13 +93,21 @@ def make(name: str) -> AnyTask:
     Raises:
         UnknownTaskError: no task has that name (the message lists those that do).
     """
-    try:
+    if name in _REGISTRY:
         return _REGISTRY[name]
-    except KeyError:
+    row = _registry.builtin(name) if isinstance(name, str) else None
+    if row is None:
         raise UnknownTaskError(
-            f"unknown task {name!r}; choose one of: {', '.join(sorted(_REGISTRY))} "
+            f"unknown task {name!r}; choose one of: {', '.join(sorted(names()))} "
             "(`diffcontrol list` describes them)"
-        ) from None
+        )
+    return register(_builtin_class(row)())
+
+
+def _builtin_class(row: _registry.Builtin) -> type:
+    """The class of a built-in task: the registry's lazy lookup of its module."""
+    module, _, cls = row.path.partition(":")
+    return getattr(importlib.import_module(module), cls)
 
 
 def resolve(spec: str) -> AnyTask:
@@ -121,8 +123,8 @@ def resolve(spec: str) -> AnyTask:
         UnknownTaskError: nothing of that name, or the module does not import, or the
             attribute is not a task.
     """
-    if spec in _REGISTRY:
-        return _REGISTRY[spec]
+    if spec in _REGISTRY or _registry.builtin(spec):
+        return make(spec)
     target = spec
     if ":" not in spec:
         found = [
@@ -199,37 +201,29 @@ def named_by_file(name: object, where: str, fix: str) -> AnyTask:
 
 
 def names() -> list[str]:
-    """Names of the registered tasks, in registration order."""
-    return list(_REGISTRY)
+    """Names of the tasks: the built-in ones in the table's order, then those registered in
+    this process, in registration order."""
+    builtin = [row.name for row in BUILTIN]
+    return builtin + [name for name in _REGISTRY if name not in builtin]
 
 
-# The built-in systems whose runs are judged or drawn their own way: the modules that register
-# those overrides with the layers (``tasks._hooks``), imported when a hook first meets one.
-plugin(CartPoleSwingUp, "diffcontrol.builtin.swingup")
-plugin(TrebuchetAiming, "diffcontrol.builtin.trebuchet")
+# The built-in tasks' classes by name (``diffcontrol.tasks.Pendulum``, ...), from their modules
+# when first used, as the registry makes them.
+_CLASSES = {row.path.partition(":")[2]: row.path.partition(":")[0] for row in BUILTIN}
 
-for _task in (
-    Pendulum(),
-    PendulumUnclipped(),
-    CartPole(),
-    Acrobot(),
-    TrebuchetAiming(),
-    CartPoleSwingUp(),
-    CartPoleSwingUpLimited(),
-    CartPoleSwingUpFriction(),
-    MountainCarContinuous(),
-):
-    register(_task)
+
+def __getattr__(name: str) -> Any:
+    if name not in _CLASSES:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return getattr(importlib.import_module(_CLASSES[name]), name)
+
+
 __all__ = [
     "AnyTask",
     "Task",
     "ContinuousTask",
     "StepLoss",
     "TrajectoryLoss",
-    "SwingUpTrajectory",
-    "CartPoleSwingUp",
-    "CartPoleSwingUpLimited",
-    "CartPoleSwingUpFriction",
     "make",
     "names",
     "named_by_file",
@@ -245,5 +239,4 @@ __all__ = [
     "CartPole",
     "MountainCarContinuous",
     "Acrobot",
-    "TrebuchetAiming",
 ]

@@ -13,7 +13,7 @@ import jax
 import numpy as np
 from jaxtyping import Array, PRNGKeyArray, PyTree
 
-from .._gym_ids import env_id as own_env_id
+from .._registry import env_id as own_env_id
 from ..errors import ConfigError
 from ._grid import GridAxis
 
@@ -68,7 +68,7 @@ class _TaskBase(abc.ABC):
 
     # --- a run: how a trained controller is loaded and judged ---------------------------------
     # What the layers do with a run (evaluate it, draw it, animate it) are their functions
-    # (``evaluation.evaluate_run``, ``runs._figures.write_figures`` and ``animate_run``); a task
+    # (``evaluation.evaluate_run``, ``plots.write_figures`` and ``animate_run``); a task
     # overrides them as ``tasks._hooks`` says.
 
     default_eval_episodes: ClassVar[int] = 100

@@ -2,13 +2,13 @@
 
 A ``SwingUpModel`` is the cart-pole's vector field as the fitted model sees it, one of:
 
-- ``nominal`` / ``params``: the known physics (``diffcontrol.systems.cartpole_swingup``) with
+- ``nominal`` / ``params``: the known physics (``builtin.swingup.system``) with
   its parameters (``params``: friction coefficients fitted from data, a grey box);
 - ``hybrid``: the known **frictionless** physics plus a small network (``models.Correction``)
   that gives the generalised forces the physics leaves out, a cart force ``Q_x`` (N) and a
   joint torque ``Q_theta`` (N m), as functions of the velocities ``(x_dot, theta_dot)``
   (a universal differential equation). They enter the equations of motion exactly as the
-  friction of ``cartpole_swingup`` does, through the known mass matrix ``M(theta)``:
+  friction of ``system`` does, through the known mass matrix ``M(theta)``:
   ``(x_acc, theta_acc) += M(theta)^-1 (Q_x, Q_theta)``. Why this shape rather than a free
   correction of the accelerations: friction and drag *are* generalised forces of the
   velocities, so a 2-input network covers from a few recorded episodes the region a swing-up
@@ -43,8 +43,8 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from ...errors import ConfigError, ModelFileError
-from ...systems import cartpole_swingup as cp
-from ...tasks.swingup import ACTION_COLUMNS, STATE_COLUMNS, CartPoleSwingUp
+from . import system as cp
+from .task import ACTION_COLUMNS, STATE_COLUMNS, CartPoleSwingUp
 
 MODEL_TYPES = ("nominal", "params", "hybrid", "neural")
 """What a ``SwingUpModel`` can be (module docstring)."""
@@ -66,7 +66,7 @@ def generalized_force_accelerations(
     params: cp.SwingUpParams, theta: Array, cart_force: Array, joint_torque: Array
 ) -> tuple[Array, Array]:
     """``M(theta)^-1 (Q_x, Q_theta)``: the accelerations an extra cart force (N) and joint
-    torque (N m) add, the same terms as the friction of ``cartpole_swingup.accelerations``."""
+    torque (N m) add, the same terms as the friction of ``system.accelerations``."""
     p = params
     sin, cos = jnp.sin(theta), jnp.cos(theta)
     denom = p.cart_mass + p.pole_mass * sin**2
@@ -117,7 +117,7 @@ class SwingUpModel(eqx.Module):
     def accelerations(
         self, state: Float[Array, " 4"], force: Float[Array, ""]
     ) -> tuple[Array, Array, Array]:
-        """``(x_acc, theta_acc, friction_power)`` as ``cartpole_swingup.accelerations``."""
+        """``(x_acc, theta_acc, friction_power)`` as ``system.accelerations``."""
         x_dot, theta, theta_dot = state[1], state[2], state[3]
         if self.model_type == "neural":
             features = jnp.stack([x_dot, jnp.cos(theta), jnp.sin(theta), theta_dot, force])
@@ -132,7 +132,7 @@ class SwingUpModel(eqx.Module):
         return x_acc, theta_acc, power
 
     def vector_field(self, t: Array, y: Float[Array, " 6"], force_fn: Any) -> Array:
-        """``dy/dt`` of the closed loop, as ``cartpole_swingup.vector_field``."""
+        """``dy/dt`` of the closed loop, as ``system.vector_field``."""
         state = y[:4]
         force = jnp.reshape(force_fn(t, state), ())
         x_acc, theta_acc, power = self.accelerations(state, force)

@@ -8,9 +8,9 @@ from typing import Any
 from ... import io
 from ...evaluation import ContinuousRecording, evaluate_run, simulate_continuous
 from ...plots import animate_run, write_figures
-from ...tasks import CartPoleSwingUp
 from .draw import animate_swingup, plot_swingup
 from .judge import swingup_result
+from .task import CartPoleSwingUp
 
 
 def reference_solve(task: CartPoleSwingUp, run: Any) -> ContinuousRecording:

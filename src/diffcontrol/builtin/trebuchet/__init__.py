@@ -1,19 +1,13 @@
-"""The trebuchet beyond its task (``tasks.trebuchet``): its runs judged by the miss over
-random targets and drawn as a throw (``runs``), its data as recorded throws (``throws``,
-``record``) and its physics fitted to measured distances (``fit``), registered with the
-layers' hooks (``tasks._hooks``)."""
+"""The trebuchet of the 2019 post, a built-in system in its own folder, as a user's task is:
+its dynamics (``system``), its task (``task``: aim at a target in a wind), and what the layers
+do with it their own way (``hooks``: its runs judged by the miss over random targets and drawn
+as a throw, its data as recorded throws, its physics fitted to measured distances), imported
+when a layer's hook first meets the task (``tasks._hooks.plugin``)."""
 
-from ...identify._routes import model_route
-from ...identify.recording import record_task
-from ...tasks import TrebuchetAiming
-from . import runs  # noqa: F401  (registers evaluate_run, write_figures, animate_run)
-from .fit import THROWS
-from .record import record_data
+from ...tasks._hooks import plugin
+from .system import TrebuchetParams
+from .task import TrebuchetAiming
 
-record_task.register(TrebuchetAiming)(record_data)
+plugin(TrebuchetAiming, "diffcontrol.builtin.trebuchet.hooks")
 
-
-@model_route.register(TrebuchetAiming)
-def _route(task: TrebuchetAiming) -> object:
-    """The grey box fitted to the measured distances (``fit.THROWS``)."""
-    return THROWS
+__all__ = ["TrebuchetAiming", "TrebuchetParams"]

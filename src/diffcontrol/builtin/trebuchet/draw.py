@@ -14,7 +14,7 @@ import numpy as np  # noqa: E402
 
 from ...animation import Frames, held, write_gif  # noqa: E402
 from ...io import write_figure  # noqa: E402
-from ...systems.trebuchet import TrebuchetParams  # noqa: E402
+from .system import TrebuchetParams  # noqa: E402
 
 
 def throw_frame(ax: Any, throw: Any, i: int, target: float, wind: float) -> dict[str, Any]:
@@ -71,7 +71,7 @@ def plot_throw(throw: Any, target: float, wind: float, path: str | Path, title: 
 
 
 def animate_throw(throw: Any, target: float, wind: float, path: str | Path, fps: int = 30) -> Path:
-    """Write an animated GIF of a recorded trebuchet throw (``systems.trebuchet.simulate``),
+    """Write an animated GIF of a recorded trebuchet throw (``system.simulate``),
     played at real time until a little after landing, with the target marked. The scene is
     drawn once; each frame moves the arm, the sling, the projectile and its path."""
     times = np.asarray(throw.time)

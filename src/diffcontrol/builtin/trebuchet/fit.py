@@ -2,7 +2,7 @@
 
 A throw is one input ``(wind, release angle, counterweight)`` and one measured outcome, the
 distance (a one-step episode: ``throws``). The model is the differentiable trebuchet
-itself (``systems.trebuchet.shoot``) with some of its parameters unknown (by default the drag
+itself (``system.shoot``) with some of its parameters unknown (by default the drag
 coefficient ``C_d`` and ``wind_factor``, how strongly the wind acts on the flight). They are
 fitted by least squares on the distance residuals ``r_i = shoot(w_i, a_i, m_i; theta) - d_i``
 (m), differentiating through the whole simulated throw: no windows are needed, since a throw is
@@ -48,7 +48,7 @@ from ...errors import ConfigError, InsufficientDataError
 from ...identify._routes import TrajectoryRoute, parameters_doc
 from ...identify._shooting import FitResult, check_settings, set_params, standard_errors
 from ...identify.data import TrajectoryData
-from ...systems import trebuchet as tb
+from . import system as tb
 from .record import as64, padded_rows, parameter_names, params_dict, predict_distances
 from .throws import Throws, read_throws, throws_of
 

@@ -9,8 +9,8 @@ from typing import Any
 import numpy as np
 
 from ...tasks import Task
-from ...tasks import trebuchet as aim
-from ...tasks.trebuchet import miss_statistics
+from . import task as aim
+from .task import miss_statistics
 
 
 @dataclasses.dataclass
@@ -66,7 +66,7 @@ def evaluate_aiming(
 
     Targets ~ U(20, 100) m and winds ~ N(0, 5^2) m/s (clipped to +-20 m/s) are drawn with
     ``numpy.random.default_rng(seed)``, so every controller meets the same situations. Each
-    throw is simulated with ``diffcontrol.systems.trebuchet.shoot``; a target counts as
+    throw is simulated with ``system.shoot``; a target counts as
     reachable when it lies between the shortest and longest throws the heads' bounds allow
     in its wind (``reachable_range``).
 

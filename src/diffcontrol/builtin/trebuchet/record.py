@@ -20,8 +20,8 @@ import numpy as np
 from ...errors import ConfigError
 from ...identify.data import TrajectoryData
 from ...io import now_iso
-from ...systems import trebuchet as tb
-from ...tasks.trebuchet import TARGET_RANGE_M
+from . import system as tb
+from .task import TARGET_RANGE_M
 from .throws import Throws, throws_table
 
 RANDOM_ANGLE_DEG = (20.0, 70.0)

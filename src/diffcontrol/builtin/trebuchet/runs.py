@@ -6,9 +6,9 @@ from typing import Any
 
 from ...evaluation import evaluate_run
 from ...plots import animate_run, write_figures
-from ...tasks import TrebuchetAiming
 from .draw import animate_throw, plot_throw
 from .judge import evaluate_aiming
+from .task import TrebuchetAiming
 
 
 @evaluate_run.register(TrebuchetAiming)

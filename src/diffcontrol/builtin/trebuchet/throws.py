@@ -11,7 +11,7 @@ The first row is what is known before the throw and the aim: the wind the anemom
 (m/s, ``+`` blowing toward the target, within +-20 m/s: the simulator's step budgets are
 checked for that range), the distance 0 (nothing has landed yet), the release angle (degrees
 above the horizontal, in ``(0, 90]``) and the counterweight (pounds, in ``(0, 600]``: heavier
-ones make the simulator's Euler steps diverge; ``systems.trebuchet.check_inputs``). The
+ones make the simulator's Euler steps diverge; ``system.check_inputs``). The
 second row is the outcome: the same wind and the measured distance (m from the pivot), and no
 action. These are the ``distance`` and ``wind`` of the task's state ``(target, wind,
 distance)``; the target is the controller's, not the physics', and is not recorded.
@@ -47,7 +47,7 @@ from ...identify.data._files import (
     readable_suffix,
 )
 from ...io import parse_json
-from ...tasks.trebuchet import THROW_COLUMNS
+from .task import THROW_COLUMNS
 
 COLUMNS = (*THROW_COLUMNS[0], *THROW_COLUMNS[1])
 """The four throw columns of the table: wind, distance, release angle, counterweight."""

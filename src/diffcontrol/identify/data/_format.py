@@ -35,7 +35,7 @@ def known_columns() -> dict[str, Columns]:
 @functools.lru_cache(maxsize=8)
 def _known_columns(names: tuple[str, ...]) -> dict[str, Columns]:
     from ... import tasks
-    from ..._gym_ids import env_id
+    from ..._registry import env_id
 
     known: dict[str, Columns] = {}
     for name in names:

@@ -1,6 +1,6 @@
 """The trebuchet's three phases as scans, and the location of their events.
 
-The integrator behind ``systems.trebuchet`` (whose docstring has the physics and the event
+The integrator behind ``system`` (whose docstring has the physics and the event
 semantics). Each phase is one ``lax.scan`` of explicit-Euler steps whose body computes only
 that phase's rates and the sign test of its event at the step's end. Once the test fires, the
 scan holds the state at the start of that step, and every later step recomputes the same step
@@ -24,7 +24,7 @@ import jax
 import jax.numpy as jnp
 from jax.ad_checkpoint import checkpoint_name
 
-from ._trebuchet_eom import flight_rates, ground_rates, hang_rates, sling_velocity
+from ._eom import flight_rates, ground_rates, hang_rates, sling_velocity
 
 NEWTON_ITERS = 4
 """Newton iterations from the regula-falsi point; the 5th (differentiable) one reaches

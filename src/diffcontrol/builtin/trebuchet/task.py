@@ -3,7 +3,7 @@
 The seed post's first demo. One "episode" is one throw: the reset distribution samples a
 situation (target distance and wind, as in the original's training data), the controller
 answers with a release angle and a counterweight through bounded heads, and the
-differentiable trebuchet (``diffcontrol.systems.trebuchet``) throws. The reward is minus the
+differentiable trebuchet (``builtin.trebuchet.system``) throws. The reward is minus the
 miss, so the generic trainer with ``window = horizon = 1`` is minibatch gradient descent
 through the simulator over random situations, the original's recipe with a batch under
 ``vmap`` instead of one sample at a time.
@@ -18,12 +18,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._jax_setup import FastJit
-from ..config import TrainConfig
-from ..errors import ConfigError
-from ..systems import draws
-from ..systems import trebuchet as tb
-from ._base import StepLoss, Task
+import diffcontrol.builtin.trebuchet.system as tb
+
+from ..._jax_setup import FastJit
+from ...config import TrainConfig
+from ...errors import ConfigError
+from ...systems import draws
+from ...tasks import StepLoss, Task
 
 TARGET_RANGE_M = (20.0, 100.0)
 """Targets are drawn uniformly from this range (m), as in the original."""
@@ -162,7 +163,7 @@ class TrebuchetAiming(Task):
 
     def load_policy(self, doc: dict):
         """An ``AimingPolicy``: ``policy(target_m, wind_mps) -> (angle_deg, weight_lb)``."""
-        from ..policies import AimingPolicy
+        from ...policies import AimingPolicy
 
         return AimingPolicy(doc)
 
@@ -257,7 +258,7 @@ _PADDING = (0.0, 45.0, 200.0)
 
 
 def shoot_in_chunks(wind_mps, angle_deg, weight_lb, params: tb.TrebuchetParams | None = None):
-    """``systems.trebuchet.shoot`` elementwise over NumPy inputs (broadcast against each
+    """``system.shoot`` elementwise over NumPy inputs (broadcast against each
     other), in calls of ``SHOOT_CHUNK`` throws (the last padded) to one compiled program.
 
     Returns a float64 NumPy array of the inputs' broadcast shape. ``params=None`` (the nominal

@@ -1,4 +1,4 @@
-"""The trebuchet's constants, geometry and equations of motion (``systems.trebuchet``'s physics).
+"""The trebuchet's constants, geometry and equations of motion (``system``'s physics).
 
 The rates of the three phases as Trebuchet.jl writes them (``shared/reference/seed-systems.md``
 section 2), in SI units: the state ``u = (q_A, q_W, q_S, w_A, w_W, w_S)`` of the mechanism and
@@ -15,7 +15,7 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ..errors import ConfigError
+from ...errors import ConfigError
 
 FT = 0.3048
 """Metres per foot (the original's ``ft2m``)."""

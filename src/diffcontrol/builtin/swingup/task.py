@@ -1,7 +1,7 @@
 """Cart-pole swing-up as a neural ODE: the second seed post (Paul Shen, 2020), and variants.
 
 The controller ``F = NN(cos theta, sin theta, theta_dot)`` sits inside the right-hand side of
-the cart-pole ODE (``diffcontrol.systems.cartpole_swingup``); the closed loop is solved from
+the cart-pole ODE (``builtin.swingup.system``); the closed loop is solved from
 the pole hanging down with an adaptive solver, saved at ``saves`` equally spaced times, and a
 loss on that saved trajectory is differentiated through the solve
 (``../shared/reference/seed-systems.md`` §7).
@@ -36,9 +36,10 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from ..config import ODETrainConfig
-from ..systems import cartpole_swingup as cp
-from ._base import ContinuousTask, TrajectoryLoss
+import diffcontrol.builtin.swingup.system as cp
+
+from ...config import ODETrainConfig
+from ...tasks import ContinuousTask, TrajectoryLoss
 
 ENERGY_WEIGHT = 0.1
 """Weight of the dissipated energy (per joule) in the ``energy`` loss."""
@@ -257,7 +258,7 @@ class CartPoleSwingUp(ContinuousTask):
         """The planner of the actuator-limited swing-up (docs/planning.md): the force held for
         0.05 s, 40 of them planned (2 s), 5 box-iLQR iterations from the warm start and both
         bounds. No force bound: this 1 s task's force is not limited (pass ``action_bound``)."""
-        from ..settings import PlanConfig
+        from ...settings import PlanConfig
 
         return PlanConfig(horizon=40, iterations=5, dt=0.05)
 

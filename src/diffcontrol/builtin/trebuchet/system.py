@@ -92,8 +92,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
-from ..errors import ConfigError
-from ._trebuchet_eom import (
+from ...errors import ConfigError
+from ._eom import (
     FT,
     LB,
     TrebuchetParams,
@@ -107,7 +107,7 @@ from ._trebuchet_eom import (
     sling_end,
     sling_velocity,
 )
-from ._trebuchet_phases import flight_scan, ground_scan, hang_scan, locate_liftoff, locate_release
+from ._phases import flight_scan, ground_scan, hang_scan, locate_liftoff, locate_release
 
 __all__ = [
     "END",
