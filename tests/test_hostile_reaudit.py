@@ -5,6 +5,7 @@ imports nothing a file names, and changes nothing."""
 from __future__ import annotations
 
 import json
+import re
 import shutil
 import sys
 
@@ -232,6 +233,33 @@ def test_library_inputs_of_the_wrong_kind(cartpole_run):
     for obs in (np.zeros((2, 5)), [[1.0, 2.0]], np.full(4, np.inf)):
         with pytest.raises(ValueError):
             policy(obs)
+
+
+@pytest.mark.parametrize(
+    ("call", "needle"),
+    [
+        (lambda run: diffcontrol.make(5), "takes a task's name"),
+        (lambda run: diffcontrol.make(None), "takes a task's name"),
+        (lambda run: diffcontrol.train(5), "train() takes a task"),
+        (lambda run: diffcontrol.register(5), "register() takes an instance"),
+        (lambda run: diffcontrol.register("pendulum"), "register() takes an instance"),
+        (lambda run: diffcontrol.check_task(5), "check_task() takes a task"),
+        (lambda run: diffcontrol.load(run, task="pendulum"), "open it with its own task"),
+        (lambda run: diffcontrol.fit(diffcontrol.make("pendulum"), run / "nope.csv"), "exist"),
+        (lambda run: diffcontrol.fit(diffcontrol.make("pendulum"), {"x": 1}), "recorded data"),
+    ],
+)
+def test_library_calls_with_the_wrong_kind_of_argument_say_what_they_take(
+    cartpole_run, call, needle
+):
+    """One error of the library's own, naming what the call takes, never a raw TypeError or
+    AttributeError from inside it (a CartPole run loaded as the Pendulum's included)."""
+    with pytest.raises(DiffcontrolError, match=re.escape(needle)):
+        call(cartpole_run)
+
+
+def test_check_task_takes_a_name_as_make_does():
+    assert diffcontrol.check_task("pendulum").task == "pendulum"
 
 
 # --- integers on every command, races for a new file ------------------------------------------

@@ -109,3 +109,29 @@ def test_a_finished_run_refuses_the_library_resume(cartpole_run):
     doc = json.loads((cartpole_run / "run.json").read_text())
     with pytest.raises(RunDirectoryError, match="finished run"):
         io.prepare_run_dir(cartpole_run, doc, resume=True)
+
+
+def test_result_save_never_overwrites_another_run(cartpole_run, tmp_path):
+    """``result.save(DIR)`` (the README's call) refuses a directory that holds another run,
+    keeps its files, writes into a new one, and writes again into the directory ``train``
+    wrote (its own) or where told to with ``overwrite=True``."""
+    import shutil
+
+    import diffcontrol
+
+    other = tmp_path / "other"
+    shutil.copytree(cartpole_run, other)
+    before = {p.name: p.read_bytes() for p in other.iterdir() if p.is_file()}
+    task = diffcontrol.make("pendulum")
+    config = task.default_config().replace(
+        updates=2, eval_every=1, batch=4, window=10, eval_episodes=2
+    )
+    result = diffcontrol.train(task, config)
+    with pytest.raises(RunDirectoryError, match="holds another run"):
+        result.save(other, final_eval=0, animation=False)
+    assert {p.name: p.read_bytes() for p in other.iterdir() if p.is_file()} == before
+    assert "model.json" in result.save(tmp_path / "new", final_eval=0, animation=False)
+    result.save(other, final_eval=0, animation=False, overwrite=True)
+    assert json.loads((other / "model.json").read_text())["task"] == "pendulum"
+    own = diffcontrol.train(task, config, out_dir=tmp_path / "own")
+    assert "model.json" in own.save(tmp_path / "own", final_eval=0, animation=False)

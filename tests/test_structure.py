@@ -101,7 +101,7 @@ LAYERS = [
     "systems",
     "tasks",
     "rollout checks _checks",
-    "training identify mpc evaluation envs wrappers plots animation optimal _run_files",
+    "training identify mpc evaluation envs wrappers plots animation optimal _run_files deploy",
     "runs",
     "compare cli",
     "builtin",

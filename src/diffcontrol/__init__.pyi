@@ -4,6 +4,7 @@ from .checks import check_task as check_task
 from .config import ODETrainConfig as ODETrainConfig
 from .config import TrainConfig as TrainConfig
 from .controllers import MLPController as MLPController
+from .deploy import export as export
 from .errors import ConfigError as ConfigError
 from .errors import DiffcontrolError as DiffcontrolError
 from .evaluation import evaluate as evaluate

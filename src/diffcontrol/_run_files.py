@@ -11,8 +11,9 @@ from pathlib import Path
 from typing import Any
 
 from . import _timing, io, policies
-from .errors import ModelFileError
+from .errors import ModelFileError, RunDirectoryError
 from .evaluation import evaluate_run
+from .identify.fitted import real_params
 from .tasks import AnyTask
 
 MODEL_FILE = "model.json"
@@ -75,8 +76,6 @@ def judged(task: AnyTask, params: Any, real: dict | None) -> tuple[AnyTask, Any]
     judged on the system the model stands for (``task.base``) with the real parameters where
     its data gives them, else on what it was trained on."""
     if real and "params" in real:
-        from .identify.fitted import real_params
-
         base = getattr(task, "base", task)
         return base, real_params(base, real)
     return task, params
@@ -91,6 +90,7 @@ def save_run(
     real: dict | None = None,
     progress: Callable[[str], None] | None = None,
     process_total: bool = False,
+    overwrite: bool = False,
 ) -> tuple[Run, list[str]]:
     """Write a trained controller's run files into ``out_dir``: ``model.json``, the final
     evaluation in ``metrics.json`` and the task's pictures.
@@ -104,11 +104,24 @@ def save_run(
         progress: called with a line when the evaluation is done.
         process_total: record the process's age in ``metrics["timings"]["total"]`` (the
             command line, whose process is the run).
+        overwrite: write over the files of another run in ``out_dir`` (the commands that
+            own their directories pass it).
 
     Returns:
         The ``Run`` and the names of the files written.
+
+    Raises:
+        RunDirectoryError: ``out_dir`` holds another run's ``model.json`` or ``run.json``
+            (not the directory ``result`` was trained into), and not ``overwrite``.
     """
     out = Path(out_dir)
+    own = getattr(result, "out_dir", None)
+    held = [n for n in (MODEL_FILE, io.RUN_FILE) if (out / n).exists()]
+    if held and not overwrite and not (own is not None and _same_dir(own, out)):
+        raise RunDirectoryError(
+            f"{out} holds another run ({', '.join(held)}); save into a new or empty directory, "
+            "or pass overwrite=True to replace it"
+        )
     out.mkdir(parents=True, exist_ok=True)
     say = progress or (lambda line: None)
     metrics = dict(result.metrics)
@@ -183,3 +196,11 @@ def release_claim(run_dir: str | Path) -> bool:
     if not any(out.iterdir()):
         out.rmdir()
     return True
+
+
+def _same_dir(a: str | Path, b: str | Path) -> bool:
+    """Whether two paths name the same directory."""
+    try:
+        return Path(a).resolve() == Path(b).resolve()
+    except OSError:
+        return False

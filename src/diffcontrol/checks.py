@@ -30,7 +30,7 @@ from ._checks.contract import task_contract
 from ._checks.parity import check_parity
 from ._checks.shapes import task_shapes
 from .errors import ConfigError, TaskCheckError
-from .tasks import AnyTask, ContinuousTask
+from .tasks import AnyTask, ContinuousTask, as_task
 
 __all__ = ["CheckReport", "TaskCheckError", "check_contract", "check_task", "validate_task"]
 
@@ -202,6 +202,7 @@ def check_task(
     for arg, value in (("states", states), ("steps", steps)):
         if not isinstance(value, int) or isinstance(value, bool) or value <= 0:
             raise ConfigError(f"{arg} must be a positive integer, got {value!r}")
+    task = as_task(task, "check_task()")
     params = default_params(task) if params is None else params
     state = validate_task(task, params)
     task_contract(task, params, state, states, seed)

@@ -69,7 +69,7 @@ class _Config:
                 object.__setattr__(self, f.name, _pairs(value))
 
     def _check_common(self) -> None:
-        from .controllers import ACTIVATIONS, HEADS
+        from .controllers import ACTIVATIONS, HEADS  # JAX: config is read by --help
 
         if self.activation not in ACTIVATIONS:
             raise ConfigError(

@@ -9,6 +9,10 @@ from typing import Any
 
 import numpy as np
 
+from . import _jax_setup
+from .envs import make_env
+from .errors import ConfigError
+from .rollout import solve_closed_loop
 from .tasks import ContinuousTask, Task
 from .tasks._hooks import task_hook
 
@@ -238,8 +242,6 @@ def _lockstep(
 def _check_fits(policy: Any, env: Any, label: str) -> None:
     """A controller and an environment of different observation sizes (``--env`` of another
     system) are refused in one line before the first episode."""
-    from .errors import ConfigError
-
     try:
         policy(env.observation_space.sample())
     except ValueError as e:  # the policy names the size it takes
@@ -251,15 +253,11 @@ def eval_environment(task: Task, real: tuple[str, dict | None] | None) -> tuple[
     (``(env_id, env_kwargs)``, labelled ``env_id(k=v, ...)``)."""
     if real is None:
         return task.make_gym_env(), task.gym_label
-    from .envs import make_env
-
     env_id, kwargs = real
     args = ", ".join(f"{k}={v}" for k, v in (kwargs or {}).items())
     try:
         env = make_env(env_id, kwargs)
     except ImportError as e:  # the module before ':' of an id the user named
-        from .errors import ConfigError
-
         raise ConfigError(
             f"cannot make the environment {env_id!r}: {type(e).__name__}: {e}; check the "
             "module path (run from the directory that holds it, or install its package)"
@@ -371,9 +369,6 @@ def simulate_continuous(
     import jax
     import jax.numpy as jnp
 
-    from ._jax_setup import compile_with
-    from .rollout import solve_closed_loop
-
     config = config or task.default_config()
     horizon = float(config.horizon_s)
     params = task.default_params() if params is None else params
@@ -425,7 +420,7 @@ def simulate_continuous(
             # the loss computed op by op after the solve (before 2026-11-26), the loss moves by
             # at most an ulp or two, and the friction swing-up's trajectory by up to 2e-9
             # relative (the emitters); level 1 would move the swing-up's last bits too.
-            program = compile_with(run.lower(*args), "xla_cpu_use_fusion_emitters")
+            program = _jax_setup.compile_with(run.lower(*args), "xla_cpu_use_fusion_emitters")
             ys_all, force_all, loss, ok = (np.asarray(x) for x in program(*args))
             ys, force, loss, ok_loss = ys_all[at], force_all[at], float(loss), True
         if not (bool(ok) and bool(ok_loss)):

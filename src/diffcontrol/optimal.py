@@ -35,6 +35,7 @@ import numpy as np
 from jaxtyping import Array, Float, PyTree
 
 from .errors import ConfigError
+from .evaluation import eval_environment
 from .tasks._grid import GridAxis
 
 __all__ = ["GridAxis", "OptimumResult", "ValueTable", "greedy_rollout", "optimal_return", "solve"]
@@ -283,8 +284,6 @@ def optimal_return(
             {"g": 12.0, "friction": 0.1})`` with ``task.params_of_env`` of the same), as
             ``evaluation.evaluate``'s ``real``; the optimum is then that system's.
     """
-    from .evaluation import eval_environment
-
     seeds = [int(s) for s in seeds]
     if not seeds:
         raise ConfigError("seeds is empty; pass at least one Gymnasium reset seed")

@@ -13,6 +13,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from . import io  # noqa: E402
 from .animation import animate, can_draw  # noqa: E402
 from .errors import ConfigError  # noqa: E402
 from .evaluation import Recording, record_episode  # noqa: E402
@@ -21,9 +22,7 @@ from .tasks._hooks import task_hook  # noqa: E402
 
 
 def _save(fig: Any, path: str | Path) -> Path:
-    from .io import write_figure
-
-    return write_figure(fig, path)
+    return io.write_figure(fig, path)
 
 
 def column_layout(fig: Any, rows: int) -> None:

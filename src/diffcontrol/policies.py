@@ -49,6 +49,7 @@ from ._version import __version__
 from .controllers import ACTIVATIONS, HEADS, MLPController
 from .errors import ConfigError, ModelFileError
 from .io import now_iso, read_json
+from .settings import PlanConfig
 
 MODEL_FORMAT = "diffcontrol-model"
 GYM_KINDS = {"sign": "discrete_sign", "argmax": "discrete"}
@@ -153,8 +154,6 @@ def planner_document(
 
 
 def _check_planner(doc: dict, bad: Any) -> None:
-    from .settings import PlanConfig
-
     for what in ("observation", "action"):
         size = (doc.get(what) or {}).get("size")
         if not isinstance(size, int) or isinstance(size, bool) or size < 1:

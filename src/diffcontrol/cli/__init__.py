@@ -1,5 +1,6 @@
 """The ``diffcontrol`` command line: each command parses its options, makes one library call and
-prints what it returns (``_train``, ``_runs``, ``_compare``, ``_identify``; ``_args``: options)."""
+prints what it returns (``_train``, ``_runs``, ``_compare``, ``_identify``, ``_deploy``;
+``_args``: options)."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ from .._interrupts import terminate_as_interrupt
 from .._jax_setup import GC_THRESHOLDS, checks_as_nan
 from .._shell import command
 from ..errors import DiffcontrolError, Interrupted
-from . import _compare, _identify, _runs, _train
+from . import _compare, _deploy, _identify, _runs, _train
 from ._args import EXIT_USAGE, Parser
 
 
@@ -33,7 +34,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 # Each command is the function ``cmd_<command>`` of its module.
-_MODULES = (_runs, _train, _compare, _identify)
+_MODULES = (_runs, _train, _compare, _identify, _deploy)
 COMMANDS = {n[4:]: f for m in _MODULES for n, f in vars(m).items() if n.startswith("cmd_")}
 
 

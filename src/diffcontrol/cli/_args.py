@@ -174,6 +174,8 @@ RUN_TASK = ("--task", str, None, "TASK", "the run's task when it is not a built-
             "because a file names it")
 JSON = ("--json", FLAG, False, None, "print the result as JSON")
 QUIET = ("--quiet", FLAG, False, None, "print only the final summary")
+LOG_DIR = ("--log-dir", str, None, "DIR", "write the training curves to DIR as TensorBoard event "
+           "files (loss, gradient norm, learning rate, evaluation return); needs tensorboardX")
 NO_COMPILE_CACHE = ("--no-compile-cache", FLAG, False, None, "do not use JAX's persistent "
                     "compilation cache (also: DIFFCONTROL_NO_COMPILE_CACHE=1)")
 # fmt: on

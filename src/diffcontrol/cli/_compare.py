@@ -37,7 +37,7 @@ def add_parsers(sub: Any) -> None:
 
 
 def cmd_compare(args: argparse.Namespace) -> int:
-    from ..compare import run_comparison
+    from ..compare import run_comparison  # JAX: the library, when the command runs
 
     more = {"real": args.real, "resume": args.resume, "progress": say(args)}
     more |= {"compile_cache": not args.no_compile_cache, "command": args.command_line}

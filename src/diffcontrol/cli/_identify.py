@@ -9,7 +9,18 @@ import time
 from typing import Any
 
 from ..settings import MODELS, FitConfig, LoopConfig, RecordConfig
-from ._args import FLAG, QUIET, REQUIRED, TASK, add, config_of, config_specs, env_arg, say
+from ._args import (
+    FLAG,
+    LOG_DIR,
+    QUIET,
+    REQUIRED,
+    TASK,
+    add,
+    config_of,
+    config_specs,
+    env_arg,
+    say,
+)
 
 
 def add_parsers(sub: Any) -> None:
@@ -74,12 +85,13 @@ def add_parsers(sub: Any) -> None:
         *config_specs(LoopConfig),
         ("--resume", FLAG, False, None, "continue an interrupted loop in DIR"),
         ("--quiet", FLAG, False, None, "print only each round's summary"),
+        LOG_DIR,
     )
     # fmt: on
 
 
 def cmd_fit(args: argparse.Namespace) -> int:
-    from .. import identify, tasks
+    from .. import identify, tasks  # JAX: the library, when the command runs
 
     more = {"force": args.force, "progress": say(args)}
     task, config = tasks.resolve(args.task), config_of(FitConfig, args)
@@ -89,16 +101,17 @@ def cmd_fit(args: argparse.Namespace) -> int:
 
 
 def cmd_loop(args: argparse.Namespace) -> int:
-    from .. import runs, tasks
+    from .. import runs, tasks  # JAX: the library, when the command runs
 
     config = config_of(LoopConfig, args)
     more = {"env_kwargs": dict(args.env_arg), "resume": args.resume, "progress": say(args)}
+    more["log_dir"] = args.log_dir
     runs.loop(tasks.resolve(args.task), args.out, config, env_id=args.env, **more)
     return 0
 
 
 def cmd_record(args: argparse.Namespace) -> int:
-    from .. import identify, tasks
+    from .. import identify, tasks  # JAX: the library, when the command runs
 
     t0 = time.perf_counter()
     task = tasks.resolve(args.task) if args.task else None

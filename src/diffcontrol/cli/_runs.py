@@ -8,6 +8,7 @@ from typing import Any
 
 import diffcontrol.cli._args as a
 
+from .._registry import listing
 from ._args import FLAG, REQUIRED, add
 
 
@@ -71,14 +72,12 @@ def add_parsers(sub: Any) -> None:
 
 
 def cmd_list(args: argparse.Namespace) -> int:
-    from .._registry import listing
-
     print("\n".join(listing()))
     return 0
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
-    from ..runs import evaluate_dir
+    from ..runs import evaluate_dir  # JAX: the library, when the command runs
 
     kw = a.pick(args, "task episodes seed optimum")
     run, ev = evaluate_dir(args.run_dir, env_id=args.env, env_kwargs=dict(args.env_arg), **kw)
@@ -91,7 +90,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
 
 def cmd_animate(args: argparse.Namespace) -> int:
-    from ..runs import animate_dir
+    from ..runs import animate_dir  # JAX: the library, when the command runs
 
     kw = a.pick(args, "task seed target wind")
     path, what = animate_dir(args.run_dir, args.out, **kw)
@@ -100,7 +99,7 @@ def cmd_animate(args: argparse.Namespace) -> int:
 
 
 def cmd_aim(args: argparse.Namespace) -> int:
-    from ..runs import aim_dir
+    from ..runs import aim_dir  # JAX: the library, when the command runs
 
     result, lines = aim_dir(args.run_dir, args.target, args.wind, direct=args.direct)
     print(json.dumps(result) if args.json else "\n".join(lines))

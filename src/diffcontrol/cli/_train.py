@@ -11,6 +11,7 @@ from typing import Any
 import diffcontrol.cli._args as a
 
 from ..config import ODETrainConfig, TrainConfig
+from ..errors import TrainingWarning
 from ..settings import PlanConfig
 from ._args import FLAG, REQUIRED, add
 
@@ -59,6 +60,7 @@ def add_parsers(sub: Any) -> None:
         ("--join-timeout", a.positive_float, 60.0, "S", "give up joining the hosts after S s"),
         a.NO_COMPILE_CACHE,
         a.QUIET,
+        a.LOG_DIR,
     )
     group = p.add_argument_group(
         "training settings (defaults depend on the task; see `diffcontrol list`)")
@@ -78,8 +80,7 @@ def add_parsers(sub: Any) -> None:
 
 
 def cmd_train(args: argparse.Namespace) -> int:
-    from ..errors import TrainingWarning
-    from ..runs import train_run
+    from ..runs import train_run  # JAX: the library, when the command runs
 
     with warnings.catch_warnings():
         if not args.quiet:  # training warnings come as progress lines; not twice
@@ -96,7 +97,7 @@ def cmd_train(args: argparse.Namespace) -> int:
             compile_cache=not args.no_compile_cache,
             progress=a.say(args),
             command=args.command_line,
-            **a.pick(args, "recipe model resume final_eval devices"),
+            **a.pick(args, "recipe model resume final_eval devices log_dir"),
         )
     print(outcome.summary)
     if outcome.files:
@@ -107,7 +108,7 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 
 def cmd_plan(args: argparse.Namespace) -> int:
-    from ..runs import plan_run
+    from ..runs import plan_run  # JAX: the library, when the command runs
 
     kw = a.pick(args, "model final_eval value") | {"env_id": args.env, "progress": a.say(args)}
     kw |= {"settings": a.pick(args, _PLAN), "animation": not args.no_animation}
@@ -138,17 +139,17 @@ def _add_sweep_parser(sub: Any) -> None:
         ("--recipe", str, None, "NAME", "start from a named set of settings of the task"),
         ("--resume", FLAG, False, None, "train the members of the sweep in DIR not yet written"),
         ("--final-eval", a.nonneg_int, None, "N", "the best member's final evaluation size"),
-        a.NO_COMPILE_CACHE, a.QUIET)
+        a.NO_COMPILE_CACHE, a.QUIET, a.LOG_DIR)
     add(p.add_argument_group("settings of every member (see `diffcontrol train --help`)"),
         *a.config_specs(TrainConfig, skip={"seed", "params"}, defaults=False))
     # fmt: on
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
-    from ..runs import sweep_dir
+    from ..runs import sweep_dir  # JAX: the library, when the command runs
 
     settings = a.pick(args, _DISCRETE - {"seed", "params"})
-    more = a.pick(args, "recipe devices resume final_eval") | {"values": args.set or []}
+    more = a.pick(args, "recipe devices resume final_eval log_dir") | {"values": args.set or []}
     more |= {"compile_cache": not args.no_compile_cache, "progress": a.say(args)}
     _, files = sweep_dir(args.out, args.task, seeds=args.seeds, settings=settings, **more)
     print(f"wrote {args.out}: sweep.txt, sweep.png and {len(files) - 3} run directories")

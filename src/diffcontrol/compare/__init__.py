@@ -19,7 +19,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from .. import envs, io
+from .. import _jax_setup, envs, io
 from .._shell import command as shell_command
 from ..errors import ConfigError, Interrupted, RunDirectoryError
 from ..settings import CompareConfig
@@ -93,8 +93,6 @@ def run_comparison(
     task = resolve(task) if isinstance(task, str) else task
     config = config or CompareConfig()
     if compile_cache and not os.environ.get("DIFFCONTROL_NO_COMPILE_CACHE"):
-        from .. import _jax_setup
-
         _jax_setup.enable_compile_cache()
     if real:
         return run_real_comparison(

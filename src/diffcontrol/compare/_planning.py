@@ -24,7 +24,10 @@ from collections.abc import Callable
 
 import numpy as np
 
+from .. import policies
 from ..errors import ConfigError
+from ..evaluation import evaluate
+from ..mpc import PlannerPolicy, distil, planner_from_config
 from ..settings import PlanConfig
 from ..tasks import Task
 from .baselines import BASELINES
@@ -59,11 +62,7 @@ def run_planning(
 ) -> dict:
     """Run ``method`` (``planner`` or ``distilled``) with ``seed``; ``memo`` keeps the planner
     (and its grid) between the calls of one comparison."""
-    from ..evaluation import evaluate
-
     if "planner" not in memo:
-        from ..mpc import PlannerPolicy, planner_from_config
-
         t0 = time.perf_counter()
         policy = PlannerPolicy(planner_from_config(task, PLANNER, progress=say))
         policy(np.asarray(task.observation_space().sample()))  # compiled here, counted here
@@ -80,9 +79,6 @@ def run_planning(
             return memo[key]
 
     else:
-        from .. import policies
-        from ..mpc import distil
-
         result = distil(task, policy.planner, seed=seed, progress=say, **DISTIL)
         m = result.metrics
         steps, seconds = m["simulated_steps"], m["train_seconds"]

@@ -40,7 +40,8 @@ import numpy as np
 
 from .. import io
 from ..errors import ConfigError, RunDirectoryError
-from ..settings import CONTROLLERS
+from ..runs import loop
+from ..settings import CONTROLLERS, LoopConfig
 from ..tasks import Task, make, names, resolve
 from .report import machine, plot, summarize, table
 from .run import THRESHOLDS, first_reached
@@ -104,9 +105,6 @@ def run_real_comparison(
         ConfigError: a task without a threshold, an unknown model, an RL file of another
             evaluation protocol; RunDirectoryError: ``out_dir`` holds other things.
     """
-    from ..runs import loop
-    from ..settings import LoopConfig
-
     task = resolve(task) if isinstance(task, str) else task
     if not _can_learn(task):
         can = sorted(n for n in names() if _can_learn(make(n)))

@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from ..io import write_figure
 from .run import first_reached
 
 
@@ -142,8 +143,6 @@ def plot(
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from ..io import write_figure
 
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.5), sharey=True)
     methods: list[str] = []

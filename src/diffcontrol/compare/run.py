@@ -31,9 +31,10 @@ from typing import Any
 import gymnasium
 import numpy as np
 
-from .. import envs
+from .. import envs, policies
 from ..errors import ConfigError
 from ..tasks import Task
+from ..training import resolve_config, train
 from .baselines import BASELINES, build_model
 
 THRESHOLDS: dict[str, tuple[float, ...]] = {
@@ -145,9 +146,6 @@ def run_diffcontrol(
     say: Callable[[str], None],
 ) -> dict:
     """Train diffcontrol's default configuration with ``seed``; evaluate as described above."""
-    from .. import policies
-    from ..training import resolve_config, train
-
     config = resolve_config(task, seed=seed, updates=updates)
     curve: list[dict] = []
     eval_seconds = 0.0

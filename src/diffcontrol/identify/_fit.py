@@ -13,10 +13,13 @@ from typing import Any
 
 from .._version import __version__
 from ..errors import ConfigError, RunDirectoryError
+from ..io import now_iso, write_json, write_json_new
 from ..settings import FitConfig
+from ..tasks import as_task
 from ._routes import model_route
 from ._shooting import MODEL_TYPES, FitResult
-from .fitted import FITTED_FILE, FITTED_FORMAT
+from .data import TrajectoryData
+from .fitted import FITTED_FILE, FITTED_FORMAT, real_params
 
 
 def fit(task: Any, data: Any, model: str = "params", **settings: Any) -> FitResult:
@@ -27,8 +30,8 @@ def fit(task: Any, data: Any, model: str = "params", **settings: Any) -> FitResu
 
     Args:
         task: any task (``diffcontrol.make``/``tasks.resolve``).
-        data: recorded episodes (``TrajectoryData``; one-step episodes where the system gives
-            one measured outcome).
+        data: recorded episodes (``TrajectoryData``, or the path of its CSV or NPZ file;
+            one-step episodes where the system gives one measured outcome).
         model: ``params`` (grey box: the task's physical parameters), ``hybrid`` (physics plus
             a network) or ``neural`` (a network alone).
         settings: ``names`` (the parameters of a grey box; default the task's
@@ -46,7 +49,15 @@ def fit(task: Any, data: Any, model: str = "params", **settings: Any) -> FitResu
     """
     if model not in MODEL_TYPES:
         raise ConfigError(f"unknown model kind {model!r}; choose one of {list(MODEL_TYPES)}")
+    task = as_task(task, "fit()")
     route = model_route(task)
+    if isinstance(data, str | os.PathLike):  # a recorded file: read (and checked) first
+        data = route.read(data)
+    if not isinstance(data, TrajectoryData):
+        raise ConfigError(
+            f"fit() takes recorded data (a TrajectoryData, or the path of a CSV or NPZ file "
+            f"that diffcontrol record wrote), not {type(data).__name__}"
+        )
     steps, lr = route.defaults.get(model, (None, None))
     settings = {"steps": steps, "learning_rate": lr, **settings}
     result = route.fit(task, data, model, **{k: v for k, v in settings.items() if v is not None})
@@ -155,8 +166,7 @@ def fit_dir(
     data = route.read(data_file)
     meta = getattr(data, "metadata", None) or {}
     if isinstance(meta.get("params"), dict) and not meta.get("env_id"):
-        from .fitted import real_params  # what train --model will judge on: checked now
-
+        # what train --model will judge on: checked now
         real_params(task, {"params": meta["params"]})
     out = Path(out)
     check_fit_dir(out, force)
@@ -185,8 +195,6 @@ def save_fit(
 ) -> dict:
     """Write ``out/fitted.json``: the format's head, ``body`` (the route's model, settings,
     data and prediction errors) with how the fit ended, and when and by what; returns it."""
-    from ..io import now_iso, write_json, write_json_new
-
     head = {"format": FITTED_FORMAT, "version": 1, "task": task.name, "model": result.model_type}
     ended = {
         "loss": result.loss,

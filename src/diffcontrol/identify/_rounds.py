@@ -11,6 +11,10 @@ from typing import Any
 import numpy as np
 
 from ..errors import ConfigError
+from .ensemble import mean_spread
+from .fitted import fitted_model, fitted_physics
+from .hybrid import model_task
+from .steps import prediction_errors
 
 
 class NoisyPolicy:
@@ -78,9 +82,6 @@ def predictor_of(task: Any, fit_doc: dict | None, model: str, start: dict[str, f
     """``(task, params)`` that predicts as the model did before the new data: the fitted file
     ``fit_doc`` of the previous round, or for the first round the start physics (a grey box, or
     a hybrid whose correction is still zero); ``None`` for a black box that has no model yet."""
-    from .fitted import fitted_model, fitted_physics
-    from .hybrid import model_task
-
     if fit_doc is None:
         return None if model == "neural" else (task, start_params(task, start))
     if fit_doc["model"] == "params":
@@ -94,9 +95,6 @@ def model_error(predictor: Any, data: Any, horizons: tuple[int, ...] = (1, 10)) 
     recorded state with the recorded actions), ``{"rmse_H": value}`` per horizon, and for an
     ensemble its members' mean spread on the data (``"spread"``: how unsure it was there);
     None without a predictor."""
-    from .ensemble import mean_spread
-    from .steps import prediction_errors
-
     if predictor is None:
         return None
     errors = prediction_errors(*predictor, data, horizons)

@@ -19,9 +19,17 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import ConfigError
 from ..tasks import Task
 from ..tasks._hooks import task_hook
 from ._shooting import HORIZONS, FitResult
+from .data import read_trajectories
+from .ensemble import Ensemble, ensemble_to_dict, mean_spread
+from .hybrid import fit_model, model_task
+from .network import correction_to_dict
+from .ode import fit_vector_field, model_document, nominal_model
+from .ode import prediction_errors as ode_prediction_errors
+from .steps import fit_parameters, prediction_errors
 
 
 def params_dict(params: Any) -> dict[str, float]:
@@ -69,8 +77,6 @@ class TrajectoryRoute:
     unit = "episode"
 
     def read(self, path: Any) -> Any:
-        from .data import read_trajectories
-
         return read_trajectories(path)
 
     def count(self, data: Any) -> int:
@@ -97,24 +103,18 @@ class StepRoute(TrajectoryRoute):
 
     def fit(self, task: Any, data: Any, model_type: str, **s: Any) -> FitResult:
         if model_type == "params":
-            from .steps import fit_parameters
-
             _one_network(s, "a grey box (--model params) has no network")
 
             keys = ("window", "steps", "learning_rate", "lm_steps", "init")
             return fit_parameters(
                 task, data, s.get("names"), **{k: s[k] for k in keys if s.get(k) is not None}
             )
-        from .hybrid import fit_model
-
         keys = ("params", "window", "steps", "learning_rate", "hidden", "seed", "members")
         keys += ("bootstrap", "uncertainty_penalty")
         return fit_model(task, data, model_type, **{k: s[k] for k in keys if s.get(k) is not None})
 
     def predictor(self, task: Any, result: FitResult | None) -> tuple[Any, Any]:
         """``(task, params)`` to predict with: the nominal model for ``None``."""
-        from .hybrid import model_task
-
         if result is None:
             return task, task.default_params()
         if result.model_type == "params":
@@ -122,8 +122,7 @@ class StepRoute(TrajectoryRoute):
         return model_task(task, result.model), result.model
 
     def outputs(self, task, result, data, train, held_out, data_file, settings, out):
-        from .plot import prediction_plot, task_predictor
-        from .steps import prediction_errors
+        from .plot import prediction_plot, task_predictor  # matplotlib
 
         nominal, fitted = self.predictor(task, None), self.predictor(task, result)
         errors = None
@@ -136,9 +135,6 @@ class StepRoute(TrajectoryRoute):
             model_doc = {"parameters": parameters_doc(result)}
             model_doc["all_parameters"] = params_dict(result.params)
         else:
-            from .ensemble import Ensemble, ensemble_to_dict
-            from .network import correction_to_dict
-
             c = result.model.correction
             net = ensemble_to_dict(c) if isinstance(c, Ensemble) else correction_to_dict(c)
             model_doc = {
@@ -166,8 +162,6 @@ class StepRoute(TrajectoryRoute):
             fit_settings.update(hidden=list(settings["hidden"]), seed=settings["seed"])
             members = settings.get("members", 1)
             if members > 1:
-                from .ensemble import mean_spread
-
                 spread = {"fit": mean_spread(task, result.model, train)}
                 if held_out is not None:
                     spread["held_out"] = mean_spread(task, result.model, held_out)
@@ -233,8 +227,6 @@ class ODERoute(TrajectoryRoute):
         )
 
     def fit(self, task: Any, data: Any, model_type: str, **s: Any) -> FitResult:
-        from .ode import fit_vector_field
-
         _one_network(s, f"{task.name}'s vector-field models have no ensembles yet")
 
         keys = ("window", "steps", "learning_rate", "lm_steps", "hidden", "seed", "weight_decay")
@@ -243,15 +235,14 @@ class ODERoute(TrajectoryRoute):
         return fit_vector_field(task, data, model_type, s.get("params"), **kw)
 
     def outputs(self, task, result, data, train, held_out, data_file, settings, out):
-        from .ode import model_document, nominal_model, prediction_errors
-        from .plot import ode_predictor, prediction_plot
+        from .plot import ode_predictor, prediction_plot  # matplotlib
 
         nominal = nominal_model(task, task.default_params())
         errors = None
         if held_out is not None:
             errors = {
-                "nominal": prediction_errors(task, nominal, held_out),
-                "fitted": prediction_errors(task, result.model, held_out),
+                "nominal": ode_prediction_errors(task, nominal, held_out),
+                "fitted": ode_prediction_errors(task, result.model, held_out),
             }
         network = result.model_type != "params"
         body = {
@@ -309,8 +300,6 @@ def _one_network(settings: dict, why: str) -> None:
     Raises:
         ConfigError: naming the value and why.
     """
-    from ..errors import ConfigError
-
     members = settings.get("members", 1)
     if members not in (None, 1):
         raise ConfigError(f"--members {members}: {why}; drop --members, or fit hybrid/neural")

@@ -18,6 +18,8 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
+from ..errors import ConfigError
+
 MIN_TRANSITIONS_PER_PARAMETER = 50
 """The fewest recorded transitions ``(y_t, u_t, y_{t+1})`` per fitted parameter."""
 
@@ -84,8 +86,6 @@ def check_settings(window: int = 1, steps: int = 0, learning_rate: float = 1.0, 
     Raises:
         ConfigError: the first bad setting.
     """
-    from ..errors import ConfigError
-
     if not isinstance(window, int) or isinstance(window, bool) or window < 1:
         raise ConfigError(f"window must be a positive number of steps, got {window!r}")
     if not isinstance(steps, int) or steps < 0 or not isinstance(lm_steps, int) or lm_steps < 0:

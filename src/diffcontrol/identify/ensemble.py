@@ -29,6 +29,7 @@ from jaxtyping import Array, Float, PRNGKeyArray
 
 from ..errors import ConfigError, ModelFileError
 from .network import Correction, correction_from_dict, correction_to_dict
+from .steps import task_actions
 
 MAX_MEMBERS = 64
 """The most networks of an ensemble."""
@@ -174,8 +175,6 @@ def mean_spread(task: Any, model: Any, data: Any) -> float | None:
     """The mean ``Ensemble.spread`` of a hybrid or neural ``model`` over the recorded
     transitions of ``data`` (at each recorded observation and action); ``None`` for a model
     that is not an ensemble."""
-    from .steps import task_actions
-
     if not isinstance(getattr(model, "correction", None), Ensemble):
         return None
     obs, actions, _ = data.transitions()

@@ -19,7 +19,7 @@ from typing import Any
 import equinox as eqx
 
 from ..errors import ConfigError, ModelFileError
-from ..io import scalar_arguments
+from ..io import read_json, scalar_arguments
 from ..tasks import Task
 from ..tasks._hooks import task_hook
 from ._shooting import MODEL_TYPES, NETWORK_MODELS
@@ -37,8 +37,6 @@ def read_fitted(path: str | os.PathLike) -> dict[str, Any]:
     Raises:
         ModelFileError: the file is missing, not a fitted model, or malformed (says which).
     """
-    from ..io import read_json
-
     path = Path(path)
     if path.is_dir():
         path = path / FITTED_FILE

@@ -18,6 +18,7 @@ import numpy as np  # noqa: E402
 
 from ..io import write_figure  # noqa: E402
 from .data import TrajectoryData  # noqa: E402
+from .ode import predict as ode_predict  # noqa: E402
 from .steps import predict, task_actions  # noqa: E402
 
 Predictor = Callable[[np.ndarray, np.ndarray], np.ndarray]
@@ -44,7 +45,6 @@ def task_predictor(task: Any, params: Any) -> Predictor:
 def ode_predictor(model: Any, dt: float, substeps: int) -> Predictor:
     """A continuous-time model as a ``Predictor``: the states after each held action, open
     loop in float64 (``identify.ode.predict``, as the prediction errors are measured)."""
-    from .ode import predict as ode_predict
 
     @eqx.filter_jit  # one program per segment length, not one per segment
     def open_loop(m, state, actions):

@@ -21,11 +21,13 @@ import gymnasium
 import numpy as np
 from gymnasium import spaces
 
-from .. import io
+from .. import io, tasks
 from .._version import __version__
-from ..envs import make_env
-from ..errors import ConfigError
+from ..envs import TaskEnv, make_env
+from ..envs import env_id as own_id
+from ..errors import ConfigError, DataFileError
 from ..io import now_iso
+from ..policies import NumpyPolicy, read_model
 from ..settings import RecordConfig
 from ..tasks import Task
 from ..tasks._hooks import task_hook
@@ -35,8 +37,6 @@ from .data import DISCRETE_UNIT, TrajectoryData, known_columns, write_trajectori
 def _time_step(env: gymnasium.Env) -> float | None:
     """The environment's time step (s), where it exposes one (``dt``, ``tau``, or a
     diffcontrol control task's parameters); ``None`` otherwise (time is then in steps)."""
-    from ..envs import TaskEnv
-
     u = env.unwrapped
     for name in ("dt", "tau"):
         if isinstance(getattr(u, name, None), int | float):
@@ -303,8 +303,6 @@ def record_gym(
 ) -> TrajectoryData:
     """A discrete-time task's ``record_task``: Gymnasium episodes of ``env_id`` (default the task's
     own environment) as the task's real system, with the columns named by the task."""
-    from ..envs import env_id as own_id
-
     env_id = env_id or task.gym_id or own_id(task)
     return _record_env(
         env_id, episodes, task, env_kwargs, controller, seed, max_steps, noise_m, progress
@@ -312,8 +310,6 @@ def record_gym(
 
 
 def _record_env(env_id, episodes, task, env_kwargs, controller, seed, max_steps, noise_m, progress):
-    from ..policies import NumpyPolicy, read_model
-
     if noise_m is not None:
         raise ConfigError(
             f"--noise-m does not apply to recording {env_id} (only to a task's own recording "
@@ -345,8 +341,6 @@ def check_data_file(out: Path, force: bool) -> None:
             or a directory that cannot be written.
     """
     import os
-
-    from ..errors import DataFileError
 
     if out.is_dir():
         raise DataFileError(f"--out {out} is a directory; give a file name ending in .csv/.npz")
@@ -394,9 +388,6 @@ def record_data(
     Returns:
         The recorded data and the file written.
     """
-    from .. import tasks
-    from ..errors import DataFileError
-
     env_id: str | None = source
     if task is None and source in tasks.names():
         task, env_id = tasks.make(source), None

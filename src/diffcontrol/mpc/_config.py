@@ -10,6 +10,7 @@ import equinox as eqx
 import optax
 from jaxtyping import PyTree
 
+from .. import optimal
 from ..errors import ConfigError
 from ..settings import PlanConfig
 from ..tasks._base import ContinuousTask
@@ -85,8 +86,6 @@ def planner_from_config(
         solver = Shooting(optax.adam(config.learning_rate), iterations=config.solver_iterations)
     terminal_cost = value
     if config.value_grid is not None:
-        from .. import optimal
-
         if progress:
             progress(
                 f"solving the terminal value: grid optimum of {config.value_grid} points per "

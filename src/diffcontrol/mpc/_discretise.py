@@ -32,6 +32,7 @@ import numpy as np
 from jaxtyping import Array, Float, PyTree
 
 from ..errors import ConfigError
+from ..rollout import solve_closed_loop
 from ..tasks._base import ContinuousTask, Task
 
 
@@ -242,8 +243,6 @@ def ode_closed_loop(
 
 
 def _ode_loop(planner, y0, steps, params, rtol, atol, save_ts, system):
-    from ..rollout import solve_closed_loop
-
     disc = planner.task
     cont, dt = system or disc.continuous, disc.dt
     params = planner.problem.params if params is None else params

@@ -8,6 +8,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..evaluation import REFERENCE_ATOL, REFERENCE_RTOL
+from ._discretise import ode_closed_loop
 from ._planner import Planner
 
 
@@ -122,9 +124,6 @@ class SampledPlannerPolicy:
         model) with ``params`` from ``y0``, saved at the times ``ts`` (NumPy, increasing,
         from 0), in the dtype of ``y0`` (float64 under ``jax.enable_x64`` for a reference
         solve at 1e-9); every control step's report is added to ``reports``."""
-        from ..evaluation import REFERENCE_ATOL, REFERENCE_RTOL
-        from ._discretise import ode_closed_loop
-
         ys, us, infos, ok = ode_closed_loop(
             self.planner, y0, ts, params, REFERENCE_RTOL, REFERENCE_ATOL, system
         )

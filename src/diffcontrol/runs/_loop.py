@@ -36,6 +36,7 @@ from ..policies import read_model
 from ..settings import FitConfig, LoopConfig
 from ..tasks import Task
 from ..training import resolve_config, train
+from ..training._events import open_log
 from ._open import load_policy
 from ._plan import plan_run
 from ._train import fitted_training
@@ -53,6 +54,7 @@ def loop(
     resume: bool = False,
     progress: Callable[[str], None] | None = None,
     report: Callable[[str], None] = print,
+    log_dir: str | Path | None = None,
 ) -> dict:
     """Learn a controller for a system you can only run: record ``episodes`` episodes (or
     ``real_steps`` steps) of the real environment ``env_id`` (default the task's own; random
@@ -84,6 +86,10 @@ def loop(
             are not the task's, an unknown ``start`` parameter.
         RunDirectoryError: ``out`` holds another loop (or, without ``resume``, any loop), or
             other files.
+
+    ``log_dir``: write each round's training curves there as TensorBoard event files
+    (``round_K``), and per round the real steps so far, the model's error on the new data and
+    the return on the real system (``loop/...``, the step is the round).
     """
 
     if not isinstance(task, Task):
@@ -140,6 +146,7 @@ def loop(
                      if v})  # fmt: skip
     if c.members > 1:
         settings.update(ensemble)
+    log = open_log(log_dir)  # before the directory is claimed: a missing tensorboardX
     state = _start(out, settings, resume)
     state["start"] = _start_doc(task, model, start)
     say = progress or (lambda line: None)
@@ -233,9 +240,13 @@ def loop(
             overrides = {"seed": seed, "updates": updates, "params": params or None}
             config = resolve_config(trained, None, **{k: v for k, v in overrides.items() if v})
             resumed = (here / "run" / "checkpoint.npz").exists()
-            result = train(trained, config, out_dir=here / "run", resume=resumed, progress=say)
+            logs = {"log_dir": Path(log_dir) / f"round_{k}" if log_dir else None}
+            result = train(
+                trained, config, out_dir=here / "run", resume=resumed, progress=say, **logs
+            )
             result.metrics["model"] = info
-            save_run(result, here / "run", final_eval=own_eval, animation=False, real=real)
+            save_run(result, here / "run", final_eval=own_eval, animation=False, real=real,
+                     overwrite=True)  # fmt: skip
         metrics = read_json(here / "run" / "metrics.json", "metrics")
         fitted_doc = read_json(here / "fit" / "fitted.json", "fitted model")
         judged = metrics.get("gym_eval", {})
@@ -269,6 +280,13 @@ def loop(
         }
         state["rounds"] = [r for r in state["rounds"] if r["round"] != k] + [row]
         write_json(out / LOOP_FILE, {**state, "updated": now_iso()})
+        if log is not None:
+            figures = {
+                "loop/real_steps": row["real_steps"],
+                "loop/real_return": row["real_return"],
+                "loop/model_error_1_step": error["rmse_1"] if error else None,
+            }
+            log.scalars(figures, k)
         ret = row["real_return"]
         fitted_txt = ", ".join(f"{n} = {v:.4g}" for n, v in row["fitted_parameters"].items())
         err = f"; model error on the new data {error['rmse_1']:.3g} (1 step)" if error else ""
@@ -283,6 +301,8 @@ def loop(
         if k < rounds:
             record_round(k, here / "run")
     _plot(state, out / "loop.png")
+    if log is not None:
+        log.close()
     report(
         f"wrote {out / LOOP_FILE}, {out / 'loop.png'} and {out / 'data.csv'}; the controller: "
         f"{out / f'round_{rounds}' / 'run' / 'model.json'}"

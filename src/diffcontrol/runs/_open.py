@@ -10,6 +10,8 @@ from typing import Any
 from .. import io, policies, tasks
 from .._run_files import METRICS_FILE, Run, judged
 from ..errors import ModelFileError
+from ..identify.fitted import checked_env
+from ..mpc import planner_policy
 from ..policies import NumpyPolicy, StatePolicy, read_model
 from ..tasks import AnyTask, resolve, task_params
 
@@ -18,8 +20,6 @@ def load_policy(task: AnyTask, doc: dict) -> Any:
     """The policy of a ``model.json`` document: the task's ``load_policy`` (a NumPy policy),
     or for a planner its ``mpc.PlannerPolicy`` (which imports JAX)."""
     if policies.is_planner(doc):
-        from ..mpc import planner_policy
-
         return planner_policy(task, doc)
     return task.load_policy(doc)
 
@@ -47,7 +47,8 @@ def load(run_dir: str | os.PathLike, task: AnyTask | str | None = None) -> Any:
             or a ``StatePolicy`` where the file gives the state's features).
 
     Raises:
-        ModelFileError: the file is missing, corrupt, or of an unsupported version.
+        ModelFileError: the file is missing, corrupt, or of an unsupported version, or a
+            controller of other sizes than ``task``'s.
     """
     doc = read_model(Path(run_dir))
     if isinstance(task, str):
@@ -55,6 +56,7 @@ def load(run_dir: str | os.PathLike, task: AnyTask | str | None = None) -> Any:
     if task is None and doc["task"] in tasks.names():
         task = tasks.make(doc["task"])
     if task is not None:
+        _check_sizes(doc, task, run_dir)
         return load_policy(task, doc)  # the task's, or a planner's
     if policies.is_planner(doc):
         raise ModelFileError(f"the planner's task {doc['task']!r} is not registered; pass task=")
@@ -85,13 +87,7 @@ def open_run(
         task = _task_of(doc)
     elif isinstance(task, str):
         task = resolve(task)
-    for what, key in (("observation", "observation_size"), ("action", "action_size")):
-        size, own = doc[what]["size"], getattr(task, key, None)
-        if isinstance(own, int) and size != own:  # a model of another system: refused here
-            raise ModelFileError(
-                f"{path} holds a controller of {what} size {size}, but task {task.name!r} has "
-                f"{what}s of size {own}; open it with its own task (--task)"
-            )
+    _check_sizes(doc, task, path)
     config = task.default_config()
     planner = policies.is_planner(doc)  # its run.json holds the planner's settings, not training's
     if (directory / io.RUN_FILE).exists() and not planner:
@@ -114,8 +110,6 @@ def open_run(
         if real is not None and not isinstance(real, dict):
             raise ModelFileError(f"{directory / METRICS_FILE}: 'real_system' is not an object")
         if real and "env_id" in real:  # read from a file: used only if it imports nothing
-            from ..identify.fitted import checked_env
-
             env = checked_env(real["env_id"], real.get("env_kwargs"), str(directory / METRICS_FILE))
             real = {"env_id": env[0], "env_kwargs": env[1]}
     task, params = judged(task, task_params(task, config.params), real or None)
@@ -129,3 +123,14 @@ def _task_of(doc: dict) -> AnyTask:
     hint = f" (it was trained from {source!r})" if isinstance(source, str) else ""
     fix = f"--task module:Class{hint} (in Python: open_run(dir, task=...))"
     return tasks.named_by_file(doc["task"], "the controller", fix)
+
+
+def _check_sizes(doc: dict, task: AnyTask, path: str | os.PathLike) -> None:
+    """Refuse a controller of another system than ``task`` (its observation or action size)."""
+    for what, key in (("observation", "observation_size"), ("action", "action_size")):
+        size, own = doc[what]["size"], getattr(task, key, None)
+        if isinstance(own, int) and size != own:
+            raise ModelFileError(
+                f"{path} holds a controller of {what} size {size}, but task {task.name!r} has "
+                f"{what}s of size {own}; open it with its own task (--task)"
+            )

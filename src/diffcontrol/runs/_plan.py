@@ -25,6 +25,7 @@ from .. import io, policies
 from .._run_files import Run, mark_complete, release_claim, save_run
 from .._version import __version__
 from ..errors import ConfigError, ModelFileError
+from ..identify.fitted import read_fitted, real_system
 from ..mpc import ValueNetwork, make_planner_policy
 from ..settings import PlanConfig
 from ..tasks import AnyTask, resolve, task_params
@@ -136,8 +137,6 @@ def plan_run(
         value = read_value(task, value)
     real, info = None, {"kind": "simulator"}
     if model is not None:
-        from ..identify.fitted import read_fitted, real_system
-
         fitted = read_fitted(model)
         real = real_system(fitted, trusted=env_id)
         stored = {k: v for k, v in fitted.items() if k != "_path"}  # the file, not where it was
@@ -159,8 +158,14 @@ def plan_run(
         params = planner.problem.params if own else task_params(task)
         config_ = task.default_config()  # the run's training settings: none, the defaults
         result = PlanResult(task, None, config_, params, metrics, config, info, policy, value)
-        run_, files = save_run(
-            result, out, final_eval=final_eval, animation=animation, real=real, progress=say
+        run_, files = save_run(  # into the directory plan_run claimed
+            result,
+            out,
+            final_eval=final_eval,
+            animation=animation,
+            real=real,
+            progress=say,
+            overwrite=True,
         )
     except BaseException:
         release_claim(out)

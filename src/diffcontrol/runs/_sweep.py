@@ -20,11 +20,15 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from .. import io, policies
+from .. import _jax_setup, io, policies
 from .._run_files import METRICS_FILE, MODEL_FILE, mark_complete, read_run_file, save_run
 from .._shell import command as shell_command
 from ..errors import ConfigError, RunDirectoryError
 from ..tasks import named_by_file, resolve
+from ..training import TrainResult, resolve_config
+from ..training._sweep import check_discrete, check_members, grid, sweep
+from ._open import open_run
+from ._train import RunInterrupted
 
 SWEEP_FILE = "sweep.json"
 SWEEP_FORMAT = "diffcontrol-sweep"
@@ -52,6 +56,7 @@ def sweep_dir(
     final_eval: int | None = None,
     compile_cache: bool = True,
     progress: Callable[[str], None] | None = None,
+    log_dir: str | Path | None = None,
 ) -> tuple[Any, list[str]]:
     """Train a grid of runs of ``task`` as one program and write them into ``out_dir``.
 
@@ -72,6 +77,8 @@ def sweep_dir(
         compile_cache: use JAX's persistent compilation cache (unless
             ``DIFFCONTROL_NO_COMPILE_CACHE`` is set).
         progress: called with each progress line.
+        log_dir: write the training curves there as TensorBoard event files, one run per
+            member named as its directory (a sweep of more than 64 members: their summary).
 
     Returns:
         The ``SweepResult`` of the members trained now (``None`` if none were left) and the
@@ -80,9 +87,6 @@ def sweep_dir(
     Raises:
         ConfigError, RunDirectoryError: bad settings, or a directory that holds something else.
     """
-    from ..training import resolve_config
-    from ..training._sweep import check_discrete, check_members, grid, sweep
-
     say = progress or (lambda line: None)
     out = Path(out_dir)
     if task is None and resume:  # the sweep's own task: registered ones only
@@ -99,8 +103,6 @@ def sweep_dir(
         if values is not None and not isinstance(values, dict):
             values = parse_values(values, base)
     if compile_cache and not os.environ.get("DIFFCONTROL_NO_COMPILE_CACHE"):
-        from .. import _jax_setup
-
         _jax_setup.enable_compile_cache()
     if resume:  # the sweep's own settings, from its directory alone
         stored = stored_sweep(out)
@@ -129,7 +131,9 @@ def sweep_dir(
                 f"sweeping {the_task.name}: {len(todo)} member(s) ({', '.join(swept)}) x "
                 f"{base.updates} updates -> {out}"
             )
-            result = sweep(the_task, [configs[i] for i in todo], devices=devices, progress=say)
+            members = [configs[i] for i in todo]
+            logged = {"log_dir": log_dir, "log_names": [doc["members"][i] for i in todo]}
+            result = sweep(the_task, members, devices=devices, progress=say, **logged)
             for i, member in zip(todo, result.members, strict=True):
                 _write_member(out / doc["members"][i], member, task)
     except BaseException as e:
@@ -140,8 +144,6 @@ def sweep_dir(
                 out.rmdir()
         if not isinstance(e, KeyboardInterrupt):
             raise
-        from ._train import RunInterrupted
-
         if not written:
             raise RunInterrupted(
                 "interrupted before any member was written; nothing was kept"
@@ -154,14 +156,14 @@ def sweep_dir(
     best = max(range(len(rows)), key=lambda i: _rank(rows[i]["eval_return"]))
     best_dir = out / doc["members"][best]
     if not (best_dir / "learning_curve.png").exists():
-        from ._open import open_run
-
         run = open_run(best_dir, the_task, real=None)
         member = _as_result(run)
-        save_run(member, best_dir, final_eval=final_eval, animation=False, progress=say)
+        save_run(  # the member's own directory, evaluated and drawn now
+            member, best_dir, final_eval=final_eval, animation=False, progress=say, overwrite=True
+        )
     table = _table(rows, swept, best)
     io.write_bytes(out / "sweep.txt", (table + "\n").encode())
-    from ..plots import sweep_plot
+    from ..plots import sweep_plot  # matplotlib
 
     sweep_plot(rows, swept, best, the_task.name, out / "sweep.png")
     io.write_json(out / SWEEP_FILE, {**doc, "best": doc["members"][best], "complete": True})
@@ -244,8 +246,6 @@ def _write_member(member_dir: Path, result: Any, task_spec: str) -> None:
 
 
 def _as_result(run: Any) -> Any:
-    from ..training import TrainResult
-
     return TrainResult(
         task=run.task,
         config=run.config,

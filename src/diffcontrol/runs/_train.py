@@ -15,11 +15,15 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from .. import io
+from .. import _jax_setup, _timing, io, tasks
 from .._run_files import Run, mark_complete, read_run_file, release_claim, save_run
 from .._shell import command as shell_command
+from ..envs import make_env
 from ..errors import ConfigError, Interrupted, RunDirectoryError, TrainingDiverged
+from ..identify.fitted import checked_env_id, fitted_physics, fitted_task, read_fitted, real_system
 from ..tasks import AnyTask, named_by_file, resolve
+from ..training import resolve_config, train
+from ..training._devices import is_writer, join_hosts
 
 
 class RunInterrupted(Interrupted):
@@ -58,6 +62,7 @@ def train_run(
     note: Callable[[str], None] | None = None,
     inform: Callable[[str], None] | None = None,
     command: str | None = None,
+    log_dir: str | Path | None = None,
 ) -> RunOutcome:
     """Train a controller into ``out_dir`` and write its files, as ``diffcontrol train``.
 
@@ -88,6 +93,7 @@ def train_run(
         note: called with warnings meant for stderr.
         inform: called with what is trained through (even when ``progress`` is silent).
         command: the command line to record in ``metrics.json``.
+        log_dir: write the training curves there as TensorBoard event files (``train``'s).
 
     Raises:
         ConfigError, RunDirectoryError, ModelFileError, TrainingDiverged, SolverFailed: bad
@@ -95,10 +101,6 @@ def train_run(
             be kept).
         RunInterrupted: Ctrl-C; the message says how to continue.
     """
-    from .. import _jax_setup, _timing
-    from ..training import resolve_config, train
-    from ..training._devices import is_writer, join_hosts
-
     started = _timing.process_seconds()  # the interpreter, the imports, the command line
 
     if hosts is not None:
@@ -120,8 +122,6 @@ def train_run(
     if env_id and not model:
         raise ConfigError("--env names the real system of a fitted model: give --model too")
     if env_id is None and invocation.get("env"):  # run.json's: used if it imports nothing
-        from ..identify.fitted import checked_env_id
-
         env_id = checked_env_id(invocation["env"], str(out / io.RUN_FILE))
     final_eval = invocation.get("final_eval") if final_eval is None else final_eval
     animation = animation and invocation.get("animation") is not False
@@ -189,6 +189,7 @@ def train_run(
             progress=say,
             invocation=invocation,
             devices=devices,
+            log_dir=log_dir,
         )
     except BaseException as e:
         # nothing to resume (no run.json yet, or one without a checkpoint): say so
@@ -230,6 +231,7 @@ def train_run(
             real=real,
             progress=say,
             process_total=True,
+            overwrite=True,  # the directory train_run claimed
         )
     except KeyboardInterrupt:
         raise RunInterrupted(
@@ -246,8 +248,6 @@ def train_run(
 
 
 def _builtin_names() -> set[str]:
-    from .. import tasks
-
     return {n for n in tasks.names() if not getattr(tasks.make(n), "source", None)}
 
 
@@ -285,14 +285,10 @@ def fitted_training(
     """
     import numpy as np
 
-    from ..identify.fitted import fitted_physics, fitted_task, read_fitted, real_system
-
     doc = read_fitted(fit_dir)
     fitted_physics(task, doc)  # refuses a model of another task
     real = real_system(doc, trusted=env_id)
     if real and "env_id" in real:  # the final evaluation's environment, made before training
-        from ..envs import make_env
-
         make_env(real["env_id"], real["env_kwargs"]).close()
     info = {"dir": str(fit_dir), "kind": doc["model"], "real_system": real}
     if doc["model"] == "params":

@@ -10,6 +10,7 @@ from .. import io
 from .._run_files import Run
 from ..errors import ConfigError
 from ..evaluation import evaluate_run
+from ..optimal import optimal_return
 from ._open import open_run
 
 
@@ -73,8 +74,6 @@ def _optimum(run: Run, ev: Any, points: int) -> Any:
     """The grid optimum, on the seeds ``ev`` was measured on, of the system it was measured
     on: the task's own, or the run's real system (``--env``, or the one a fitted model's data
     came from) solved with its physics (the task's ``params_of_env``)."""
-    from ..optimal import optimal_return
-
     real, params = run.real_env, None
     if real is not None and ev.key == "gym_eval":
         params = run.task.params_of_env(*real)

@@ -68,6 +68,23 @@ def register_env(task: Any) -> str:
     return eid
 
 
+def as_task(task: Any, where: str) -> AnyTask:
+    """``task`` itself when it is a task, the task it names when it is a string
+    (``resolve``); anything else is refused in one line that says what ``where`` takes.
+
+    Raises:
+        ConfigError: neither a task nor a name; UnknownTaskError: a name of no task.
+    """
+    if isinstance(task, Task | ContinuousTask):
+        return task
+    if isinstance(task, str):
+        return resolve(task)
+    raise ConfigError(
+        f"{where} takes a task (diffcontrol.make('pendulum'), or an instance of your Task) or "
+        f"its name, not {task!r} ({type(task).__name__})"
+    )
+
+
 def register(task: AnyTask) -> AnyTask:
     """Add a task instance to the registry under ``task.name`` and make it a Gymnasium
     environment (``diffcontrol/<Name>-v0``) at once; returns it.
@@ -75,7 +92,13 @@ def register(task: AnyTask) -> AnyTask:
     Raises:
         ValueError: a task of another class is registered under the same name (a built-in
             task's name included).
+        ConfigError: ``task`` is not a task instance.
     """
+    if not isinstance(task, Task | ContinuousTask):
+        raise ConfigError(
+            f"register() takes an instance of a Task or ContinuousTask subclass, not {task!r} "
+            f"({type(task).__name__})"
+        )
     row = _registry.builtin(task.name)
     own = f"{type(task).__module__}:{type(task).__qualname__}"
     other = type(_REGISTRY[task.name]) if task.name in _REGISTRY else None
@@ -93,15 +116,24 @@ def make(name: str) -> AnyTask:
     Raises:
         UnknownTaskError: no task has that name (the message lists those that do).
     """
+    _check_name(name)
     if name in _REGISTRY:
         return _REGISTRY[name]
-    row = _registry.builtin(name) if isinstance(name, str) else None
+    row = _registry.builtin(name)
     if row is None:
         raise UnknownTaskError(
             f"unknown task {name!r}; choose one of: {', '.join(sorted(names()))} "
             "(`diffcontrol list` describes them)"
         )
     return register(_builtin_class(row)())
+
+
+def _check_name(name: Any) -> None:
+    if not isinstance(name, str):
+        raise ConfigError(
+            "diffcontrol.make() takes a task's name, e.g. 'pendulum', or an import path "
+            f"'module:Class', not {name!r} ({type(name).__name__})"
+        )
 
 
 def _builtin_class(row: _registry.Builtin) -> type:
@@ -123,6 +155,7 @@ def resolve(spec: str) -> AnyTask:
         UnknownTaskError: nothing of that name, or the module does not import, or the
             attribute is not a task.
     """
+    _check_name(spec)
     if spec in _REGISTRY or _registry.builtin(spec):
         return make(spec)
     target = spec
@@ -228,6 +261,7 @@ __all__ = [
     "names",
     "named_by_file",
     "register",
+    "as_task",
     "register_env",
     "env_entry",
     "supports_env",

@@ -13,8 +13,11 @@ import jax
 import numpy as np
 from jaxtyping import Array, PRNGKeyArray, PyTree
 
+from .._jax_setup import FAST_COMPILE
 from .._registry import env_id as own_env_id
 from ..errors import ConfigError
+from ..policies import NumpyPolicy, StatePolicy
+from ..settings import MIN_TRANSITIONS, PlanConfig
 from ._grid import GridAxis
 
 StepLoss = Callable[[PyTree, Array, Array, Array, Array], Array]
@@ -56,8 +59,6 @@ class _TaskBase(abc.ABC):
         by default, options changing them; default ``PlanConfig()``. A continuous-time task
         names its control period ``dt`` here, and a task without action bounds the planner's
         ``action_bound``."""
-        from ..settings import PlanConfig
-
         return PlanConfig()
 
     @property
@@ -98,8 +99,6 @@ class _TaskBase(abc.ABC):
             ConfigError: the declaration names another program, or an option that is not in
                 ``_jax_setup.FAST_COMPILE``.
         """
-        from .._jax_setup import FAST_COMPILE
-
         own = vars(type(self)).get("fast_compile", {})
         for key, names in own.items():
             if (
@@ -125,8 +124,6 @@ class _TaskBase(abc.ABC):
         Raises:
             ConfigError: naming the parameter, its value and the range.
         """
-        from ..errors import ConfigError
-
         for name in (*self.positive_params, *self.nonnegative_params):
             if not hasattr(params, name):  # a fitted model's parameters: checked in its physics
                 continue
@@ -158,8 +155,6 @@ class _TaskBase(abc.ABC):
 
         Default: a ``NumpyPolicy``, ``policy(obs) -> Gymnasium action``.
         """
-        from ..policies import NumpyPolicy
-
         return NumpyPolicy(doc)
 
     # --- hooks of model learning (``diffcontrol.identify``): the data and the fit ----------
@@ -331,8 +326,6 @@ class Task(_TaskBase):
         transitions a network is fitted to (``identify.MIN_TRANSITIONS``: 1,000 for a network
         alone), i.e. 200/200/1,000 on the Pendulum. A task whose episodes end early (the
         CartPole's random ones last ~20 steps) or run long chooses its own."""
-        from ..settings import MIN_TRANSITIONS
-
         return max(self.episode_length, MIN_TRANSITIONS.get(model, 0))
 
     def loop_planner(self) -> Any:
@@ -341,8 +334,6 @@ class Task(_TaskBase):
         H = 10 and the terminal cost ``-V_0`` of a 201-point grid optimum solved through the
         fitted model, where the task has a state grid (the Pendulum; see docs/planning.md),
         else ``default_plan_config()``."""
-        from ..settings import PlanConfig
-
         if self.state_grid(self.default_params()):
             return PlanConfig(horizon=10, value_grid=201)
         return self.default_plan_config()
@@ -525,8 +516,6 @@ class ContinuousTask(_TaskBase):
 
     def load_policy(self, doc: dict) -> Any:
         """A ``StatePolicy``: ``policy(state) -> action`` on the physical state."""
-        from ..policies import StatePolicy
-
         return StatePolicy(doc)
 
     # --- model learning (``identify.ode``): what a system's model is -----------------------

@@ -139,7 +139,7 @@ class Acrobot(Task):
     def frames(self, recording: Any, every: int):
         """One matplotlib figure per drawn frame of ``recording`` (every ``every``-th state):
         the two links, the goal line, the time and the torque."""
-        from ._scene import close, scene
+        from ._scene import close, scene  # matplotlib
 
         params = self.default_params()
         l1, l2 = float(params.link_length_1), float(params.link_length_2)

@@ -80,7 +80,7 @@ class CartPole(Task):
 
     def frames(self, recording, every):
         """The cart on its track (limits in red) with the pole, time and push direction."""
-        from ._scene import close, scene
+        from ._scene import close, scene  # matplotlib
 
         fig, ax = scene(4.8, 2.4, (-2.6, 2.6), (-0.4, 1.3))
         ax.plot([-2.4, 2.4], [0, 0], color="0.5", lw=1)

@@ -167,7 +167,7 @@ class MountainCarContinuous(Task):
         import numpy as np
         from matplotlib.patches import Rectangle
 
-        from ._scene import close, scene
+        from ._scene import close, scene  # matplotlib
 
         p = self.default_params()
         lo, hi, goal = p.min_position, p.max_position, p.goal_position

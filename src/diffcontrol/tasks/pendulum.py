@@ -66,7 +66,7 @@ class Pendulum(Task):
 
     def frames(self, recording, every):
         """The pendulum from the front: the rod, the pivot, time and torque."""
-        from ._scene import close, scene
+        from ._scene import close, scene  # matplotlib
 
         fig, ax = scene(3.2, 3.2, (-1.3, 1.3), (-1.3, 1.3))
         (rod,) = ax.plot([], [], lw=6, color="#cc4d4d", solid_capstyle="round")

@@ -21,9 +21,10 @@ import numpy as np
 import optax
 from jaxtyping import Array, Float, Int, PRNGKeyArray, PyTree
 
-from ..config import TrainConfig
+from .. import optimal
+from ..config import MAX_VALUE_GRID, TrainConfig
 from ..controllers import MLPController
-from ..errors import TrainingDiverged
+from ..errors import ConfigError, TrainingDiverged
 from ..rollout import batch_returns
 from ..tasks import StepLoss, Task, task_params
 
@@ -49,28 +50,38 @@ class UpdateStats(eqx.Module):
     grad_norm: Float[Array, ""]
 
 
-def make_optimizer(config: TrainConfig, learning_rate: Any = None) -> optax.GradientTransformation:
-    """Adam with the configured schedule, after optional global-norm gradient clipping.
-
-    ``learning_rate`` (default ``config.learning_rate``) may be a traced value: a sweep builds
-    the same chain inside ``optax.inject_hyperparams`` with one learning rate per member.
+def learning_rate_schedule(
+    config: TrainConfig, learning_rate: Any = None
+) -> optax.ScalarOrSchedule:
+    """The configured learning-rate schedule (a float for ``constant``): the learning rate of
+    update ``u + 1`` is ``schedule(u)``. ``learning_rate`` (default ``config.learning_rate``)
+    may be a traced value: a sweep builds the same schedule with one learning rate per member.
     """
     lr = config.learning_rate if learning_rate is None else learning_rate
     final = lr * config.lr_final_fraction
     if config.lr_schedule == "constant":
-        schedule: optax.Schedule | float = lr
-    elif config.lr_schedule == "cosine":
-        schedule = optax.cosine_decay_schedule(lr, config.updates, alpha=config.lr_final_fraction)
-    else:
-        warmup = max(1, config.updates // 20)
-        steps = max(config.updates, warmup + 1)
-        if isinstance(lr, int | float):
-            schedule = optax.warmup_cosine_decay_schedule(0.0, lr, warmup, steps, end_value=final)
-        else:  # traced (a sweep's): optax divides by the peak in Python, so scale a unit one
-            unit = optax.warmup_cosine_decay_schedule(
-                0.0, 1.0, warmup, steps, end_value=config.lr_final_fraction
-            )
-            schedule = lambda count: lr * unit(count)  # noqa: E731
+        return lr
+    if config.lr_schedule == "cosine":
+        return optax.cosine_decay_schedule(lr, config.updates, alpha=config.lr_final_fraction)
+    warmup = max(1, config.updates // 20)
+    steps = max(config.updates, warmup + 1)
+    if isinstance(lr, int | float):
+        return optax.warmup_cosine_decay_schedule(0.0, lr, warmup, steps, end_value=final)
+    # traced (a sweep's): optax divides by the peak in Python, so scale a unit one
+    unit = optax.warmup_cosine_decay_schedule(
+        0.0, 1.0, warmup, steps, end_value=config.lr_final_fraction
+    )
+    return lambda count: lr * unit(count)
+
+
+def make_optimizer(config: TrainConfig, learning_rate: Any = None) -> optax.GradientTransformation:
+    """Adam with the configured schedule (``learning_rate_schedule``), after optional
+    global-norm gradient clipping.
+
+    ``learning_rate`` (default ``config.learning_rate``) may be a traced value: a sweep builds
+    the same chain inside ``optax.inject_hyperparams`` with one learning rate per member.
+    """
+    schedule = learning_rate_schedule(config, learning_rate)
     parts = [optax.clip_by_global_norm(config.grad_clip)] if config.grad_clip > 0 else []
     return optax.chain(*parts, optax.adam(schedule))
 
@@ -93,8 +104,6 @@ class Trainer(eqx.Module):
 
     def __check_init__(self) -> None:
         if self.config.value_grid and self.value is None:
-            from ..errors import ConfigError
-
             raise ConfigError(
                 f"value_grid={self.config.value_grid} but the trainer was given no terminal "
                 "value; build it with make_trainer (or value=terminal_value(...))"
@@ -393,8 +402,6 @@ def builtin_loss_name(task: Any, requested: str, argument: str) -> str:
         ConfigError: the task has no built-in losses (pass ``argument`` to ``train``), or
             none called ``requested``.
     """
-    from ..errors import ConfigError
-
     if not task.losses:
         raise ConfigError(
             f"task {task.name!r} has no built-in losses; pass one to "
@@ -434,10 +441,6 @@ def check_value_grid(task: Any, config: TrainConfig, params: PyTree = None) -> N
         ConfigError: one line, naming the value and the way out.
     """
     import math
-
-    from .. import optimal
-    from ..config import MAX_VALUE_GRID
-    from ..errors import ConfigError
 
     points = config.value_grid
     params = task.default_params() if params is None else params
@@ -481,8 +484,6 @@ def terminal_value(
     """
     if not config.value_grid:
         return None
-    from .. import optimal
-
     check_value_grid(task, config, params)
     if progress:
         progress(

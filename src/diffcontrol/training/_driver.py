@@ -27,11 +27,12 @@ from .._run_files import save_run
 from ..checks import validate_task
 from ..controllers import MLPController
 from ..errors import ConfigError, TrainingDiverged
-from ..tasks import AnyTask, ContinuousTask, StepLoss, TrajectoryLoss, task_params
+from ..tasks import AnyTask, ContinuousTask, StepLoss, TrajectoryLoss, as_task, task_params
 from ._bptt import make_trainer
 from ._devices import batch_placement, check_devices, divisible, gathered, is_writer, placer
 from ._diagnostics import Diagnostics
-from ._ode import make_ode_trainer
+from ._events import learning_rates, open_log
+from ._ode import FAIL_MAX_STEPS, FAIL_NAN, FAIL_SOLVER, failure_message, make_ode_trainer
 
 CHECKPOINT_FILE = "checkpoint.npz"
 
@@ -47,6 +48,8 @@ class TrainResult:
     params: PyTree
     controller: MLPController
     metrics: dict[str, Any]
+    out_dir: Path | None = dataclasses.field(default=None, repr=False)
+    """The run directory ``train`` wrote into (``out_dir``), which ``save`` may write again."""
 
     @property
     def curve(self) -> list[dict[str, Any]]:
@@ -57,7 +60,12 @@ class TrainResult:
         """Write the run's files into ``out_dir``: ``model.json`` (read back by
         ``diffcontrol.load``), the task's final evaluation in ``metrics.json``, the learning
         curve and the task's pictures; returns the names written. ``options`` are those of
-        ``diffcontrol.runs.save_run`` (``final_eval``, ``animation``, ``real``, ``progress``).
+        ``diffcontrol.runs.save_run`` (``final_eval``, ``animation``, ``real``, ``progress``,
+        ``overwrite``).
+
+        Raises:
+            RunDirectoryError: ``out_dir`` holds another run (not the one ``train`` wrote
+                there), unless ``overwrite=True``.
         """
         return save_run(self, out_dir, **options)[1]
 
@@ -102,6 +110,7 @@ def train(
     on_point: Callable[[dict[str, Any], MLPController], None] | None = None,
     invocation: dict[str, Any] | None = None,
     devices: int | None = None,
+    log_dir: str | Path | None = None,
 ) -> TrainResult:
     """Train a controller for ``task`` by differentiating through its simulator.
 
@@ -111,7 +120,7 @@ def train(
     evaluation points, checkpoints, resume.
 
     Args:
-        task: a task from ``diffcontrol.make``.
+        task: a task from ``diffcontrol.make`` (or its name).
         config: the settings; ``task.default_config()`` when omitted.
         out_dir: if given, ``run.json`` and a checkpoint after every chunk are written there,
             so an interrupted run can continue with ``resume=True``, and ``model.json`` at the
@@ -132,6 +141,9 @@ def train(
         devices: split the batch of simulations over this many local devices (data
             parallelism; discrete-time tasks; the batch must divide evenly). The result is
             one device's up to the order of floating-point sums.
+        log_dir: write the training curves there as TensorBoard event files: the loss, the
+            gradient norm and the learning rate of every update, the evaluation return of
+            every evaluation point (``training._events``; needs tensorboardX).
 
     Returns:
         A ``TrainResult`` whose controller is the one of the best evaluation point when
@@ -159,6 +171,7 @@ def train(
     _timing.watch_compiles()
     t_start = time.perf_counter()
     compiled_before, programs_before = _timing.compile_seconds(), _timing.compiled_programs()
+    task = as_task(task, "train()")
     config = config or task.default_config()
     expected = type(task.default_config())
     if not isinstance(config, expected):
@@ -168,6 +181,7 @@ def train(
         )
     say = progress or (lambda line: None)
     _check_head(task, config.head)
+    log = open_log(log_dir) if is_writer() else None  # a missing tensorboardX: said at once
     params = task_params(task, config.params)
     validate_task(task, params)  # a wrong shape named here, not as a lax.scan type error
     if isinstance(task, ContinuousTask):
@@ -257,6 +271,8 @@ def train(
             **trainer.point_extras(ts, returns),
         }
         curve.append(point)
+        if log is not None:
+            log.point(point)
         # ">=": among equal returns (CartPole's 500s) the later, longer-trained controller.
         so_far = curve[best_index]["eval_return"]
         if best is None or len(curve) == 1 or math.isnan(so_far) or eval_return >= so_far:
@@ -303,12 +319,14 @@ def train(
             raise type(e)(f"{e}{where}") from None
         for note in notes:
             say("note: " + note)
-        diagnostics.after_chunk(losses, np.asarray(stats.grad_norm)[:done], config.learning_rate)
+        grad_norms = np.asarray(stats.grad_norm)[:done]
+        diagnostics.after_chunk(losses, grad_norms, config.learning_rate)
+        if log is not None:
+            first = int(ts.update)
+            log.updates(first, losses, grad_norms, learning_rates(config, first, done))
         ts = new_ts
         with np.errstate(all="ignore"):  # chunks whose members all failed hold only nan
-            record(
-                ts, float(np.nanmean(losses)), float(np.nanmean(np.asarray(stats.grad_norm)[:done]))
-            )
+            record(ts, float(np.nanmean(losses)), float(np.nanmean(grad_norms)))
         if out is not None:
             whole_state = gathered((ts, best))  # every process takes part; process 0 writes
         if out is not None and is_writer():
@@ -327,6 +345,8 @@ def train(
                 },
             )
 
+    if log is not None:
+        log.close()
     wall = seconds_before + time.perf_counter() - t_start - callback_seconds
     chosen = curve[best_index] if config.keep_best else curve[-1]
     if config.keep_best:
@@ -374,7 +394,12 @@ def train(
             out / "model.json", policies.model_document(task, controller, config, metrics)
         )
     return TrainResult(
-        task=task, config=config, params=params, controller=controller, metrics=metrics
+        task=task,
+        config=config,
+        params=params,
+        controller=controller,
+        metrics=metrics,
+        out_dir=None if out is None else Path(out),
     )
 
 
@@ -647,8 +672,6 @@ def _population(config: Any) -> int:
 
 def _check_first_solve(trainer: Any, ts: Any, params: PyTree) -> None:
     """Before any update, no member's loss is finite: the loss or the solve is at fault."""
-    from ._ode import FAIL_MAX_STEPS, FAIL_NAN, FAIL_SOLVER, failure_message
-
     ctrl = trainer.pick(ts.controller, np.zeros(_population(trainer.config)))
     loss, (ok, hit_max, _) = jax.jit(trainer.member_loss)(
         ctrl, params, jnp.asarray(trainer.config.horizon_s)

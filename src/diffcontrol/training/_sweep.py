@@ -20,6 +20,7 @@ import itertools
 import math
 import time
 from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import Any
 
 import equinox as eqx
@@ -29,6 +30,7 @@ import numpy as np
 import optax
 from jaxtyping import PyTree
 
+from ..checks import validate_task
 from ..config import TrainConfig
 from ..errors import ConfigError
 from ..tasks import ContinuousTask, StepLoss, Task
@@ -41,6 +43,7 @@ from ._bptt import (
 )
 from ._devices import check_devices, mesh_placements, placer
 from ._driver import TrainResult, _check_head, compiled_once, interrupts_deferred, task_params
+from ._events import EventLog, learning_rates, open_log, summary
 
 MAX_MEMBERS = 2**16
 """The most members one sweep may have."""
@@ -145,6 +148,8 @@ def sweep(
     step_loss: StepLoss | None = None,
     devices: int | None = None,
     progress: Callable[[str], None] | None = None,
+    log_dir: str | Path | None = None,
+    log_names: Sequence[str] | None = None,
 ) -> SweepResult:
     """Train every config of ``configs`` on ``task`` as a vmapped population of whole runs.
 
@@ -156,6 +161,10 @@ def sweep(
         devices: how many local devices to shard the members over (default: as many as
             divide each program's member count).
         progress: called with one line per evaluation point.
+        log_dir: write the training curves there as TensorBoard event files: one run per
+            member (``log_names``, default ``member_000``, ...) up to ``LOGGED_MEMBERS``
+            members, else one ``summary`` run of the members' median, best and worst.
+        log_names: the members' run names under ``log_dir``.
 
     Returns:
         A ``SweepResult``; member ``i``'s ``TrainResult`` has the metrics ``train`` gives
@@ -168,6 +177,10 @@ def sweep(
     configs = list(configs)
     check_members(task, configs, devices)
     say = progress or (lambda line: None)
+    log = open_log(log_dir)
+    names = list(log_names or (f"member_{i:03d}" for i in range(len(configs))))
+    if len(configs) > LOGGED_MEMBERS:
+        names = [""] * len(configs)  # the summary only
     # One program per setting that changes shapes or control flow.
     groups: dict[TrainConfig, list[int]] = {}
     for i, c in enumerate(configs):
@@ -178,10 +191,13 @@ def sweep(
         if len(groups) > 1:
             say(f"program {g + 1}/{len(groups)}: {len(members)} member(s)")
         group = [configs[i] for i in members]
+        logged = (log, [names[i] for i in members]) if log is not None else None
         for i, result in zip(
-            members, _run_program(task, group, step_loss, devices, say), strict=True
+            members, _run_program(task, group, step_loss, devices, say, logged), strict=True
         ):
             results[i] = result
+    if log is not None:
+        log.close()
     swept = ["seed", *_differing(configs)]
     metrics = {
         "task": task.name,
@@ -268,14 +284,14 @@ def _run_program(
     step_loss: StepLoss | None,
     devices: int | None,
     say: Callable[[str], None],
+    logged: tuple[EventLog, list[str]] | None = None,
 ) -> list[TrainResult]:
-    """The members of one program: same shapes, different seeds and learning rates."""
+    """The members of one program: same shapes, different seeds and learning rates (their
+    curves written to ``logged``'s event log under its names; ``""``: the summary only)."""
     t_start = time.perf_counter()
     cfg = configs[0]
     _check_head(task, cfg.head)
     params = task_params(task, cfg.params)
-    from ..checks import validate_task
-
     validate_task(task, params)
     if step_loss is None:
         step_loss = task.step_loss(builtin_loss_name(task, cfg.loss, "step_loss"))
@@ -377,6 +393,8 @@ def _run_program(
             )
         )
         means = np.array([c[-1]["eval_return"] for c in curves])
+        if logged is not None:
+            _log_points(logged, curves, active, means, int(updates.max()))
         top = int(np.nanargmax(np.where(diverged, np.nan, means))) if not diverged.all() else 0
         running = int(np.sum(~(stopped | diverged) & (updates < cfg.updates)))
         say(
@@ -418,6 +436,8 @@ def _run_program(
                 "the others train on"
             )
         diverged |= lost
+        if logged is not None:
+            _log_updates(logged, configs, updates, done, losses, grads)
         ts = new
         record(ts, loss_mean, grad_mean, active & ~lost)
 
@@ -456,6 +476,54 @@ def _run_program(
             TrainResult(task=task, config=c, params=params, controller=controller, metrics=metrics)
         )
     return results
+
+
+LOGGED_MEMBERS = 64
+"""A sweep of more members logs one summary run instead of a run per member."""
+
+
+def _log_updates(
+    logged: tuple[EventLog, list[str]],
+    configs: Sequence[TrainConfig],
+    updates: np.ndarray,
+    done: np.ndarray,
+    losses: np.ndarray,
+    grads: np.ndarray,
+) -> None:
+    """Each member's updates of the chunk just run (or, for the summary, their median)."""
+    log, names = logged
+    rates = [learning_rates(c, int(u), int(d), c.learning_rate) for c, u, d in
+             zip(configs, updates, done, strict=True)]  # fmt: skip
+    if names[0]:
+        for i in np.flatnonzero(done > 0):
+            k = int(done[i])
+            log.updates(int(updates[i]), losses[i, :k], grads[i, :k], rates[i], run=names[i])
+        return
+    k = int(done.max())
+    members = [i for i in range(len(configs)) if done[i] == k]
+    with np.errstate(all="ignore"):
+        median = [
+            np.nanmedian(np.stack([x[i, :k] for i in members]), axis=0) for x in (losses, grads)
+        ]
+    rate = np.median(np.stack([rates[i] for i in members]), axis=0)
+    log.updates(int(updates[members[0]]), median[0], median[1], rate, run="summary")
+
+
+def _log_points(
+    logged: tuple[EventLog, list[str]],
+    curves: list[list[dict[str, Any]]],
+    active: np.ndarray,
+    means: np.ndarray,
+    step: int,
+) -> None:
+    """Each member's evaluation point (or the members' median, best and worst)."""
+    log, names = logged
+    if names[0]:
+        for i in np.flatnonzero(active):
+            log.point(curves[i][-1], run=names[i])
+        return
+    stats = summary(means)
+    log.scalars({f"eval/return_{k}": v for k, v in stats.items()}, step, run="summary")
 
 
 def _member(stacked: Any, i: int) -> Any:

@@ -43,6 +43,10 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from ...errors import ConfigError, ModelFileError
+from ...identify.data import TrajectoryData
+from ...identify.network import Correction, correction_from_dict, correction_to_dict
+from ...identify.ode import fit_vector_field
+from ...identify.ode import prediction_errors as ode_prediction_errors
 from . import system as cp
 from .task import ACTION_COLUMNS, STATE_COLUMNS, CartPoleSwingUp
 
@@ -264,8 +268,6 @@ def model_to_dict(model: SwingUpModel) -> dict[str, Any]:
         },
     }
     if model.correction is not None:
-        from ...identify.network import correction_to_dict
-
         inputs, outputs = NETWORK_SIGNATURES[model.model_type]
         doc["network"] = {
             "inputs": inputs,
@@ -282,8 +284,6 @@ def model_from_dict(doc: Any, where: str = "the fitted model") -> SwingUpModel:
         ModelFileError: an unknown kind, missing or non-numeric parameters, a malformed
             network, or a network whose sizes do not fit the kind.
     """
-    from ...identify.network import correction_from_dict
-
     kind = doc.get("kind", doc.get("model")) if isinstance(doc, dict) else None
     if kind not in MODEL_TYPES:
         raise ModelFileError(f"{where}: unknown model kind {kind!r}; refit the model")
@@ -324,8 +324,6 @@ def initial_model(model_type, nominal, data, dt, hidden, key) -> SwingUpModel:
     standard deviation of the recorded accelerations)."""
     if model_type == "params":
         return SwingUpModel("params", nominal)
-    from ...identify.network import Correction
-
     y = data.observations
     std = np.maximum(np.std(y, axis=0), 1e-6)
     p = nominal
@@ -434,8 +432,6 @@ def record_swingup(
         keys = jax.random.split(jax.random.PRNGKey(seed), episodes)
         runs = [episode(k) for k in keys]
     names = _PHYSICAL  # (a fitted model's network is no parameter of the recorded system)
-    from ...identify.data import TrajectoryData
-
     return TrajectoryData.from_episodes(
         [np.asarray(ys) for ys, _ in runs],
         [np.asarray(fs)[:, None] for _, fs in runs],
@@ -455,13 +451,9 @@ def record_swingup(
 def fit_swingup_model(data: Any, kind: str = "hybrid", params: Any = None, **settings: Any):
     """``identify.ode.fit_vector_field`` for the swing-up (``params`` default
     ``SwingUpParams()``): a ``FitResult`` whose ``model`` is a ``SwingUpModel``."""
-    from ...identify.ode import fit_vector_field
-
     return fit_vector_field(CartPoleSwingUp(), data, kind, params or cp.SwingUpParams(), **settings)
 
 
 def prediction_errors(model: SwingUpModel, data: Any, horizons: Any = (1, 10, 50), substeps=2):
     """``identify.ode.prediction_errors`` of a swing-up model on recorded state data."""
-    from ...identify.ode import prediction_errors as errors
-
-    return errors(CartPoleSwingUp(), model, data, horizons, substeps)
+    return ode_prediction_errors(CartPoleSwingUp(), model, data, horizons, substeps)

@@ -39,6 +39,7 @@ from jaxtyping import Array, Float
 import diffcontrol.builtin.swingup.system as cp
 
 from ...config import ODETrainConfig
+from ...settings import PlanConfig
 from ...tasks import ContinuousTask, TrajectoryLoss
 
 ENERGY_WEIGHT = 0.1
@@ -258,8 +259,6 @@ class CartPoleSwingUp(ContinuousTask):
         """The planner of the actuator-limited swing-up (docs/planning.md): the force held for
         0.05 s, 40 of them planned (2 s), 5 box-iLQR iterations from the warm start and both
         bounds. No force bound: this 1 s task's force is not limited (pass ``action_bound``)."""
-        from ...settings import PlanConfig
-
         return PlanConfig(horizon=40, iterations=5, dt=0.05)
 
     def default_config(self) -> ODETrainConfig:

@@ -48,6 +48,7 @@ from ...errors import ConfigError, InsufficientDataError
 from ...identify._routes import TrajectoryRoute, parameters_doc
 from ...identify._shooting import FitResult, check_settings, set_params, standard_errors
 from ...identify.data import TrajectoryData
+from ...io import write_figure
 from . import system as tb
 from .record import as64, padded_rows, parameter_names, params_dict, predict_distances
 from .throws import Throws, read_throws, throws_of
@@ -273,8 +274,6 @@ def throws_plot(
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from ...io import write_figure
 
     data = _throws(data)
     fig, (ax, ax_wind) = plt.subplots(1, 2, figsize=(10.0, 4.2))

@@ -20,6 +20,8 @@ import numpy as np
 from ...errors import ConfigError
 from ...identify.data import TrajectoryData
 from ...io import now_iso
+from ...policies import AimingPolicy, read_model
+from ...tasks import make
 from . import system as tb
 from .task import TARGET_RANGE_M
 from .throws import Throws, throws_table
@@ -57,8 +59,6 @@ def trebuchet_params(env_args: list[tuple[str, float]]) -> tb.TrebuchetParams:
             f"{', '.join(known)} (e.g. --env-arg drag_coefficient=1.5 --env-arg wind_factor=1.5)"
         )
     params = tb.TrebuchetParams(**{name: float(value) for name, value in env_args})
-    from ...tasks import make
-
     make("trebuchet").check_params(params)  # the task's ranges, as for --param
     return params
 
@@ -177,8 +177,6 @@ def record_data(task: Any, episodes: int, *, env_id=None, env_kwargs=None, contr
     """The trebuchet task's ``record_data``: ``episodes`` throws with random inputs (or a
     trained ``controller`` aiming at random targets) of the trebuchet whose parameters
     ``env_kwargs`` change, with ``noise_m`` m of noise on the distances."""
-    from ...policies import AimingPolicy, read_model
-
     for flag, value in (("--max-steps", max_steps), ("an environment id", env_id)):
         if value is not None:
             raise ConfigError(

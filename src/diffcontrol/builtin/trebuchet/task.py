@@ -23,6 +23,7 @@ import diffcontrol.builtin.trebuchet.system as tb
 from ..._jax_setup import FastJit
 from ...config import TrainConfig
 from ...errors import ConfigError
+from ...policies import AimingPolicy
 from ...systems import draws
 from ...tasks import StepLoss, Task
 
@@ -163,8 +164,6 @@ class TrebuchetAiming(Task):
 
     def load_policy(self, doc: dict):
         """An ``AimingPolicy``: ``policy(target_m, wind_mps) -> (angle_deg, weight_lb)``."""
-        from ...policies import AimingPolicy
-
         return AimingPolicy(doc)
 
     def throw(self, run, target_m: float, wind_mps: float):

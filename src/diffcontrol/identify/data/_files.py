@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from ...errors import DataFileError
-from ...io import _finite, parse_json, read_limited, scalar_arguments, write_bytes
+from ...io import _finite, npz_shape, parse_json, read_limited, scalar_arguments, write_bytes
 from ._format import FORMAT, VERSION, parse_column, validate
 from ._table import TrajectoryData
 
@@ -221,8 +221,6 @@ claims more is refused before anything is read."""
 def npz_arrays(npz: Any, names: tuple[str, ...], path: Path) -> dict[str, np.ndarray]:
     """The arrays ``names`` of an open ``.npz``, each refused unread if its declared size is
     beyond ``MAX_NPZ_ELEMENTS``."""
-    from ...io import npz_shape
-
     for name in names:
         shape, _ = npz_shape(npz, name)
         if int(np.prod(shape, dtype=object)) > MAX_NPZ_ELEMENTS:

@@ -8,6 +8,8 @@ from typing import Any
 
 import numpy as np
 
+from ... import tasks
+from ..._registry import env_id as own_env_id
 from ...errors import DataFileError
 
 FORMAT = "diffcontrol-trajectories"
@@ -27,16 +29,11 @@ def known_columns() -> dict[str, Columns]:
     ``diffcontrol record ENV_ID`` names its columns so, and a file whose metadata names such
     an environment (``env_id``) must have exactly these columns.
     """
-    from ... import tasks
-
     return dict(_known_columns(tuple(tasks.names())))
 
 
 @functools.lru_cache(maxsize=8)
 def _known_columns(names: tuple[str, ...]) -> dict[str, Columns]:
-    from ... import tasks
-    from ..._registry import env_id
-
     known: dict[str, Columns] = {}
     for name in names:
         task = tasks.make(name)
@@ -46,7 +43,7 @@ def _known_columns(names: tuple[str, ...]) -> dict[str, Columns]:
             u in (None, "", "?") for _, _, u in parsed
         ):
             continue
-        for eid in (task.gym_id, env_id(task), *task.data_env_ids):
+        for eid in (task.gym_id, own_env_id(task), *task.data_env_ids):
             if eid:
                 known.setdefault(eid, (obs, act))
     return known
