@@ -50,7 +50,7 @@ def _one_line(capsys, argv, *needles):
         (dict(target_return=-math.inf), "target_return must be a finite return"),
         (dict(batch=10**13), "batch must be in"),
         (dict(updates=10**13), "updates must be in"),
-        (dict(hidden=(64, 10**13)), "hidden must be positive layer widths"),
+        (dict(hidden=(64, 10**13)), "hidden must be layer widths of at most 1,048,576"),
     ],
 )
 def test_config_values_of_the_wrong_type_or_size(change, needle):
@@ -172,6 +172,9 @@ def _damaged_checkpoints(path):
     huge = dict(arrays)
     huge["leaf_0000"] = np.lib.stride_tricks.as_strided(np.zeros(1), (10**6,), (0,))
     yield "huge claim", huge
+    nan = {k: np.full_like(v, np.nan) if k.startswith("leaf_") and v.dtype.kind == "f" else v
+           for k, v in arrays.items()}  # fmt: skip
+    yield "NaN weights", nan
 
 
 def test_damaged_checkpoints_get_one_line(resumable, capsys):

@@ -109,6 +109,17 @@ def test_a_real_system_named_by_metrics_json(capsys, cartpole_run, tmp_path, rea
     assert not (tmp_path / "a.gif").exists()
 
 
+def test_a_real_system_that_fails_on_its_arguments_is_one_line(capsys, pendulum_run, tmp_path):
+    """Text where the environment computes with a number: its TypeError, in one line that
+    names the environment and the argument."""
+    out = _copy(pendulum_run, tmp_path)
+    real = {"env_id": "diffcontrol/PendulumFriction-v0", "env_kwargs": {"g": "12"}}
+    _edit(out / "metrics.json", lambda m: m.update(model={"real_system": real}))
+    _one_line(capsys, ["evaluate", out, "--episodes", "1"], "g='12') raised TypeError")
+    _one_line(capsys, ["animate", out, "--out", tmp_path / "a.gif"], "raised TypeError")
+    assert not (tmp_path / "a.gif").exists()
+
+
 @pytest.fixture(scope="module")
 def fitted_dir(tmp_path_factory):
     """A grey-box fitted.json of the pendulum (a few steps; only its fields matter here)."""
@@ -199,6 +210,8 @@ def test_a_recorded_trebuchet_out_of_range(capsys, tmp_path):
             ),
             "float32",
         ),
+        (lambda m: m["observation"].update(scale=[0, 0, 0, 0]), "scale is 0"),
+        (lambda m: m["observation"].update(scale=[0.0, -0.0, 0, 0.0]), "scale is 0"),
     ],
 )
 def test_model_file_fields_of_the_wrong_kind(cartpole_run, tmp_path, change, needle):
@@ -433,3 +446,143 @@ def test_a_horizon_beyond_float32_time_is_refused():
 
 def test_an_unwritable_gif_names_the_file_asked_for(capsys, cartpole_run):
     _one_line(capsys, ["animate", str(cartpole_run), "--out", "/proc/x.gif"], "(/proc/x.gif)")
+
+
+@pytest.mark.parametrize("damage", ["model [1]", "no model", "no metrics.json"])
+def test_a_fitted_model_run_without_its_real_system_is_not_judged_on_the_nominal_one(
+    capsys, pendulum_run, tmp_path, damage
+):
+    """A run that run.json says was trained through a fitted model is judged on the real
+    system its metrics.json names; with that entry damaged or gone it is refused (not judged
+    on the task's own system), and --env names the system instead."""
+    run = tmp_path / "run"
+    shutil.copytree(pendulum_run, run)
+    doc = json.loads((run / "run.json").read_text())
+    doc["invocation"] = {**doc.get("invocation", {}), "model": "fits/p"}
+    (run / "run.json").write_text(json.dumps(doc))
+    metrics = json.loads((run / "metrics.json").read_text())
+    if damage == "no metrics.json":
+        (run / "metrics.json").unlink()
+    elif damage == "model [1]":
+        (run / "metrics.json").write_text(json.dumps({**metrics, "model": [1]}))
+    else:
+        metrics.pop("model", None)
+        (run / "metrics.json").write_text(json.dumps(metrics))
+    _one_line(capsys, ["evaluate", run, "--episodes", "1"], "fitted model fits/p", "--env")
+    assert main(["evaluate", str(run), "--episodes", "1", "--env", "Pendulum-v1"]) == 0
+
+
+@pytest.mark.parametrize(
+    ("sizes", "nan", "needle"),
+    [
+        ((4, 1), None, "gives 1 outputs, but this task's model needs 4 and 2"),
+        ((3, 2), None, "takes 3 inputs"),
+        ((4, 3), None, "gives 3 outputs"),
+        ((4, 2), "in_scale", "in_scale is not finite"),
+        ((4, 2), "out_scale", "out_scale is not finite"),
+    ],
+)
+def test_a_fitted_network_that_does_not_fit_the_task_trains_and_plans_nothing(
+    capsys, fitted_dir, tmp_path, sizes, nan, needle
+):
+    """A hybrid model's network must take the observation and action and give the state
+    (the Pendulum's 3 + 1 -> 2), with finite scalings; one line names fitted.json."""
+    import jax
+
+    from diffcontrol.identify import Correction, correction_to_dict
+
+    fit = tmp_path / "fit"
+    shutil.copytree(fitted_dir[0], fit)
+    doc = json.loads((fit / "fitted.json").read_text())
+    network = correction_to_dict(Correction(jax.random.PRNGKey(0), sizes[0], sizes[1], (8,)))
+    if nan:
+        network[nan] = [float("nan")] * len(network[nan])
+    (fit / "fitted.json").write_text(json.dumps({**doc, "model": "hybrid", "network": network}))
+    for command in ("train", "plan"):
+        out = tmp_path / command
+        _one_line(capsys, [command, "pendulum", "--model", fit, "--out", out], "fitted", needle)
+        assert not out.exists()
+
+
+def test_a_terminal_value_needs_a_loss_that_is_minus_the_reward(capsys, tmp_path):
+    """The value is a return to come, in reward units: a window's loss must be minus the
+    reward to add up with it (a task's other loss, or a custom one, is refused)."""
+    out = tmp_path / "run"
+    argv = ["train", "pendulum", "--out", out, "--value-grid", "51", "--updates", "2"]
+    _one_line(capsys, [*argv, "--loss", "squared_cost"], "--loss cost", "value_grid=51")
+    assert not out.exists()
+    task = diffcontrol.make("pendulum")
+    config = task.default_config().replace(value_grid=51, updates=2, eval_every=1, batch=4)
+    with pytest.raises(ConfigError, match="minus the reward"):
+        diffcontrol.train(task, config, step_loss=lambda p, s, a, ns, r: -2.0 * r)
+
+
+@pytest.mark.parametrize(
+    ("column", "value", "needle"),
+    [
+        (2, "3.0", "obs.cos_theta [1] = 3"),  # |cos| > 1
+        (3, "-1.5", "obs.sin_theta [1] = -1.5"),
+        (4, "1e300", "obs.theta_dot [rad/s] = 1e+300"),  # beyond max_speed 8
+        (5, "2.5", "action.torque [N m] = 2.5"),  # beyond the bounds +-2
+        (5, "-9", "action.torque [N m] = -9"),
+    ],
+)
+def test_data_the_system_cannot_produce_fits_nothing(
+    capsys, fitted_dir, tmp_path, column, value, needle
+):
+    """Recorded values outside the system's observation or action space (its Gymnasium
+    twin's bounds) are refused by fit in one line naming the row, the column and the value."""
+    lines = fitted_dir[1].read_text().splitlines()
+    cells = lines[10].split(",")
+    cells[column] = value
+    lines[10] = ",".join(cells)
+    data = tmp_path / "bad.csv"
+    data.write_text("\n".join(lines) + "\n")
+    out = tmp_path / "fit"
+    argv = ["fit", "pendulum", "--data", data, "--model", "params", "--out", out]
+    _one_line(capsys, argv, "data row 9", needle, "never take")
+    assert not out.exists()
+
+
+def test_data_naming_an_unknown_environment_fits_nothing(capsys, fitted_dir, tmp_path):
+    lines = fitted_dir[1].read_text().splitlines()
+    header = json.loads(lines[0][2:])
+    header["metadata"]["env_id"] = "NoSuchEnv-v3"
+    data = tmp_path / "bad.csv"
+    data.write_text("# " + json.dumps(header) + "\n" + "\n".join(lines[1:]) + "\n")
+    out = tmp_path / "fit"
+    argv = ["fit", "pendulum", "--data", data, "--model", "params", "--out", out]
+    _one_line(capsys, argv, "NoSuchEnv-v3")
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(("grid", "levels"), [(1001, 1001), (1001, 41), (401, 1001)])
+def test_a_planner_file_asking_for_hours_of_grid_is_refused_at_once(capsys, tmp_path, grid, levels):
+    """A downloaded planner's stored grid is solved again at every load: one within minutes
+    is, one of hours is refused in one line (before anything is solved)."""
+    from diffcontrol import io, policies
+    from diffcontrol.settings import PlanConfig
+
+    task = diffcontrol.make("pendulum")
+    settings = PlanConfig(value_grid=grid, value_levels=levels).to_json()
+    doc = policies.planner_document(task, settings, {"kind": "simulator"}, {"created": "now"})
+    run = tmp_path / "planner"
+    run.mkdir()
+    io.write_json(run / "model.json", doc)
+    _one_line(capsys, ["evaluate", run, "--episodes", "1"], "--value-grid 401 or less")
+    argv = ["plan", "pendulum", "--value-grid", grid, "--value-levels", levels]
+    _one_line(capsys, [*argv, "--out", tmp_path / "new"], "--value-grid 401 or less")
+    assert not (tmp_path / "new").exists()  # the directory is given back
+
+
+@pytest.mark.parametrize("episode", [str(2**70), "1e300", str(2**53 + 2)])
+def test_an_episode_id_too_large_to_count_is_named(capsys, fitted_dir, tmp_path, episode):
+    lines = fitted_dir[1].read_text().splitlines()
+    for i in range(2, len(lines)):  # the first episode's rows: the header and the column names
+        cells = lines[i].split(",")
+        if cells[1] == "0":
+            lines[i] = ",".join([cells[0], episode, *cells[2:]])
+    data = tmp_path / "bad.csv"
+    data.write_text("\n".join(lines) + "\n")
+    argv = ["fit", "pendulum", "--data", data, "--model", "params", "--out", tmp_path / "fit"]
+    _one_line(capsys, argv, "larger than 2^53")

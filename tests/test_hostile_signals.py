@@ -119,7 +119,9 @@ def test_a_full_disk_ends_with_one_line_and_resumes(tmp_path, reference, capsys)
         assert code == 2, err
         lines = [line for line in err.strip().splitlines() if line.strip()]
         assert len(lines) == 1 and "Traceback" not in err, err
-        assert "No space left" in lines[0] and "--resume" in lines[0]
+        assert "No space left" in lines[0]
+        # --resume is advised where there is something to resume, and only there
+        assert ("--resume" in lines[0]) == (out / "run.json").exists(), err
         _no_partial_files(out)
         for p in out.iterdir() if out.exists() else ():
             if p.suffix == ".json":

@@ -222,7 +222,8 @@ def test_loop_records_fits_trains_and_resumes(tmp_path, capsys):
     assert (out / "round_2" / "run" / "model.json").exists() and (out / "loop.png").exists()
     capsys.readouterr()
     assert main(argv) == 2 and "pass --resume" in capsys.readouterr().err
-    (out / "round_2" / "run" / "model.json").unlink()  # as if interrupted in round 2's training
+    for name in ("model.json", "metrics.json"):  # as if interrupted in round 2's training
+        (out / "round_2" / "run" / name).unlink()
     assert main([*argv, "--resume"]) == 0
     assert (out / "round_2" / "run" / "model.json").exists()
     assert main([*argv[:-3], "--model", "hybrid", "--out", str(out), "--resume"]) == 2

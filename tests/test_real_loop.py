@@ -22,7 +22,8 @@ from diffcontrol.tasks import Pendulum, Task
 
 
 class _BrokenPendulum(gymnasium.Env):
-    """Pendulum-shaped spaces; NaN observations after 3 steps, or raises at step 3."""
+    """Pendulum-shaped spaces; from step 3: NaN observations ("nan"), an exception ("raise"),
+    an observation of 4 numbers ("shape") or an infinite reward ("inf")."""
 
     observation_space = spaces.Box(-np.inf, np.inf, (3,), np.float32)
     action_space = spaces.Box(-2.0, 2.0, (1,), np.float32)
@@ -39,15 +40,27 @@ class _BrokenPendulum(gymnasium.Env):
         self.t += 1
         if self.t == 3 and self.how == "raise":
             raise RuntimeError("motor driver fault")
-        obs = np.array([1.0, 0.0, np.nan if self.t >= 3 else 0.0], np.float32)
-        return obs, 0.0, False, self.t >= 10, {}
+        broken = self.t >= 3
+        obs = np.array([1.0, 0.0, np.nan if broken and self.how == "nan" else 0.0], np.float32)
+        if broken and self.how == "shape":
+            obs = np.zeros(4, np.float32)
+        reward = np.inf if broken and self.how == "inf" else 0.0
+        return obs, reward, False, self.t >= 10, {}
 
 
 gymnasium.register("test/BrokenPendulum-v0", entry_point=_BrokenPendulum, max_episode_steps=10)
 
 
-@pytest.mark.parametrize("how, match", [("nan", "non-finite observation"), ("raise", "raised")])
-def test_record_refuses_nan_observations_and_an_environment_that_raises(how, match):
+@pytest.mark.parametrize(
+    "how, match",
+    [
+        ("nan", "non-finite observation"),
+        ("raise", "raised"),
+        ("shape", r"observation of shape \(4,\)"),
+        ("inf", "the reward inf"),
+    ],
+)
+def test_record_refuses_a_system_that_breaks_its_space(how, match):
     task = diffcontrol.make("pendulum")
     with pytest.raises(ConfigError, match=match) as e:
         identify.record("test/BrokenPendulum-v0", 1, env_kwargs={"how": how}, task=task)
@@ -311,3 +324,13 @@ def test_compare_real_runs_a_planner_through_the_fitted_model_as_its_own_row(tmp
     assert all(len(r["real_returns"]) == 2 for r in rounds)  # judged on the real system
     assert abs(rounds[-1]["fitted_parameters"]["g"] - 10.0) < 0.05  # from g = 8
     assert rounds[0]["work_seconds"]["train"] > 0  # the planner's build time
+
+
+def test_evaluation_refuses_a_system_whose_rewards_are_not_numbers(pendulum_run):
+    """No return is judged from infinite rewards (a loop's round on such a system included):
+    one line naming the environment, the episode and the return."""
+    policy, task = diffcontrol.load(pendulum_run), diffcontrol.make("pendulum")
+    real = ("test/BrokenPendulum-v0", {"how": "inf"})
+    with pytest.raises(ConfigError, match="rewards are not finite numbers") as e:
+        diffcontrol.evaluate(policy, task, episodes=2, real=real)
+    assert "\n" not in str(e.value) and "episode 0 (reset seed 0)" in str(e.value)

@@ -217,3 +217,14 @@ def test_failed_sweep_gives_the_directory_back(tmp_path, capsys):
     assert "continuous-time" in capsys.readouterr().err
     assert main(["sweep", "--out", str(out), "--resume"]) == 2
     assert "no sweep to resume" in capsys.readouterr().err
+
+
+def test_the_library_sweep_caps_its_members_as_the_command_does():
+    """More members than one program takes are refused before anything is built (the CLI's
+    65,536, for the library's sweep() too)."""
+    from diffcontrol.training import _sweep
+
+    task = dc.make("pendulum")
+    configs = [task.default_config()] * (_sweep.MAX_MEMBERS + 1)
+    with pytest.raises(ConfigError, match="65,537 members is more than 65,536"):
+        dc.sweep(task, configs)

@@ -40,6 +40,14 @@ axis; its table is solved once per load or run (Pendulum: 0.8 GB)."""
 _WIDE = ("batch", "eval_episodes", "population", "starts")
 
 
+def int_bounds(f: dataclasses.Field) -> tuple[int, int]:
+    """The bounds of the integer config field ``f``: its ``low`` (default 1) and ``high``
+    (default ``MAX_WIDTH`` for the sizes of what runs side by side, else ``MAX_COUNT``), which
+    the command line and the config's own checks both state."""
+    high = MAX_WIDTH if f.name in _WIDE else MAX_COUNT
+    return f.metadata.get("low", 1), f.metadata.get("high", high)
+
+
 class _Config:
     """What every configuration shares: validation helpers, ``replace`` and JSON round trips."""
 
@@ -52,9 +60,9 @@ class _Config:
             if declared == "int":
                 if not isinstance(value, int) or isinstance(value, bool):
                     raise ConfigError(f"{f.name} must be an integer, got {value!r}")
-                limit = MAX_WIDTH if f.name in _WIDE else MAX_COUNT
-                if not (0 <= value <= limit):
-                    raise ConfigError(f"{f.name} must be in 0 ... {limit:,}, got {value!r}")
+                low, limit = int_bounds(f)
+                if not (0 <= value <= limit):  # 0: a field's own check names its lower bound
+                    raise ConfigError(f"{f.name} must be in {low} ... {limit:,}, got {value!r}")
             elif declared == "float":
                 if not isinstance(value, int | float) or isinstance(value, bool):
                     raise ConfigError(f"{f.name} must be a number, got {value!r}")
@@ -144,9 +152,13 @@ def layer_widths(name: str, value: Any) -> tuple[int, ...]:
         ConfigError: anything else, naming the setting ``name``.
     """
     if not isinstance(value, tuple | list) or not all(
-        isinstance(w, int) and not isinstance(w, bool) and 0 < w <= MAX_WIDTH for w in value
+        isinstance(w, int) and not isinstance(w, bool) and w > 0 for w in value
     ):
         raise ConfigError(f"{name} must be positive layer widths such as (64, 64), got {value!r}")
+    if any(w > MAX_WIDTH for w in value):  # the rule it breaks is the size, not the sign
+        raise ConfigError(
+            f"{name} must be layer widths of at most {MAX_WIDTH:,} (2^20) units each, got {value!r}"
+        )
     return tuple(value)
 
 

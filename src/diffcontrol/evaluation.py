@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Any
 
 import numpy as np
 
 from . import _jax_setup
 from .envs import make_env
-from .errors import ConfigError
+from .errors import ConfigError, DiffcontrolError
 from .rollout import solve_closed_loop
 from .tasks import ContinuousTask, Task
 from .tasks._hooks import task_hook
@@ -117,13 +117,20 @@ def evaluate(
         raise ValueError(f"episodes must be positive, got {episodes}")
     env, label = eval_environment(task, real)
     try:
-        _check_fits(policy, env, label)
-        if _side_by_side(policy, env):
-            returns, lengths = _lockstep(policy, task, real, env, episodes, seed)
-        else:
-            returns, lengths = _one_by_one(policy, env, episodes, seed)
+        with _system_errors(label, real):
+            _check_fits(policy, env, label)
+            if _side_by_side(policy, env):
+                returns, lengths = _lockstep(policy, task, real, env, episodes, seed)
+            else:
+                returns, lengths = _one_by_one(policy, env, episodes, seed)
     finally:
         env.close()
+    if not np.all(np.isfinite(returns)):  # a system whose rewards are not numbers: no verdict
+        i = int(np.argmin(np.isfinite(returns)))
+        raise ConfigError(
+            f"{label} gave the return {returns[i]} in episode {i} (reset seed {seed + i}): its "
+            "rewards are not finite numbers, so no return can be judged; fix the environment"
+        )
     return EvalResult(label, seed, returns, lengths)
 
 
@@ -248,13 +255,32 @@ def _check_fits(policy: Any, env: Any, label: str) -> None:
         raise ConfigError(f"the controller cannot act in {label}: {e}") from None
 
 
+@contextlib.contextmanager
+def _system_errors(label: str, real: Any) -> Iterator[None]:
+    """Another system's failure (``real``: the user's environment) as one line naming it, not
+    a traceback from inside it; the task's own environment's errors pass through."""
+    try:
+        yield
+    except (KeyboardInterrupt, SystemExit, DiffcontrolError):
+        raise
+    except Exception as e:
+        if real is None:
+            raise
+        raise ConfigError(
+            f"{label} raised {type(e).__name__}: {e} while the controller acted in it; check "
+            "the environment and its arguments"
+        ) from None
+
+
 def eval_environment(task: Task, real: tuple[str, dict | None] | None) -> tuple[Any, str]:
     """The environment to evaluate in and its label: the task's own, or ``real``
     (``(env_id, env_kwargs)``, labelled ``env_id(k=v, ...)``)."""
     if real is None:
         return task.make_gym_env(), task.gym_label
     env_id, kwargs = real
-    args = ", ".join(f"{k}={v}" for k, v in (kwargs or {}).items())
+    args = ", ".join(
+        f"{k}={v!r}" if isinstance(v, str) else f"{k}={v}" for k, v in (kwargs or {}).items()
+    )
     try:
         env = make_env(env_id, kwargs)
     except ImportError as e:  # the module before ':' of an id the user named
@@ -273,7 +299,7 @@ def record_episode(
     env, label = eval_environment(task, real)
     if callable(getattr(policy, "reset", None)):  # a planner: start from its initial plan
         policy.reset()
-    try:
+    with _system_errors(label, real), contextlib.closing(env):
         obs, _ = env.reset(seed=seed)
         states = [np.array(env.unwrapped.state, dtype=np.float64)]
         actions, rewards = [], []
@@ -285,8 +311,6 @@ def record_episode(
             rewards.append(float(reward))
             done = terminated or truncated
         dt = float(getattr(env.unwrapped, "dt", getattr(env.unwrapped, "tau", 0.02)))
-    finally:
-        env.close()
     return Recording(
         env_id=label,
         dt=dt,

@@ -358,6 +358,29 @@ def check_same_run(out: Path, old: dict, run: dict) -> None:
         )
 
 
+def check_no_dangling_link(out: Path) -> None:
+    """Refuse an output directory ``out`` that is, or lies under, a symbolic link to nothing:
+    creating it would fail with "File exists", which reads as another process's claim.
+
+    Raises:
+        RunDirectoryError: naming the link, where it points, and what to do.
+    """
+    for link in (out, *out.parents):
+        if link.is_symlink() and not link.exists():
+            target = os.readlink(link)
+            where = f"--out {out} is" if link == out else f"--out {out} lies under {link},"
+            raise RunDirectoryError(
+                f"{where} a symbolic link to {target}, which does not exist; create "
+                f"{link.parent / target} first, or choose another --out"
+            )
+
+
+def make_dir(out: Path) -> None:
+    """Create the output directory ``out`` and its parents (``check_no_dangling_link``)."""
+    check_no_dangling_link(out)
+    out.mkdir(parents=True, exist_ok=True)
+
+
 def check_run_dir(out_dir: str | os.PathLike, run: dict, resume: bool) -> None:
     """Refuse a directory that cannot take this run (``prepare_run_dir``'s checks), writing
     nothing: a run with work to do before it claims its directory (a grid to solve) calls it
@@ -367,6 +390,7 @@ def check_run_dir(out_dir: str | os.PathLike, run: dict, resume: bool) -> None:
         RunDirectoryError: as ``prepare_run_dir``.
     """
     out = Path(out_dir)
+    check_no_dangling_link(out)
     if out.exists() and not out.is_dir():
         raise RunDirectoryError(f"--out {out} is a file, not a directory; choose a directory")
     existing = out / RUN_FILE

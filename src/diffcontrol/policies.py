@@ -204,6 +204,8 @@ def _check_model(doc: Any, path: Path) -> None:
             v = np.asarray(obs[name], float)
             if v.shape != (size,) or not np.all(np.isfinite(v)):
                 raise bad(f"observation {name} is not {size} finite numbers")
+        if not np.any(np.asarray(obs["scale"], float)):  # a controller that sees nothing
+            raise bad("the observation scale is 0 for every observation")
         if not isinstance(act["size"], int) or isinstance(act["size"], bool) or act["size"] < 1:
             raise bad(f"the action size {act['size']!r} is not a positive integer")
         if act["head"] in ("tanh", "sigmoid"):

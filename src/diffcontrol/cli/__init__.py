@@ -9,6 +9,7 @@ import errno
 import gc
 import os
 import sys
+from pathlib import Path
 
 from .._interrupts import terminate_as_interrupt
 from .._jax_setup import GC_THRESHOLDS, checks_as_nan
@@ -63,11 +64,41 @@ def main(argv: list[str] | None = None) -> int:
         if e.errno not in _FILE_SYSTEM_ERRORS:
             raise
         where = f" ({e.filename})" if e.filename else ""
-        hint = "continue with --resume" if args.command == "train" else "run it again"
-        room = "make room or " if e.errno in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG) else ""
-        msg = f"{e.strerror}{where}; {room}choose another place, then {hint}"
+        full = e.errno in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
+        if _resumable(args):  # the work done so far is kept: continue it where it is
+            again = args.command_line + ("" if args.resume else " --resume")
+            fix = "make room" if full else "make it writable"
+            msg = f"{e.strerror}{where}; {fix}, then continue with: {again}"
+        else:
+            msg = f"{e.strerror}{where}; {'make room or ' if full else ''}choose another place, "
+            msg += "then run the command again"
         print(f"diffcontrol {args.command}: error: {msg}", file=sys.stderr)
         return EXIT_USAGE
+
+
+# What a command's --resume starts from in its --out, any one of these sets of files
+# (io.RUN_FILE with training's CHECKPOINT_FILE, runs.SWEEP_FILE, runs.LOOP_FILE or the first
+# round's data, compare's SETTINGS_FILE or compare --real's file): named as files, so that
+# the advice after an error imports nothing.
+_RESUME_FROM = {
+    "train": [("run.json", "checkpoint.npz")],
+    "sweep": [("sweep.json",)],
+    "loop": [("loop.json",), ("round_0/recorded.csv",)],
+    "compare": [("compare.json",), ("compare-real.json",)],
+}
+
+
+def _resumable(args: argparse.Namespace) -> bool:
+    """Whether the command's ``--out`` holds work that its ``--resume`` continues: only then
+    does the advice after a file-system error name ``--resume``."""
+    out = getattr(args, "out", None)
+    try:
+        return bool(out) and any(
+            all((Path(out) / name).is_file() for name in names)
+            for names in _RESUME_FROM.get(args.command, [])
+        )
+    except OSError:  # an --out that cannot be read holds nothing to continue
+        return False
 
 
 def run() -> int:

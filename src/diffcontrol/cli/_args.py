@@ -13,7 +13,7 @@ import sys
 from collections.abc import Callable, Iterable
 from typing import Any, NoReturn
 
-from ..config import MAX_COUNT, MAX_WIDTH
+from ..config import MAX_COUNT, MAX_WIDTH, int_bounds
 
 EXIT_USAGE = 2
 FLAG = "store_true"
@@ -53,7 +53,7 @@ def config_specs(cls: type, skip: Any = (), defaults: bool = True) -> list[tuple
     for f in (f for f in dataclasses.fields(cls) if f.name not in skip):
         meta, declared = f.metadata, str(f.type).removesuffix(" | None")
         forms = {
-            "int": (_integer(meta.get("low", 1), meta.get("high", MAX_COUNT)), "N"),
+            "int": (_integer(*int_bounds(f)), "N"),
             "float": (_FLOATS.get(meta.get("form"), finite_float), "X"),
             "str": (meta.get("choices", str), "NAME"),
             "bool": (yes_no, "yes|no"),
@@ -100,10 +100,17 @@ def _number(cast: Callable, expected: str, ok: Callable, must: str) -> Callable[
 
 
 def _integer(low: int, high: int) -> Callable[[str], int]:
-    """Integers in ``low ... high`` (``low`` is 0 or 1), with messages that say the range."""
-    must = "a positive integer" if low else ">= 0"
-    expected = "a positive integer" if low else "an integer >= 0"
-    return _number(int, expected, lambda v: low <= v <= high, f"{must} (at most {high:,})")
+    """Integers in ``low ... high``, refused with the bound that the value breaks."""
+    least = {0: "an integer >= 0", 1: "a positive integer"}.get(low, f"an integer >= {low}")
+    below = _number(int, least, lambda v: v >= low, f"{least} (at most {high:,})")
+
+    def parse(text: str) -> int:
+        value = below(text)
+        if value > high:
+            raise argparse.ArgumentTypeError(f"must be at most {high:,}, got {value}")
+        return value
+
+    return parse
 
 
 # Every integer has an upper bound, so that no flag can ask for more than a run can hold

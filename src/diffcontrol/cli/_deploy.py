@@ -35,7 +35,7 @@ def add_parsers(sub: Any) -> None:
 
 
 def cmd_export(args: argparse.Namespace) -> int:
-    from ..deploy import export, metadata
+    from ..deploy import export, metadata  # JAX: the library, when the command runs
     from ..policies import read_model
 
     path = export(args.run_dir, args.out, overwrite=args.force)

@@ -105,7 +105,7 @@ def cmd_loop(args: argparse.Namespace) -> int:
 
     config = config_of(LoopConfig, args)
     more = {"env_kwargs": dict(args.env_arg), "resume": args.resume, "progress": say(args)}
-    more["log_dir"] = args.log_dir
+    more |= {"log_dir": args.log_dir, "command": args.command_line}
     runs.loop(tasks.resolve(args.task), args.out, config, env_id=args.env, **more)
     return 0
 

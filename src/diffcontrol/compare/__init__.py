@@ -94,23 +94,26 @@ def run_comparison(
     config = config or CompareConfig()
     if compile_cache and not os.environ.get("DIFFCONTROL_NO_COMPILE_CACHE"):
         _jax_setup.enable_compile_cache()
-    if real:
-        return run_real_comparison(
-            task,
-            out_dir or f"runs/compare-real-{task.name}",
-            models=config.models,
-            start=config.start or None,
-            resume=resume,
-            progress=progress,
-            **{n: getattr(config, n) for n in _REAL_SETTINGS},
-        )
-    out = Path(out_dir or f"runs/compare-{task.name}")
+    out = Path(out_dir or f"runs/compare-{'real-' if real else ''}{task.name}")
     try:
+        if real:
+            return run_real_comparison(
+                task,
+                out,
+                models=config.models,
+                start=config.start or None,
+                resume=resume,
+                progress=progress,
+                **{n: getattr(config, n) for n in _REAL_SETTINGS},
+            )
         return _compare(task, out, config, resume, progress)
-    except KeyboardInterrupt:
-        again = command or shell_command("compare", task.name)
+    except KeyboardInterrupt:  # a loop's or a run's own message names only its part
+        if not out.is_dir():
+            raise Interrupted("interrupted before anything was written; nothing was kept") from None
+        again = command or shell_command("compare", task.name, *(["--real"] if real else []))
+        kept = f"{out / 'runs'}" + (f" and the loops under way in {out / 'loops'}" if real else "")
         raise Interrupted(
-            f"interrupted; the finished runs are in {out / 'runs'}. Continue with the same "
+            f"interrupted; the finished runs are in {kept}. Continue with the same "
             f"options and --resume: {again}" + ("" if resume else " --resume")
         ) from None
 
@@ -222,7 +225,7 @@ def _prepare(out: Path, settings: dict, resume: bool) -> Path:
             )
     else:
         try:
-            out.mkdir(parents=True, exist_ok=True)
+            io.make_dir(out)
             if any(out.iterdir()):
                 raise RunDirectoryError(
                     f"{out} is not empty and holds no comparison; choose a new or empty --out"

@@ -300,7 +300,7 @@ def _prepare(out: Path, settings: dict, resume: bool) -> None:
         return
     if out.exists() and any(out.iterdir()):
         raise RunDirectoryError(f"--out {out} is not empty; choose a new or empty directory")
-    out.mkdir(parents=True, exist_ok=True)
+    io.make_dir(out)
     io.write_json(path, {**settings, "created": io.now_iso()})
 
 

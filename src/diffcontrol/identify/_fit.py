@@ -13,13 +13,13 @@ from typing import Any
 
 from .._version import __version__
 from ..errors import ConfigError, RunDirectoryError
-from ..io import now_iso, write_json, write_json_new
+from ..io import check_no_dangling_link, now_iso, write_json, write_json_new
 from ..settings import FitConfig
 from ..tasks import as_task
 from ._routes import model_route
 from ._shooting import MODEL_TYPES, FitResult
 from .data import TrajectoryData
-from .fitted import FITTED_FILE, FITTED_FORMAT, real_params
+from .fitted import FITTED_FILE, FITTED_FORMAT, checked_env, real_params
 
 
 def fit(task: Any, data: Any, model: str = "params", **settings: Any) -> FitResult:
@@ -107,6 +107,7 @@ class FitDir:
 
 def check_fit_dir(out: Path, force: bool) -> None:
     """Refuse, before fitting, an ``out`` that could not take fitted.json (nothing is created)."""
+    check_no_dangling_link(out)
     if out.exists() and not out.is_dir():
         raise RunDirectoryError(f"--out {out} is a file; give a directory")
     if (out / FITTED_FILE).exists() and not force:
@@ -168,6 +169,8 @@ def fit_dir(
     if isinstance(meta.get("params"), dict) and not meta.get("env_id"):
         # what train --model will judge on: checked now
         real_params(task, {"params": meta["params"]})
+    if meta.get("env_id"):  # the real system train --model judges on: checked now too
+        checked_env(meta["env_id"], meta.get("env_kwargs"), str(data_file))
     out = Path(out)
     check_fit_dir(out, force)
     train, held_out = split(route, data, holdout)

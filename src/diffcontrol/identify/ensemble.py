@@ -143,7 +143,9 @@ def ensemble_to_dict(e: Ensemble) -> dict[str, Any]:
     }
 
 
-def ensemble_from_dict(doc: Any, where: str = "the model file") -> Ensemble:
+def ensemble_from_dict(
+    doc: Any, where: str = "the model file", sizes: tuple[int, int] | None = None
+) -> Ensemble:
     """Rebuild an ``Ensemble`` from ``ensemble_to_dict``'s output.
 
     Raises:
@@ -164,7 +166,7 @@ def ensemble_from_dict(doc: Any, where: str = "the model file") -> Ensemble:
             f"{where}: 'uncertainty_penalty' must be a finite number >= 0, got {penalty!r}; "
             "refit the model"
         ) from None
-    nets = [correction_from_dict(m, f"{where} (member {k})") for k, m in enumerate(members)]
+    nets = [correction_from_dict(m, f"{where} (member {k})", sizes) for k, m in enumerate(members)]
     try:
         return stack(nets, penalty)
     except ValueError as e:

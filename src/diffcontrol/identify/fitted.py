@@ -17,6 +17,8 @@ from pathlib import Path
 from typing import Any
 
 import equinox as eqx
+import jax
+import jax.numpy as jnp
 
 from ..errors import ConfigError, ModelFileError
 from ..io import read_json, scalar_arguments
@@ -100,12 +102,21 @@ def fitted_model(task: Any, doc: dict[str, Any]) -> HybridModel | NeuralModel | 
     if doc["model"] == "params":
         return physics
     where = doc.get("_path", "the fitted model")
+    sizes = network_sizes(task)
     if "members" in doc["network"]:  # an ensemble
-        correction = ensemble_from_dict(doc["network"], where)
+        correction = ensemble_from_dict(doc["network"], where, sizes)
     else:
-        correction = correction_from_dict(doc["network"], where)
+        correction = correction_from_dict(doc["network"], where, sizes)
     cls = HybridModel if doc["model"] == "hybrid" else NeuralModel
     return cls(physics, correction)
+
+
+def network_sizes(task: Any) -> tuple[int, int]:
+    """The inputs (observation and action) and outputs (the state) of the network of a
+    discrete-time task's hybrid or neural model."""
+    obs = jax.ShapeDtypeStruct((task.observation_size,), jnp.float32)
+    state = jax.eval_shape(task.state_from_observation, obs)
+    return task.observation_size + task.action_size, int(state.shape[0])
 
 
 def real_system(doc: dict, trusted: str | None = None) -> dict | None:

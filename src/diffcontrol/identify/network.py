@@ -100,11 +100,15 @@ def correction_to_dict(c: Correction) -> dict[str, Any]:
     }
 
 
-def correction_from_dict(doc: Any, where: str = "the model file") -> Correction:
-    """Rebuild a ``Correction`` from ``correction_to_dict``'s output.
+def correction_from_dict(
+    doc: Any, where: str = "the model file", sizes: tuple[int, int] | None = None
+) -> Correction:
+    """Rebuild a ``Correction`` from ``correction_to_dict``'s output; ``sizes``: the inputs
+    and outputs the model it serves needs.
 
     Raises:
-        ModelFileError: the document is malformed (names what is wrong and where).
+        ModelFileError: the document is malformed, or of other sizes than ``sizes`` (names
+            what is wrong and where).
     """
     try:
         layers = doc["layers"]
@@ -134,6 +138,16 @@ def correction_from_dict(doc: Any, where: str = "the model file") -> Correction:
         )
     if not all(np.all(np.isfinite(a)) for a in (*weights, *biases)):
         raise ModelFileError(f"{where}: the network has non-finite weights; refit the model")
+    scalings = {"in_offset": in_offset, "in_scale": in_scale, "out_scale": out_scale}
+    for name, value in scalings.items():
+        if not np.all(np.isfinite(np.asarray(value, np.float64))):
+            raise ModelFileError(f"{where}: the network's {name} is not finite; refit the model")
+    if sizes is not None and (weights[0].shape[1], weights[-1].shape[0]) != tuple(sizes):
+        raise ModelFileError(
+            f"{where}: the network takes {weights[0].shape[1]} inputs and gives "
+            f"{weights[-1].shape[0]} outputs, but this task's model needs {sizes[0]} and "
+            f"{sizes[1]}; refit the model for this task"
+        )
     c = Correction(
         jax.random.PRNGKey(0),
         weights[0].shape[1],

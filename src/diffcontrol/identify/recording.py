@@ -217,6 +217,7 @@ def record(
             action = env.action_space.sample() if policy is None else policy(obs)
             actions.append(_action_row(action, env.action_space, env_id))
             obs, reward, terminated, truncated, _ = _call(env.step, env_id, i, len(actions), action)
+            _check_step(obs, reward, env.observation_space, env_id, i, len(actions))
             observations.append(obs)
             total += float(reward)
             left = None if left is None else left - 1
@@ -267,6 +268,24 @@ def _call(method: Callable, env_id: str, episode: int, step: int, *args: Any, **
             f"{env_id} raised {type(e).__name__}: {e} in episode {episode} at step {step} while "
             "recording; nothing of this recording was written: fix the environment and record again"
         ) from None
+
+
+def _check_step(obs: Any, reward: Any, space: Any, env_id: str, episode: int, step: int) -> None:
+    """Refuse a step that breaks the environment's own space (an observation of another
+    shape) or gives a reward that is not a finite number: the system is not what it says."""
+    shape = getattr(space, "shape", None)
+    if shape is not None and np.shape(obs) != tuple(shape):
+        raise ConfigError(
+            f"{env_id} returned an observation of shape {np.shape(obs)} in episode {episode} at "
+            f"step {step}, but its observation space is {space}; nothing of this recording was "
+            "written: fix the environment and record again"
+        )
+    if np.ndim(reward) != 0 or not np.isfinite(float(np.asarray(reward, np.float64))):
+        raise ConfigError(
+            f"{env_id} returned the reward {reward!r} in episode {episode} at step {step}, not a "
+            "finite number; nothing of this recording was written: fix the environment and "
+            "record again"
+        )
 
 
 def _check_finite(obs: Any, env_id: str, episode: int, step: int) -> None:

@@ -93,6 +93,60 @@ def check_data(task: Any, data: TrajectoryData) -> None:
             f"{where} was recorded every {dt} s but task {task.name!r} steps {model_dt} s; "
             "record at the task's time step"
         )
+    check_within_spaces(task, data, where)
+
+
+OBSERVATION_SLACK = 0.1
+"""How far outside its space a recorded observation may lie, as a share of the space's span
+on that axis: measured data carries sensor noise (0.01 on a pendulum's cos and sin is 0.5 % of
+their span)."""
+
+
+def check_within_spaces(task: Any, data: TrajectoryData, where: str) -> None:
+    """Refuse observations outside the task's observation space (its Gymnasium twin's, where
+    it has one) by more than sensor noise could explain (``OBSERVATION_SLACK`` of the space's
+    span), and actions outside its action space (an index a ``Discrete`` space does not have):
+    values the system cannot produce, which would fit a model to something else. Names the
+    first such row.
+
+    Raises:
+        DataFileError: the first value out of its space, with its row, column and bounds.
+    """
+    from gymnasium import spaces
+
+    observation_space = task.observation_space()
+    if task.gym_id and ":" not in task.gym_id:  # a Gymnasium twin: its bounds are the system's
+        twin = task.make_gym_env()
+        observation_space = twin.observation_space
+        twin.close()
+    tables = (
+        (data.observations, observation_space, data.observation_columns, "observation"),
+        (data.actions, task.action_space(), data.action_columns, "action"),
+    )
+    for (values, space, columns, what), share in zip(tables, (OBSERVATION_SLACK, 0.0), strict=True):
+        if isinstance(space, spaces.Discrete):
+            low, high = (
+                np.full(values.shape[1], space.start),
+                np.full(values.shape[1], space.start + space.n - 1),
+            )
+            whole = np.isnan(values) | (values == np.round(values))
+        elif isinstance(space, spaces.Box):
+            low, high = (np.broadcast_to(np.asarray(b, np.float64).reshape(-1), values.shape[1:])
+                         for b in (space.low, space.high))  # fmt: skip
+            whole = np.ones(values.shape, bool)
+        else:
+            continue
+        span = np.where(np.isfinite(high - low), high - low, 0.0)
+        slack = share * span + 1e-6 * (1.0 + np.abs(np.where(np.isfinite(high), high, 0.0)))
+        bad = ~whole | (values < low - slack) | (values > high + slack)
+        bad &= ~np.isnan(values)  # an episode's last row has no action
+        if bad.any():
+            row, col = (int(i) for i in np.argwhere(bad)[0])
+            raise DataFileError(
+                f"{where}: data row {row + 1} has {columns[col]} = {values[row, col]:.6g}, which "
+                f"task {task.name!r}'s {what}s never take (its {what} space: {space}); the data "
+                "is not from this system (or damaged): check the file, or record it again"
+            )
 
 
 def task_actions(task: Any, actions: np.ndarray) -> np.ndarray:

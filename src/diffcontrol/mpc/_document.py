@@ -15,6 +15,12 @@ from ._discretise import DiscretisedTask
 from ._policy import PlannerPolicy, SampledPlannerPolicy
 from ._value import ValueNetwork
 
+REFERENCE_GRID_WORK = 401**2 * 41
+"""The work of the 401-point grid with 41 actions (points per axis squared times actions)."""
+MAX_LOADED_GRID_WORK = 4 * REFERENCE_GRID_WORK
+"""The largest grid a planner read from a file solves when loaded: a few minutes on one core
+(an 801-point grid with 41 actions). The command line's own --value-grid may ask for more."""
+
 
 def planner_policy(task: AnyTask, doc: dict, progress: Callable[[str], None] | None = None) -> Any:
     """The ``mpc.PlannerPolicy`` of a planner's ``model.json`` document, for ``task`` (needs
@@ -51,7 +57,20 @@ def make_planner_policy(
     value: Any = None,
 ) -> Any:
     """A ``PlannerPolicy``, or for a planner through a continuous task's discretisation a
-    ``SampledPlannerPolicy`` (``policy(state)``, held for ``dt``)."""
+    ``SampledPlannerPolicy`` (``policy(state)``, held for ``dt``).
+
+    Raises:
+        ConfigError: a terminal value grid of more than ``MAX_LOADED_GRID_WORK``.
+    """
+    if config.value_grid is not None:
+        work = config.value_grid**2 * config.value_levels
+        if work > MAX_LOADED_GRID_WORK:
+            raise ConfigError(
+                f"a terminal value grid of {config.value_grid} points per state axis and "
+                f"{config.value_levels} actions is {work / REFERENCE_GRID_WORK:.0f} times the work "
+                "of a 401-point grid (about 35 s on one core), solved again at every load; "
+                "choose --value-grid 401 or less"
+            )
     model_task, params = planning_model(task, model)
     planner = planner_from_config(model_task, config, params, progress=progress, value=value)
     if isinstance(planner.task, DiscretisedTask):

@@ -18,12 +18,14 @@ the controller's return on the real system.
 from __future__ import annotations
 
 import json
+import shutil
 import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from .._run_files import save_run
+from .._run_files import release_claim, save_run
+from .._shell import command as shell_command
 from ..envs import env_id as own_id
 from ..errors import ConfigError, RunDirectoryError
 from ..evaluation import evaluate
@@ -31,7 +33,7 @@ from ..identify import fit_dir
 from ..identify._rounds import NoisyPolicy, model_error, parse_start, predictor_of, start_params
 from ..identify.data import concat, read_trajectories, write_trajectories
 from ..identify.recording import check_spaces, make_env, record, record_task
-from ..io import now_iso, read_json, write_figure, write_json
+from ..io import make_dir, now_iso, read_json, write_figure, write_json
 from ..policies import read_model
 from ..settings import FitConfig, LoopConfig
 from ..tasks import Task
@@ -39,7 +41,7 @@ from ..training import resolve_config, train
 from ..training._events import open_log
 from ._open import load_policy
 from ._plan import plan_run
-from ._train import fitted_training
+from ._train import RunInterrupted, fitted_training
 
 LOOP_FILE = "loop.json"
 
@@ -55,6 +57,7 @@ def loop(
     progress: Callable[[str], None] | None = None,
     report: Callable[[str], None] = print,
     log_dir: str | Path | None = None,
+    command: str | None = None,
 ) -> dict:
     """Learn a controller for a system you can only run: record ``episodes`` episodes (or
     ``real_steps`` steps) of the real environment ``env_id`` (default the task's own; random
@@ -86,11 +89,45 @@ def loop(
             are not the task's, an unknown ``start`` parameter.
         RunDirectoryError: ``out`` holds another loop (or, without ``resume``, any loop), or
             other files.
+        RunInterrupted: Ctrl-C; the message says what was kept and the command that continues.
 
     ``log_dir``: write each round's training curves there as TensorBoard event files
     (``round_K``), and per round the real steps so far, the model's error on the new data and
-    the return on the real system (``loop/...``, the step is the round).
+    the return on the real system (``loop/...``, the step is the round). ``command``: the
+    command line that started it, for the message of an interruption.
     """
+    more = {"env_kwargs": env_kwargs, "resume": resume, "progress": progress, "report": report}
+    try:
+        return _loop(task, out, config, env_id=env_id, log_dir=log_dir, **more)
+    except KeyboardInterrupt:  # every step's files are kept once written: say so
+        out = Path(out)
+        if out.is_dir() and not out.is_symlink() and not any(out.iterdir()):
+            out.rmdir()  # give an empty directory back, as train does
+        if not out.is_dir():
+            raise RunInterrupted(
+                "interrupted before anything was recorded; nothing was kept"
+            ) from None
+        again = command or shell_command("loop", getattr(task, "name", str(task)), "--out", out)
+        raise RunInterrupted(
+            f"interrupted; the recorded data, fitted models and controllers written so far are "
+            f"kept in {out}. Continue with the same options and --resume: {again}"
+            + ("" if resume else " --resume")
+        ) from None
+
+
+def _loop(
+    task: Any,
+    out: str | Path,
+    config: LoopConfig | None = None,
+    *,
+    env_id: str | None = None,
+    env_kwargs: dict | None = None,
+    resume: bool = False,
+    progress: Callable[[str], None] | None = None,
+    report: Callable[[str], None] = print,
+    log_dir: str | Path | None = None,
+) -> dict:
+    """``loop``, uninterrupted."""
 
     if not isinstance(task, Task):
         raise ConfigError(
@@ -222,15 +259,18 @@ def loop(
             )  # fmt: skip
             for line in fitted.lines:
                 say(line)
-        if not (here / "run" / "model.json").exists():
+        done = (here / "run" / "metrics.json").exists()  # save_run writes it last
+        if not done:
             (here / "eval.json").unlink(missing_ok=True)  # it judged another controller
         own_eval = eval_episodes if not eval_seed else 0  # seeds 0...: save_run's own
-        if not (here / "run" / "model.json").exists() and c.controller == "plan":
+        if not done and c.controller == "plan":
+            if (here / "run").exists():  # a planner cut short: nothing in it to continue
+                shutil.rmtree(here / "run")
             run, _ = plan_run(here / "run", task, task.loop_planner(), model=here / "fit",
                               env_id=env_id, final_eval=own_eval, animation=False,
                               progress=say)  # fmt: skip
             policies[here / "run"] = run.policy
-        if not (here / "run" / "model.json").exists():
+        elif not done:
             trained, params, real, info = fitted_training(task, here / "fit", None)
             say(info.pop("note"))
             # A parameter that must be >= 0 (the Pendulum's friction) fitted a hair below 0
@@ -240,6 +280,8 @@ def loop(
             overrides = {"seed": seed, "updates": updates, "params": params or None}
             config = resolve_config(trained, None, **{k: v for k, v in overrides.items() if v})
             resumed = (here / "run" / "checkpoint.npz").exists()
+            if not resumed:  # claimed, then cut short before its first checkpoint: start again
+                release_claim(here / "run")
             logs = {"log_dir": Path(log_dir) / f"round_{k}" if log_dir else None}
             result = train(
                 trained, config, out_dir=here / "run", resume=resumed, progress=say, **logs
@@ -367,7 +409,7 @@ def _start(out: Path, settings: dict, resume: bool) -> dict:
         return old
     if out.exists() and any(out.iterdir()) and not resume:
         raise RunDirectoryError(f"--out {out} is not empty; choose a new or empty directory")
-    out.mkdir(parents=True, exist_ok=True)
+    make_dir(out)
     return {"format": "diffcontrol-loop", "version": 1, "settings": settings, "rounds": []}
 
 

@@ -90,8 +90,12 @@ def open_run(
     _check_sizes(doc, task, path)
     config = task.default_config()
     planner = policies.is_planner(doc)  # its run.json holds the planner's settings, not training's
+    fitted_model = None  # the --model a run was trained through, as its run.json says
     if (directory / io.RUN_FILE).exists() and not planner:
-        stored = io.read_json(directory / io.RUN_FILE, "run file").get("config")
+        run_doc = io.read_json(directory / io.RUN_FILE, "run file")
+        stored = run_doc.get("config")
+        invocation = run_doc.get("invocation")
+        fitted_model = invocation.get("model") if isinstance(invocation, dict) else None
         try:
             config = type(config).from_json(stored)
         except (TypeError, ValueError, KeyError, AttributeError) as e:
@@ -106,6 +110,12 @@ def open_run(
             raise ModelFileError(f"{directory / METRICS_FILE} is not a JSON object")
     if real is True:
         model = metrics.get("model")
+        if fitted_model and not (isinstance(model, dict) and "real_system" in model):
+            raise ModelFileError(
+                f"{directory} was trained through the fitted model {fitted_model} (run.json), "
+                f"but its {METRICS_FILE} does not say which real system to judge it on (missing "
+                "or damaged); name the system with --env (Python: open_run(dir, real=...))"
+            )
         real = model.get("real_system") if isinstance(model, dict) else None
         if real is not None and not isinstance(real, dict):
             raise ModelFileError(f"{directory / METRICS_FILE}: 'real_system' is not an object")

@@ -22,13 +22,13 @@ from typing import Any
 import numpy as np
 
 from .. import io, policies
-from .._run_files import Run, mark_complete, release_claim, save_run
+from .._run_files import Run, mark_complete, save_run
 from .._version import __version__
 from ..errors import ConfigError, ModelFileError
 from ..identify.fitted import read_fitted, real_system
 from ..mpc import ValueNetwork, make_planner_policy
 from ..settings import PlanConfig
-from ..tasks import AnyTask, resolve, task_params
+from ..tasks import AnyTask, Task, resolve, task_params
 
 
 @dataclasses.dataclass
@@ -53,6 +53,18 @@ class PlanResult:
         doc = policies.planner_document(self.task, self.plan.to_json(), self.model, meta, value)
         doc["action"].update(low=bounds[0], high=bounds[1])
         return doc
+
+
+def _give_back(out: Path, keep_dir: bool) -> None:
+    """Remove what a failed or interrupted ``plan_run`` wrote into the directory it claimed
+    (new or empty then, so every file in it is its own), and the directory if it made it."""
+    if not out.is_dir():
+        return
+    for path in out.iterdir():
+        if path.is_file() or path.is_symlink():
+            path.unlink()
+    if not keep_dir and not any(out.iterdir()):
+        out.rmdir()
 
 
 def read_value(task: AnyTask, value: Any) -> Any:
@@ -121,11 +133,18 @@ def plan_run(
 
     Raises:
         ConfigError: settings the task cannot take; RunDirectoryError: ``out_dir`` is in use;
-        ModelFileError: a fitted model of another task.
+        ModelFileError: a fitted model of another task. A failed or interrupted plan_run
+        leaves nothing in ``out_dir`` (the directory is given back).
     """
     import time
 
     task = resolve(task) if isinstance(task, str) else task
+    if isinstance(task, Task) and type(task).state_from_observation is Task.state_from_observation:
+        raise ConfigError(
+            f"task {task.name!r} cannot be planned: a planner acts from the system's state, and "
+            "the task does not reconstruct it from an observation (it defines no "
+            "state_from_observation)"
+        )
     config = task.default_plan_config() if config is None else config
     unknown = set(settings or {}) - {f.name for f in dataclasses.fields(PlanConfig)}
     if unknown:
@@ -142,6 +161,7 @@ def plan_run(
         stored = {k: v for k, v in fitted.items() if k != "_path"}  # the file, not where it was
         info = {"kind": "fitted", "fitted": stored}
     run = {"task": task.name, "config": config.to_json(), "planner": True}
+    existed = Path(out_dir).is_dir()  # an empty directory of the user's is left in place
     out = io.prepare_run_dir(out_dir, run, resume=False)
     try:
         t0 = time.perf_counter()
@@ -168,7 +188,7 @@ def plan_run(
             overwrite=True,
         )
     except BaseException:
-        release_claim(out)
+        _give_back(out, existed)  # nothing half-written: the same command can run again
         raise
     run_.metrics["planner"]["solves"] = policy.summary()
     io.write_json(out / "metrics.json", {k: v for k, v in run_.metrics.items() if k != "headline"})

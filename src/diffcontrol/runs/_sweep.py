@@ -26,7 +26,7 @@ from .._shell import command as shell_command
 from ..errors import ConfigError, RunDirectoryError
 from ..tasks import named_by_file, resolve
 from ..training import TrainResult, resolve_config
-from ..training._sweep import check_discrete, check_members, grid, sweep
+from ..training._sweep import MAX_MEMBERS, check_discrete, check_members, grid, sweep
 from ._open import open_run
 from ._train import RunInterrupted
 
@@ -98,10 +98,25 @@ def sweep_dir(
     seeds = parse_seeds(seeds) if isinstance(seeds, str) else seeds
     the_task = resolve(task)
     check_discrete(the_task)  # before a continuous task's config is given BPTT's settings
+    given = sorted(n for n, v in (settings or {}).items() if v is not None)
     if not resume:  # the settings every member starts from; values checked against them
         base = resolve_config(the_task, recipe, **(settings or {}))
         if values is not None and not isinstance(values, dict):
             values = parse_values(values, base)
+        both = [n for n in given if n in (values or {})]
+        if both:  # one would silently win over the other
+            name, value = both[0], settings[both[0]]
+            shown = ",".join(map(str, value)) if isinstance(value, tuple | list) else value
+            raise ConfigError(
+                f"{_flag(name)} {shown} and --set {name}=... both set {name}; give it once: "
+                f"its values in --set, or one value in {_flag(name)}"
+            )
+    elif given or values or recipe:  # a resumed sweep keeps its own settings
+        dropped = [_flag(n) for n in given] + ["--set"] * bool(values) + ["--recipe"] * bool(recipe)
+        raise ConfigError(
+            f"--resume continues the sweep in {out} with the settings in its {SWEEP_FILE}; "
+            f"drop {', '.join(dropped)}"
+        )
     if compile_cache and not os.environ.get("DIFFCONTROL_NO_COMPILE_CACHE"):
         _jax_setup.enable_compile_cache()
     if resume:  # the sweep's own settings, from its directory alone
@@ -152,6 +167,28 @@ def sweep_dir(
             f"interrupted; the members written are kept in {out}. Train the others with: "
             f"{shell_command('sweep', *named, '--out', out, '--resume')}"
         ) from None
+    try:
+        _finish(out, doc, the_task, configs, swept, final_eval, say)
+    except KeyboardInterrupt:  # every member is written: a resume trains none again
+        raise RunInterrupted(
+            f"interrupted after every member was trained; they are kept in {out}. Evaluate "
+            f"the best and write the table with: "
+            f"{shell_command('sweep', *named, '--out', out, '--resume')}"
+        ) from None
+    return result, [SWEEP_FILE, "sweep.txt", "sweep.png", *doc["members"]]
+
+
+def _finish(
+    out: Path,
+    doc: dict,
+    the_task: Any,
+    configs: Sequence[Any],
+    swept: Sequence[str],
+    final_eval: int | None,
+    say: Callable[[str], None],
+) -> None:
+    """The end of a sweep whose members are all written: the best member's final evaluation
+    and pictures, ``sweep.txt``, ``sweep.png`` and ``sweep.json`` marked complete."""
     rows = [_row(out / name, configs[i], swept) for i, name in enumerate(doc["members"])]
     best = max(range(len(rows)), key=lambda i: _rank(rows[i]["eval_return"]))
     best_dir = out / doc["members"][best]
@@ -168,7 +205,11 @@ def sweep_dir(
     sweep_plot(rows, swept, best, the_task.name, out / "sweep.png")
     io.write_json(out / SWEEP_FILE, {**doc, "best": doc["members"][best], "complete": True})
     say(table)
-    return result, [SWEEP_FILE, "sweep.txt", "sweep.png", *doc["members"]]
+
+
+def _flag(name: str) -> str:
+    """The command-line option of the setting ``name``."""
+    return "--" + name.replace("_", "-")
 
 
 def _claim(out: Path, doc: dict, resume: bool) -> None:
@@ -190,7 +231,7 @@ def _claim(out: Path, doc: dict, resume: bool) -> None:
         return
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
         raise RunDirectoryError(f"--out {out} exists and is not an empty directory; choose another")
-    out.mkdir(parents=True, exist_ok=True)
+    io.make_dir(out)
     try:
         io.write_json_new(path, doc)
     except FileExistsError:
@@ -297,20 +338,35 @@ def parse_seeds(text: str) -> list[int]:
     """Seeds from ``"0-63"``, ``"0,3,7"`` or ``"0-3,8"`` (ranges include both ends).
 
     Raises:
-        ConfigError: not such a list, a negative or huge seed, or a repeated one.
+        ConfigError: not such a list, a negative or huge seed, a range that runs
+            downwards, more than ``MAX_MEMBERS`` seeds, or a repeated one.
     """
     seeds: list[int] = []
-    try:
-        for part in text.split(","):
-            lo, _, hi = part.strip().partition("-")
+    for part in text.split(","):
+        lo, _, hi = part.strip().partition("-")
+        try:
             first, last = int(lo), int(hi) if hi else int(lo)
-            if not 0 <= first <= last < 2**31 or last - first > 100_000:
-                raise ValueError
-            seeds += range(first, last + 1)
-    except ValueError:
-        raise ConfigError(
-            f"--seeds takes seeds and ranges such as 0-63 or 0,3,7 (0 <= seed < 2^31), got {text!r}"
-        ) from None
+        except ValueError:
+            if not lo and hi.strip().isdigit():  # "-1": a negative seed, not a range
+                raise ConfigError(
+                    f"--seeds {part.strip()!r}: a seed must be in 0 ... {2**31 - 1:,}"
+                ) from None
+            raise ConfigError(
+                f"--seeds takes seeds and ranges such as 0-63 or 0,3,7, got {text!r}"
+            ) from None
+        # Each rule its own message: the one that the text breaks is the one named.
+        if not (0 <= first < 2**31 and 0 <= last < 2**31):
+            raise ConfigError(f"--seeds {part.strip()!r}: a seed must be in 0 ... {2**31 - 1:,}")
+        if first > last:
+            raise ConfigError(
+                f"--seeds {part.strip()!r}: a range runs upwards; write it as {last}-{first}"
+            )
+        if len(seeds) + last - first >= MAX_MEMBERS:  # counted before the list is made
+            raise ConfigError(
+                f"--seeds {text!r} names more than {MAX_MEMBERS:,} seeds, the most members a "
+                "sweep may have; sweep fewer seeds, or split the sweep"
+            )
+        seeds += range(first, last + 1)
     if len(set(seeds)) != len(seeds):
         raise ConfigError(f"--seeds {text!r} names a seed twice; name each once")
     return seeds

@@ -223,8 +223,8 @@ def named_by_file(name: object, where: str, fix: str) -> AnyTask:
         UnknownTaskError: one line naming the file, the task and ``fix``.
     """
     if isinstance(name, str) and name and ":" not in name:
-        if name in _REGISTRY:
-            return _REGISTRY[name]
+        if name in _REGISTRY or _registry.builtin(name):  # a built-in one is made on demand
+            return make(name)
         if any(ep.name == name for ep in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP)):
             return resolve(name)
     raise UnknownTaskError(

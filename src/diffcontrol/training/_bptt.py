@@ -472,7 +472,11 @@ def check_value_grid(task: Any, config: TrainConfig, params: PyTree = None) -> N
 
 
 def terminal_value(
-    task: Task, config: TrainConfig, params: PyTree, progress: Any = None
+    task: Task,
+    config: TrainConfig,
+    params: PyTree,
+    progress: Any = None,
+    step_loss: StepLoss | None = None,
 ) -> Constant | None:
     """The windows' terminal value of ``config.value_grid``: the task's grid dynamic program
     (``diffcontrol.optimal.solve``, 41 actions per action dimension) over the training
@@ -480,11 +484,14 @@ def terminal_value(
     each state), or with ``config.value_time`` every ``V_t``; ``None`` without one.
 
     Raises:
-        ConfigError: the task cannot have one (``check_value_grid``).
+        ConfigError: the task cannot have one (``check_value_grid``), or ``step_loss`` is not
+            minus the reward (``check_reward_loss``).
     """
     if not config.value_grid:
         return None
     check_value_grid(task, config, params)
+    if step_loss is not None:
+        check_reward_loss(task, config, params, step_loss)
     if progress:
         progress(
             f"solving the windows' terminal value: the grid optimum of {config.value_grid} "
@@ -495,6 +502,39 @@ def terminal_value(
     if not config.value_time:
         table = eqx.tree_at(lambda t: t.values, table, table.values[:1])
     return Constant(table)
+
+
+def check_reward_loss(task: Task, config: TrainConfig, params: PyTree, step_loss: StepLoss) -> None:
+    """Refuse a terminal value with a loss that is not minus the reward: the value is the
+    best return to come, in reward units, so the windows' loss must be minus the reward for
+    the two to add up. Checked on 64 reset states and random actions within the bounds.
+
+    Raises:
+        ConfigError: one line, naming the loss and the way out.
+    """
+    k_reset, k_act = jax.random.split(jax.random.PRNGKey(0))
+    states = jax.vmap(lambda k: task.reset(k, params))(jax.random.split(k_reset, 64))
+    low, high = (jnp.broadcast_to(jnp.asarray(b, jnp.float32), (task.action_size,))
+                 for b in (task.action_low, task.action_high))  # fmt: skip
+    actions = jax.random.uniform(k_act, (64, task.action_size), minval=low, maxval=high)
+
+    def minus_reward(loss: StepLoss) -> bool:
+        def gap(state: Array, action: Array) -> Array:
+            next_state, reward, _ = task.step(params, state, action)
+            return loss(params, state, action, next_state, reward) + reward
+
+        return bool(
+            np.allclose(np.asarray(jax.jit(jax.vmap(gap))(states, actions)), 0.0, atol=1e-4)
+        )
+
+    if not minus_reward(step_loss):
+        fits = [n for n in getattr(task, "losses", ()) if minus_reward(task.step_loss(n))]
+        fix = f"--loss {fits[0]}" if fits else "a loss that is minus the reward"
+        raise ConfigError(
+            f"value_grid={config.value_grid} adds the best return to come (in reward units) to "
+            f"each window, which needs a loss that is minus the reward; loss {config.loss!r} is "
+            f"not: choose {fix}, or leave out --value-grid"
+        )
 
 
 def make_trainer(
@@ -519,7 +559,7 @@ def make_trainer(
         optimizer=make_optimizer(config),
         horizon=config.horizon or task.episode_length,
         window=config.window,
-        value=terminal_value(task, config, params, progress),
+        value=terminal_value(task, config, params, progress, step_loss),
     )
     if config.population > 1:
         return PopulationTrainer(trainer, config.population)

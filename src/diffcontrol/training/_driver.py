@@ -26,7 +26,7 @@ from .._jax_setup import compile_with
 from .._run_files import save_run
 from ..checks import validate_task
 from ..controllers import MLPController
-from ..errors import ConfigError, TrainingDiverged
+from ..errors import ConfigError, ModelFileError, TrainingDiverged
 from ..tasks import AnyTask, ContinuousTask, StepLoss, TrajectoryLoss, as_task, task_params
 from ._bptt import make_trainer
 from ._devices import batch_placement, check_devices, divisible, gathered, is_writer, placer
@@ -226,6 +226,11 @@ def train(
         if resume and ckpt.exists():
             like_best = trainer.pick(ts.controller, np.zeros(_population(config)))
             (ts, best), meta = io.load_checkpoint(ckpt, (ts, like_best))
+            if not _finite(best):  # a damaged checkpoint: nothing is trained or written from it
+                raise ModelFileError(
+                    f"checkpoint {ckpt} holds a controller whose weights are not finite; it "
+                    "cannot be resumed: start a new run in a new directory"
+                )
             say(f"resuming {task.name} from update {int(ts.update)} ({ckpt})")
 
     if ts_sharding is not None:  # data parallel: simulations split, the rest replicated
@@ -401,6 +406,12 @@ def train(
         metrics=metrics,
         out_dir=None if out is None else Path(out),
     )
+
+
+def _finite(tree: PyTree) -> bool:
+    """Whether every floating-point array of ``tree`` is finite."""
+    leaves = jax.tree.leaves(eqx.filter(tree, eqx.is_inexact_array))
+    return all(bool(np.all(np.isfinite(np.asarray(x)))) for x in leaves)
 
 
 def _start(trainer: Any, seed: Array, params: PyTree) -> tuple[Any, PRNGKeyArray]:

@@ -231,6 +231,11 @@ def check_members(task: Task, configs: Sequence[TrainConfig], devices: int | Non
     check_discrete(task)
     if not configs:
         raise ConfigError("a sweep needs at least one member config")
+    if len(configs) > MAX_MEMBERS:
+        raise ConfigError(
+            f"a sweep of {len(configs):,} members is more than {MAX_MEMBERS:,} in one program; "
+            "split it into several sweeps"
+        )
     expected = type(task.default_config())
     for c in configs:
         if not isinstance(c, expected):
@@ -299,7 +304,7 @@ def _run_program(
     def factory(learning_rate):
         return make_optimizer(cfg, learning_rate)
 
-    value = terminal_value(task, cfg, params, say)
+    value = terminal_value(task, cfg, params, say, step_loss)
     trainer = Trainer(
         task=task,
         config=cfg,

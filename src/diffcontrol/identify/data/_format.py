@@ -103,6 +103,12 @@ def validate(
         whole = np.issubdtype(episode.dtype, np.floating) and np.all(np.isfinite(episode))
         if not whole or np.any(episode != np.round(episode)):
             raise bad("episode ids must be whole numbers; number the episodes 0, 1, 2, ...")
+    large = np.flatnonzero(np.abs(episode) > 2**53)  # beyond: ids merge once cast to integers
+    if large.size:
+        raise bad(
+            f"{row(int(large[0]))}, column 'episode': the episode id {episode[large[0]]!r} is "
+            "larger than 2^53; number the episodes 0, 1, 2, ..."
+        )
     _check_rows(time, episode.astype(np.int64), observations, actions, columns, bad, row)
     _check_known(metadata.get("env_id"), columns, bad)
     dt = metadata.get("dt_s")
