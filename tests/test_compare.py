@@ -214,3 +214,24 @@ def test_compare_pendulum_has_the_planner_and_its_distilled_mlp(tmp_path, capsys
     assert distilled["env_steps"] == 4 * 200  # one round of four simulated episodes
     table = (out / "comparison.md").read_text()
     assert "planner" in table and "distilled" in table
+
+
+def test_the_rl_baselines_are_the_tasks_own():
+    """``compare.rl_setup`` of a task: the zoo's for CartPole and Pendulum, the trebuchet's
+    from its folder, none for the unclipped Pendulum, and a user's task's own method."""
+    from diffcontrol.compare import RLSetup, methods_for, rl_setup
+    from diffcontrol.compare.baselines import Baseline
+
+    setups = {n: rl_setup(diffcontrol.make(n)) for n in ("cartpole", "pendulum", "trebuchet")}
+    baselines = [list(s.baselines) for s in setups.values()]
+    assert baselines == [["ppo", "dqn"], ["sac", "td3"], ["sac", "td3"]]
+    assert setups["cartpole"].thresholds == (475.0, 500.0)
+    assert rl_setup(diffcontrol.make("pendulum-unclipped")) is None
+
+    class Mine(type(diffcontrol.make("pendulum"))):
+        name = "pendulum-mine"
+
+        def rl_setup(self):
+            return RLSetup({"a2c": Baseline("A2C", 1000)}, thresholds=(-300.0,))
+
+    assert methods_for(Mine())[-1] == "a2c" and rl_setup(Mine()).thresholds == (-300.0,)

@@ -27,9 +27,11 @@ ENVS = "diffcontrol.envs"
 
 class Builtin(NamedTuple):
     """One built-in task: its name, its class (``module:Class``), what ``list`` says of it
-    (``summary``, ``losses``, ``recipes``) and its Gymnasium environment: the id
-    ``diffcontrol/<env_name>-v0`` of ``env`` (a class of ``diffcontrol.envs``), episodes of
-    ``steps``, the reward ``threshold``."""
+    (``summary``, ``losses``, ``recipes``), its Gymnasium environment (the id
+    ``diffcontrol/<env_name>-v0`` of ``env``, a class of ``diffcontrol.envs``, episodes of
+    ``steps``, the reward ``threshold``) and ``hooks``: the module that registers what the
+    layers do with the task their own way, imported when a layer's hook first meets it
+    (``tasks._hooks``)."""
 
     name: str
     path: str
@@ -40,6 +42,7 @@ class Builtin(NamedTuple):
     env: str
     steps: int
     threshold: float | None
+    hooks: str | None = None
 
 
 BUILTIN: tuple[Builtin, ...] = (
@@ -50,6 +53,7 @@ BUILTIN: tuple[Builtin, ...] = (
         ("cost", "squared_cost"),
         ("original", "long-windows", "grid-value"),
         "Pendulum", "TaskEnv", 200, -200.0,
+        "diffcontrol.builtin.zoo",
     ),
     Builtin(
         "pendulum-unclipped",
@@ -58,6 +62,7 @@ BUILTIN: tuple[Builtin, ...] = (
         ("cost", "squared_cost"),
         ("original",),
         "PendulumUnclipped", "TaskEnv", 1000, None,
+        "diffcontrol.builtin.zoo",
     ),
     Builtin(
         "cartpole",
@@ -66,6 +71,7 @@ BUILTIN: tuple[Builtin, ...] = (
         ("shaped", "quadratic"),
         ("original",),
         "CartPole", "TaskEnv", 500, 475.0,
+        "diffcontrol.builtin.zoo",
     ),
     Builtin(
         "acrobot",
@@ -82,6 +88,7 @@ BUILTIN: tuple[Builtin, ...] = (
         ("squared_miss", "abs_miss", "huber_miss"),
         ("original",),
         "Trebuchet", "TaskEnv", 1, None,
+        "diffcontrol.builtin.trebuchet.hooks",
     ),
     Builtin(
         "cartpole-swingup",
@@ -90,6 +97,7 @@ BUILTIN: tuple[Builtin, ...] = (
         ("swingup", "limited", "limited_hold", "energy"),
         ("original",),
         "CartPoleSwingUp", "ContinuousTaskEnv", 49, None,
+        "diffcontrol.builtin.swingup.hooks",
     ),
     Builtin(
         "cartpole-swingup-limited",
@@ -127,6 +135,12 @@ OTHER_ENVS: tuple[tuple[str, str, int], ...] = (
 def builtin(name: str) -> Builtin | None:
     """The built-in task called ``name``, or ``None``."""
     return next((row for row in BUILTIN if row.name == name), None)
+
+
+def hooks_of(cls: type) -> str | None:
+    """The module of the built-in task class ``cls``'s overrides (its row's ``hooks``)."""
+    path = f"{cls.__module__}:{cls.__qualname__}"
+    return next((row.hooks for row in BUILTIN if row.path == path), None)
 
 
 def env_name(task: Any) -> str:

@@ -412,7 +412,7 @@ class ODETrainConfig(_Config):
     )
     population: int = _opt(
         "Controllers from different initial weights trained side by side under vmap; the best "
-        "is returned. Helps against the local minima of swing-ups (the cart that never moves).",
+        "is returned. Helps against local minima (a cart that never moves).",
         default=1,
     )
     curriculum_start: float = _opt(

@@ -84,7 +84,7 @@ class RecordConfig(_Settings):
         flag="env_arg",
     )
     noise_m: float | None = _opt(
-        "trebuchet only: Gaussian noise (m) on the recorded distances (0)",
+        "aiming tasks only: Gaussian noise (m) on the recorded distances (0)",
         None,
         "SD",
         form="nonneg",
@@ -220,8 +220,8 @@ class CompareConfig(_Settings):
         "diffcontrol's gradient updates (default: the task's default config)", None, "N"
     )
     eval_every: int | None = _opt(
-        "RL evaluation interval in environment steps (default: cartpole 2000, pendulum 1000, "
-        "trebuchet 1000); diffcontrol is evaluated at its own evaluation points",
+        "RL evaluation interval in environment steps (default: the task's, compare.rl_setup); "
+        "diffcontrol is evaluated at its own evaluation points",
         None,
         "STEPS",
     )
@@ -291,14 +291,13 @@ class PlanConfig(_Settings):
 
     solver: str = _opt("the solver of every step's plan", "ilqr", choices=SOLVERS)
     horizon: int = _opt(
-        "H, the actions planned at every step (the swing-ups' own default: 40)",
+        "H, the actions planned at every step (default 20, or the task's own)",
         20,
         "H",
         high=10_000,
     )
     iterations: int | None = _opt(
-        "solver iterations per step (default 10 for ilqr, 30 for shooting; the swing-ups' 5, "
-        "the friction swing-up's 10)",
+        "solver iterations per step (default 10 for ilqr, 30 for shooting, or the task's own)",
         None,
         "N",
         high=10_000,
@@ -321,22 +320,19 @@ class PlanConfig(_Settings):
     value_levels: int = _opt("actions per action dimension of that grid", 41, "N", low=2, high=1001)
     terminal_weight: float = _opt("weight of the terminal cost", 1.0, "W", form="nonneg")
     loss: str | None = _opt(
-        "the task's step loss to plan with (default the task's planning default, else its first: "
-        "the friction swing-up's energy)",
+        "the task's step loss to plan with (default the task's planning default, else its first)",
         None,
         "NAME",
     )
     action_bound: float | None = _opt(
-        "plan actions within +-B (default: the task's bounds; the actuator-limited swing-up's "
-        "force: 5 N, the friction swing-up's 40 N)",
+        "plan actions within +-B (default: the task's bounds, or its planning default)",
         None,
         "B",
         form="positive",
     )
     dt: float | None = _opt(
         "continuous-time tasks: the control period (s); each action is held for it, and the "
-        "planner's model integrates the ODE over it by RK4 (default: the task's, 0.05 for the "
-        "swing-ups)",
+        "planner's model integrates the ODE over it by RK4 (default: the task's)",
         None,
         "S",
         form="positive",

@@ -23,7 +23,7 @@ def add_parsers(sub: Any) -> None:
     )
     # fmt: off
     add(p,
-        ("task", str, REQUIRED, "TASK", "cartpole, pendulum or trebuchet"),
+        ("task", str, REQUIRED, "TASK", "a task with RL baselines (the message names them)"),
         ("--out", str, None, "DIR", "output directory (default runs/compare-TASK)"),
         ("--resume", FLAG, False, None, "continue the comparison in DIR, keeping its runs"),
         ("--real", FLAG, False, None, "count the REAL system's steps: diffcontrol learns a "

@@ -31,9 +31,9 @@ def add_parsers(sub: Any) -> None:
             "Record N episodes of ENV_ID with the controller saved in DIR, or with random "
             "actions, to a diffcontrol-trajectories file (CSV or NPZ by FILE's extension; "
             "episode i is reset with seed S+i). ENV_ID is a Gymnasium id (e.g. Pendulum-v1, "
-            "my_module:MyEnv-v0) or a task's name, which records the task's own data (the "
-            "trebuchet's throws, a swing-up's full state). With --task, ENV_ID is the real "
-            "system of TASK: its spaces must match and the columns are named by the task."
+            "my_module:MyEnv-v0) or a task's name, which records the task's own data (an aiming "
+            "task's throws, a continuous-time task's full state). With --task, ENV_ID is the "
+            "real system of TASK: its spaces must match and the columns are named by the task."
         ),
     )
     # fmt: off

@@ -19,7 +19,7 @@ def add_parsers(sub: Any) -> None:
         help="run a trained controller in Gymnasium's own environment",
         description=(
             "Run the controller saved in DIR in its task's Gymnasium environment on reset seeds "
-            "S ... S+N-1 and print the return's mean and std. Aiming tasks (trebuchet): aim at "
+            "S ... S+N-1 and print the return's mean and std. Aiming tasks: aim at "
             "N random targets drawn with seed S and print the miss statistics; continuous-time "
             "tasks: re-solve the closed loop with a float64 reference solver. A run trained "
             "with --model is evaluated on the real system its data came from."
@@ -44,7 +44,7 @@ def add_parsers(sub: Any) -> None:
         "animate",
         help="re-render the animation of a saved controller",
         description="Record one Gymnasium episode of the controller in DIR (or re-solve a "
-        "swing-up, or simulate a trebuchet throw) and write it as a GIF.",
+        "continuous-time task, or simulate an aiming task's throw) and write it as a GIF.",
     )
     add(p,
         a.RUN_DIR,
@@ -56,13 +56,13 @@ def add_parsers(sub: Any) -> None:
     )
     p = sub.add_parser(
         "aim",
-        help="aim a trained trebuchet controller at one target",
+        help="aim a trained aiming controller at one target",
         description="Ask the aiming controller in DIR for the release angle and counterweight "
         "that hit a target at M metres in a wind of W m/s (+ toward the target), simulate the "
         "throw, and print the distance and the miss.",
     )
     add(p,
-        ("run_dir", str, REQUIRED, "DIR", "a directory written by `diffcontrol train trebuchet`"),
+        ("run_dir", str, REQUIRED, "DIR", "a run of an aiming task (`diffcontrol train`)"),
         ("--target", a.finite_float, REQUIRED, "M", "target (m)"),
         ("--wind", a.finite_float, 0.0, "W", "wind (m/s)"),
         ("--direct", FLAG, False, None, "also aim by gradient descent on the simulator"),

@@ -26,7 +26,7 @@ def add_parsers(sub: Any) -> None:
         help="train a controller and write model, metrics, plots and an animation",
         description=(
             "Train a controller for TASK by differentiating through its simulator (through "
-            "time steps, or an ODE solve for cartpole-swingup*), with the task's tuned "
+            "time steps, or an ODE solve for continuous-time tasks), with the task's tuned "
             "defaults unless options change them. Writes to DIR: model.json (the controller, "
             "runnable with NumPy alone), metrics.json, plots, an animation and checkpoint.npz "
             "(for --resume); see docs/cli.md."
@@ -66,7 +66,7 @@ def add_parsers(sub: Any) -> None:
         "training settings (defaults depend on the task; see `diffcontrol list`)")
     add(group, *a.config_specs(TrainConfig, skip={"params"}, defaults=False))
     ode = p.add_argument_group(
-        "continuous-time tasks only (cartpole-swingup*): the ODE solve and its gradient")
+        "continuous-time tasks only: the ODE solve and its gradient")
     add(ode, *a.config_specs(ODETrainConfig, skip=_DISCRETE, defaults=False))
     add(group, ("--param", [a.param], None, "NAME=VALUE", "override a physical parameter of "
                 "the simulator (repeatable), e.g. --param g=9.81"))

@@ -25,12 +25,10 @@ from ..errors import ConfigError, Interrupted, RunDirectoryError
 from ..settings import CompareConfig
 from ..tasks import Task, resolve
 from ._planning import PLANNING_METHODS, methods_for, run_planning
-from .baselines import BASELINES, INSTALL_HINT, Baseline, require_rl
+from .baselines import INSTALL_HINT, Baseline, RLSetup, require_rl, rl_setup
 from .real import run_real_comparison
 from .report import machine, plot, summarize, table
 from .run import (
-    DEFAULT_EVAL_EVERY,
-    THRESHOLDS,
     evaluate_batch,
     run_diffcontrol,
     run_rl,
@@ -135,7 +133,8 @@ def _compare(
             )
     if any(m not in ("diffcontrol", *PLANNING_METHODS) for m in methods):
         require_rl()
-    every = config.eval_every or DEFAULT_EVAL_EVERY[task.name]
+    setup = rl_setup(task) or RLSetup({})  # a task without baselines: diffcontrol's rows
+    every = config.eval_every or setup.eval_every
     settings = {
         "format": "diffcontrol-compare",
         "task": task.name,
@@ -188,7 +187,7 @@ def _compare(
                 f"{result['train_seconds']:.1f} s of training; final return "
                 f"{f['mean_return']:.1f} ± {f['std_return']:.1f} ({f['episodes']} episodes)"
             )
-    thresholds = THRESHOLDS.get(task.name, ())
+    thresholds = setup.thresholds
     summary = summarize(results, thresholds)
     doc = {
         **settings,
@@ -241,14 +240,13 @@ def _prepare(out: Path, settings: dict, resume: bool) -> Path:
 
 
 __all__ = [
-    "BASELINES",
     "Baseline",
-    "DEFAULT_EVAL_EVERY",
     "INSTALL_HINT",
-    "THRESHOLDS",
+    "RLSetup",
     "evaluate_batch",
     "machine",
     "methods_for",
+    "rl_setup",
     "run_comparison",
     "run_real_comparison",
 ]

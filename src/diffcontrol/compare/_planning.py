@@ -30,7 +30,7 @@ from ..evaluation import evaluate
 from ..mpc import PlannerPolicy, distil, planner_from_config
 from ..settings import PlanConfig
 from ..tasks import Task
-from .baselines import BASELINES
+from .baselines import rl_setup
 from .run import _final, _line, _point, evaluate_batch, numpy_policy_act
 
 PLANNING_METHODS = ("planner", "distilled")
@@ -121,9 +121,13 @@ def methods_for(task: Task) -> list[str]:
     Raises:
         ConfigError: no RL baselines are defined for the task.
     """
-    if task.name not in BASELINES:
+    setup = rl_setup(task)
+    if setup is None:
+        from ..tasks import make, names  # the tasks that have them, for the message
+
+        have = [n for n in names() if rl_setup(make(n)) is not None]
         raise ConfigError(
             f"no RL baselines are defined for task {task.name!r}; `compare` supports: "
-            f"{', '.join(sorted(BASELINES))}"
+            f"{', '.join(sorted(have))}"
         )
-    return ["diffcontrol", *planning_methods(task), *BASELINES[task.name]]
+    return ["diffcontrol", *planning_methods(task), *setup.baselines]

@@ -19,6 +19,7 @@ from collections.abc import Callable
 from typing import Any
 
 from ..errors import DiffcontrolError
+from ..tasks._hooks import task_hook
 
 INSTALL_HINT = "install the rl extra: pip install 'diffcontrol[rl]'"
 
@@ -43,103 +44,31 @@ class Baseline:
     source: str = ""
 
 
-_ZOO = "DLR-RM/rl-baselines3-zoo"
+ZOO = "DLR-RM/rl-baselines3-zoo"
+"""Where the published settings come from (named in each ``Baseline.source``)."""
 
-BASELINES: dict[str, dict[str, Baseline]] = {
-    "cartpole": {
-        # hyperparams/ppo.yml, entry CartPole-v1 ("# Tuned").
-        "ppo": Baseline(
-            "PPO",
-            n_timesteps=100_000,
-            n_envs=8,
-            kwargs=dict(
-                n_steps=32,
-                batch_size=256,
-                gae_lambda=0.8,
-                gamma=0.98,
-                n_epochs=20,
-                ent_coef=0.0,
-                learning_rate="lin_0.001",
-                clip_range="lin_0.2",
-            ),
-            source=f"{_ZOO} hyperparams/ppo.yml, CartPole-v1",
-        ),
-        # hyperparams/dqn.yml, entry CartPole-v1 ("# Almost Tuned").
-        "dqn": Baseline(
-            "DQN",
-            n_timesteps=50_000,
-            kwargs=dict(
-                learning_rate=2.3e-3,
-                batch_size=64,
-                buffer_size=100_000,
-                learning_starts=1000,
-                gamma=0.99,
-                target_update_interval=10,
-                train_freq=256,
-                gradient_steps=128,
-                exploration_fraction=0.16,
-                exploration_final_eps=0.04,
-                policy_kwargs=dict(net_arch=[256, 256]),
-            ),
-            source=f"{_ZOO} hyperparams/dqn.yml, CartPole-v1",
-        ),
-    },
-    "pendulum": {
-        # hyperparams/sac.yml, entry Pendulum-v1: only the learning rate differs from SB3's
-        # defaults (buffer 1e6, batch 256, learning_starts 100, tau 0.005, gamma 0.99).
-        "sac": Baseline(
-            "SAC",
-            n_timesteps=20_000,
-            kwargs=dict(learning_rate=1e-3),
-            source=f"{_ZOO} hyperparams/sac.yml, Pendulum-v1",
-        ),
-        # hyperparams/td3.yml, entry Pendulum (the same values are those of the zoo's
-        # published sb3/td3-Pendulum-v1 agent).
-        "td3": Baseline(
-            "TD3",
-            n_timesteps=20_000,
-            kwargs=dict(
-                gamma=0.98,
-                buffer_size=200_000,
-                learning_starts=10_000,
-                noise_std=0.1,
-                gradient_steps=-1,
-                train_freq=(1, "episode"),
-                learning_rate=1e-3,
-                policy_kwargs=dict(net_arch=[400, 300]),
-            ),
-            source=f"{_ZOO} hyperparams/td3.yml, Pendulum",
-        ),
-    },
-    "trebuchet": {
-        # No published settings exist for this one-step task. Our choice: the zoo's Pendulum
-        # settings of each algorithm (a 2-D box action, dense reward), with 1,000 random
-        # warm-up throws, and one gradient step per throw (an episode is one throw). The
-        # discount does not matter: every episode ends after its only step.
-        "sac": Baseline(
-            "SAC",
-            n_timesteps=20_000,
-            kwargs=dict(learning_rate=1e-3, learning_starts=1000),
-            source="diffcontrol's choice: SAC as in the zoo's Pendulum-v1, 1,000 warm-up steps",
-        ),
-        "td3": Baseline(
-            "TD3",
-            n_timesteps=20_000,
-            kwargs=dict(
-                buffer_size=200_000,
-                learning_starts=1000,
-                noise_std=0.1,
-                train_freq=1,
-                gradient_steps=1,
-                learning_rate=1e-3,
-                policy_kwargs=dict(net_arch=[400, 300]),
-            ),
-            source="diffcontrol's choice: TD3 as in the zoo's Pendulum, 1,000 warm-up steps, "
-            "one gradient step per throw",
-        ),
-    },
-}
-"""``BASELINES[task][method]``: the RL baselines that ``diffcontrol compare`` runs."""
+
+@dataclasses.dataclass(frozen=True)
+class RLSetup:
+    """What ``diffcontrol compare`` runs against a task.
+
+    Attributes:
+        baselines: method name (``"ppo"``, ``"sac"``, ...) -> its ``Baseline``.
+        thresholds: returns at which the task counts as solved (the "first reached" columns).
+        eval_every: the RL methods' evaluation interval in environment steps.
+    """
+
+    baselines: dict[str, Baseline]
+    thresholds: tuple[float, ...] = ()
+    eval_every: int = 1000
+
+
+@task_hook
+def rl_setup(task: Any) -> RLSetup | None:
+    """The RL comparison of ``task``, or ``None`` (the default): no baselines. A task gives
+    its own as ``tasks._hooks`` says (the built-in ones: ``diffcontrol.builtin.zoo``, the
+    rl-baselines3-zoo's settings of Gymnasium's CartPole and Pendulum, and the trebuchet's)."""
+    return None
 
 
 def require_rl() -> None:

@@ -43,8 +43,9 @@ from ..errors import ConfigError, RunDirectoryError
 from ..runs import loop
 from ..settings import CONTROLLERS, LoopConfig
 from ..tasks import Task, make, names, resolve
+from .baselines import rl_setup
 from .report import machine, plot, summarize, table
-from .run import THRESHOLDS, first_reached
+from .run import first_reached
 
 LABELS = {"params": "grey box", "hybrid": "hybrid", "neural": "neural"}
 """The rows' names: ``diffcontrol (grey box)`` and so on."""
@@ -112,7 +113,7 @@ def run_real_comparison(
             f"compare --real needs a task with a threshold whose model can be fitted to "
             f"recorded episodes, not {task.name!r}; choose {' or '.join(can)}"
         )
-    thresholds = THRESHOLDS[task.name]
+    thresholds = rl_setup(task).thresholds
     models = list(models or LABELS)
     bad = [m for m in models if m not in LABELS]
     if bad:
@@ -206,7 +207,7 @@ def _can_learn(task: Task) -> bool:
     whose state can be reconstructed from observations (a model can be fitted to them)."""
     return (
         isinstance(task, Task)
-        and bool(THRESHOLDS.get(task.name))
+        and bool(getattr(rl_setup(task), "thresholds", ()))
         and type(task).state_from_observation is not Task.state_from_observation
     )
 

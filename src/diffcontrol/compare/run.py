@@ -35,19 +35,7 @@ from .. import envs, policies
 from ..errors import ConfigError
 from ..tasks import Task
 from ..training import resolve_config, train
-from .baselines import BASELINES, build_model
-
-THRESHOLDS: dict[str, tuple[float, ...]] = {
-    "cartpole": (475.0, 500.0),  # Gymnasium's reward_threshold; every episode to its limit
-    "pendulum": (-200.0, -150.0),
-    # Minus the mean |miss| in metres over random situations, out-of-reach targets included
-    # (about 7 % of them, whose misses no aim can avoid).
-    "trebuchet": (-2.0, -1.0),
-}
-"""Returns at which a task counts as solved, for the "first reached" columns."""
-
-DEFAULT_EVAL_EVERY = {"cartpole": 2000, "pendulum": 1000, "trebuchet": 1000}
-"""RL evaluation interval in environment steps, per task."""
+from .baselines import build_model, rl_setup
 
 
 def make_eval_env(task: Task) -> gymnasium.Env:
@@ -210,7 +198,7 @@ def run_rl(
     """Train the RL baseline ``method`` with ``seed``; evaluate every ``eval_every`` steps."""
     from stable_baselines3.common.callbacks import BaseCallback
 
-    baseline = BASELINES[task.name][method]
+    baseline = rl_setup(task).baselines[method]
     budget = int(steps or baseline.n_timesteps)
     t_start = time.perf_counter()
     model = build_model(baseline, lambda: make_eval_env(task), seed, torch_threads)

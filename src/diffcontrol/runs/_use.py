@@ -140,8 +140,8 @@ def aim_dir(
     run = open_run(run_dir, task=task)
     if not callable(getattr(run.task, "aim", None)):
         raise ConfigError(
-            f"{run_dir} holds a {run.task.name!r} controller; `aim` needs an aiming task "
-            "(the trebuchet)"
+            f"{run_dir} holds a {run.task.name!r} controller; `aim` needs an aiming task (one "
+            "that defines aim)"
         )
     result, lines = run.task.aim(run, target, wind, direct=direct)
     return result, [f"target {target:g} m, wind {wind:+g} m/s", *lines]

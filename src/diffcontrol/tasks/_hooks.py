@@ -19,6 +19,8 @@ import importlib
 from collections.abc import Callable
 from typing import Any
 
+from .._registry import hooks_of
+
 _PLUGINS: dict[type, str] = {}
 _LOADED: set[str] = set()
 
@@ -30,9 +32,10 @@ def plugin(cls: type, module: str) -> None:
 
 
 def load_plugins(cls: type) -> None:
-    """Import the modules that register overrides for ``cls`` and its bases, once."""
+    """Import the modules that register overrides for ``cls`` and its bases, once: those
+    named with ``plugin``, and the built-in tasks' (the registry's ``hooks``)."""
     for klass in cls.__mro__:
-        module = _PLUGINS.get(klass)
+        module = _PLUGINS.get(klass) or hooks_of(klass)
         if module is not None and module not in _LOADED:
             importlib.import_module(module)
             _LOADED.add(module)

@@ -2,17 +2,14 @@
 a user's task is: the cart-pole's vector field (``system``), the tasks (``task``), and what the
 layers do with them their own way (``hooks``: their runs judged by a float64 reference solve
 and drawn as a cart-pole, their model learnt from recorded states), imported when a layer's
-hook first meets one of the tasks (``tasks._hooks.plugin``)."""
+hook first meets one of the tasks (the registry names it)."""
 
-from ...tasks._hooks import plugin
 from .task import (
     CartPoleSwingUp,
     CartPoleSwingUpFriction,
     CartPoleSwingUpLimited,
     SwingUpTrajectory,
 )
-
-plugin(CartPoleSwingUp, "diffcontrol.builtin.swingup.hooks")
 
 __all__ = [
     "CartPoleSwingUp",

@@ -49,7 +49,7 @@ def _record(task, episodes, *, env_id=None, env_kwargs=None, controller=None,
                 "random forces; drop it"
             )
     if noise_m is not None:
-        raise ConfigError(f"--noise-m applies to the trebuchet only, not {task.name}; drop it")
+        raise ConfigError(f"--noise-m applies to aiming tasks only, not {task.name}; drop it")
     params = task_params(task, tuple((env_kwargs or {}).items()))
     if progress:
         changed = ", ".join(f"{n}={v:g}" for n, v in (env_kwargs or {}).items())
