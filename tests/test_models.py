@@ -228,6 +228,17 @@ def test_loop_records_fits_trains_and_resumes(tmp_path, capsys):
     assert (out / "round_2" / "run" / "model.json").exists()
     assert main([*argv[:-3], "--model", "hybrid", "--out", str(out), "--resume"]) == 2
     assert "other settings" in capsys.readouterr().err
+    # a run someone trained into the next round's directory is not adopted as that round's
+    foreign = out / "round_3" / "run"
+    tiny = ["--updates", "2", "--eval-every", "1", "--batch", "4", "--window", "10"]
+    assert main(["train", "pendulum", "--out", str(foreign), *tiny, "--final-eval", "0"]) == 0
+    capsys.readouterr()
+    resume = [*argv, "--resume"]
+    resume[resume.index("--rounds") + 1] = "3"
+    assert main(resume) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "did not train" in err, err
+    assert (foreign / "model.json").exists()  # left as it was
 
 
 def test_the_real_system_of_a_fitted_model_comes_from_its_data():

@@ -206,6 +206,15 @@ def test_sweep_directory_resume_and_load(tmp_path):
     assert _max_diff(weights_before._layers, dc.load(lost)._layers) < WEIGHTS_ATOL
     assert math.isclose(before, after, rel_tol=RETURN_RTOL)
     assert (out / doc["members"][0] / "model.json").read_bytes() == kept
+    # a member whose model.json is garbage (its run.json still complete) is trained again too
+    damaged = out / doc["members"][2]
+    weights_before = dc.load(damaged)
+    (damaged / "model.json").write_text("garbage")
+    stored = json.loads((out / "sweep.json").read_text())
+    stored.pop("complete")
+    (out / "sweep.json").write_text(json.dumps(stored))
+    assert main(["sweep", "--out", str(out), "--resume", "--quiet"]) == 0
+    assert _max_diff(weights_before._layers, dc.load(damaged)._layers) < WEIGHTS_ATOL
     # not a new sweep into a used directory
     assert main([*args, *_cli_tiny()]) == 2
 

@@ -24,7 +24,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from .._run_files import release_claim, save_run
+from .._run_files import read_run_file, release_claim, save_run
 from .._shell import command as shell_command
 from ..envs import env_id as own_id
 from ..errors import ConfigError, RunDirectoryError
@@ -259,6 +259,7 @@ def _loop(
             )  # fmt: skip
             for line in fitted.lines:
                 say(line)
+        _check_own_round(here / "run", k)
         done = (here / "run" / "metrics.json").exists()  # save_run writes it last
         if not done:
             (here / "eval.json").unlink(missing_ok=True)  # it judged another controller
@@ -268,7 +269,7 @@ def _loop(
                 shutil.rmtree(here / "run")
             run, _ = plan_run(here / "run", task, task.loop_planner(), model=here / "fit",
                               env_id=env_id, final_eval=own_eval, animation=False,
-                              progress=say)  # fmt: skip
+                              progress=say, invocation={"loop_round": k})  # fmt: skip
             policies[here / "run"] = run.policy
         elif not done:
             trained, params, real, info = fitted_training(task, here / "fit", None)
@@ -284,8 +285,9 @@ def _loop(
                 release_claim(here / "run")
             logs = {"log_dir": Path(log_dir) / f"round_{k}" if log_dir else None}
             result = train(
-                trained, config, out_dir=here / "run", resume=resumed, progress=say, **logs
-            )
+                trained, config, out_dir=here / "run", resume=resumed, progress=say,
+                invocation={"loop_round": k}, **logs,
+            )  # fmt: skip
             result.metrics["model"] = info
             save_run(result, here / "run", final_eval=own_eval, animation=False, real=real,
                      overwrite=True)  # fmt: skip
@@ -411,6 +413,24 @@ def _start(out: Path, settings: dict, resume: bool) -> dict:
         raise RunDirectoryError(f"--out {out} is not empty; choose a new or empty directory")
     make_dir(out)
     return {"format": "diffcontrol-loop", "version": 1, "settings": settings, "rounds": []}
+
+
+def _check_own_round(run_dir: Path, k: int) -> None:
+    """Refuse a round's run directory that holds a run this loop did not start (one that a
+    command trained or planned there: its run.json records that command's invocation; the
+    loop's own record their round, or, written by older loops, nothing).
+
+    Raises:
+        RunDirectoryError: one line naming the directory and the way out.
+    """
+    doc = read_run_file(run_dir)
+    invocation = None if doc is None else doc.get("invocation")
+    if invocation is None or (isinstance(invocation, dict) and invocation.get("loop_round") == k):
+        return
+    raise RunDirectoryError(
+        f"{run_dir} holds a run this loop did not train (its run.json: {invocation!r}); move it "
+        f"away to train round {k} here, or continue the loop in another --out"
+    )
 
 
 def _plot(state: dict, path: Path) -> None:

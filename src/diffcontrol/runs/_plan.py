@@ -101,6 +101,7 @@ def plan_run(
     progress: Callable[[str], None] | None = None,
     value: Any = None,
     settings: dict[str, Any] | None = None,
+    invocation: dict[str, Any] | None = None,
 ) -> tuple[Run, list[str]]:
     """Write a planning controller for ``task`` as a run directory: ``model.json`` (the
     settings and the model), ``metrics.json`` (the final evaluation, per-step solve reports
@@ -127,6 +128,7 @@ def plan_run(
             stored in ``model.json``.
         settings: fields of ``config`` to change (``None`` values skipped): the command
             line's options, over the task's defaults.
+        invocation: how the planner was made, recorded in ``run.json`` (default: its task).
 
     Returns:
         The ``Run`` and the names of the files written.
@@ -161,6 +163,7 @@ def plan_run(
         stored = {k: v for k, v in fitted.items() if k != "_path"}  # the file, not where it was
         info = {"kind": "fitted", "fitted": stored}
     run = {"task": task.name, "config": config.to_json(), "planner": True}
+    run["invocation"] = invocation or {"task": task.name}
     existed = Path(out_dir).is_dir()  # an empty directory of the user's is left in place
     out = io.prepare_run_dir(out_dir, run, resume=False)
     try:

@@ -258,11 +258,16 @@ def stored_sweep(out_dir: str | Path) -> dict:
 
 
 def _complete(member_dir: Path) -> bool:
+    """Whether a member is written whole: its run.json says so and its model.json and
+    metrics.json read back (a damaged member is trained again)."""
     try:
         run = read_run_file(member_dir)
+        if not (run and run.get("complete")):
+            return False
+        policies.read_model(member_dir / MODEL_FILE)
+        return isinstance(io.read_json(member_dir / METRICS_FILE, "metrics"), dict)
     except Exception:  # noqa: BLE001 - a damaged member is trained again
         return False
-    return bool(run and run.get("complete")) and (member_dir / MODEL_FILE).is_file()
 
 
 def _write_member(member_dir: Path, result: Any, task_spec: str) -> None:
