@@ -134,9 +134,12 @@ def plan_run(
         The ``Run`` and the names of the files written.
 
     Raises:
-        ConfigError: settings the task cannot take; RunDirectoryError: ``out_dir`` is in use;
-        ModelFileError: a fitted model of another task. A failed or interrupted plan_run
-        leaves nothing in ``out_dir`` (the directory is given back).
+        ConfigError: settings the task cannot take.
+        RunDirectoryError: ``out_dir`` is in use.
+        ModelFileError: a fitted model of another task.
+
+    A failed or interrupted ``plan_run`` leaves nothing in ``out_dir`` (the directory is given
+    back), so the same call can run again.
     """
     import time
 
