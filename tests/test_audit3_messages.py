@@ -19,23 +19,9 @@ from diffcontrol.config import TrainConfig
 from diffcontrol.errors import ConfigError
 from diffcontrol.runs import _sweep as runs_sweep
 
+from ._cli import one_line
+
 TINY = ["--updates", "20", "--eval-every", "10", "--final-eval", "2", "--no-animation"]
-
-
-def _one_line(capsys, argv, *needles, absent=()):
-    """``main(argv)`` exits 2 with one line holding every needle (and none of ``absent``)."""
-    try:
-        code = main([str(a) for a in argv])
-    except SystemExit as e:
-        code = e.code
-    err = capsys.readouterr().err
-    assert code == 2, err
-    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
-    for needle in needles:
-        assert needle in err, err
-    for needle in absent:
-        assert needle not in err, err
-    return err
 
 
 def _interrupted(capsys, argv, *needles):
@@ -74,7 +60,7 @@ def _interrupt(*args, **kwargs):
 )
 def test_an_integer_is_refused_by_the_rule_it_breaks(capsys, tmp_path, argv, needle):
     out = tmp_path / "out"
-    _one_line(capsys, [*argv, "--out", out, *TINY[:6]], needle, absent=["positive layer"])
+    one_line(capsys, [*argv, "--out", out, *TINY[:6]], needle, absent=["positive layer"])
     assert not out.exists()
 
 
@@ -97,7 +83,7 @@ def test_an_out_that_is_a_dangling_link_is_named(capsys, tmp_path, monkeypatch, 
     (tmp_path / "lnk").symlink_to(target)
     budget = {"train": TINY, "sweep": [*TINY[:6], "--seeds", "0-1"]}
     budget["loop"] = ["--rounds", "1", "--episodes", "1", "--updates", "20"]
-    _one_line(
+    one_line(
         capsys,
         [command, "pendulum", "--out", "lnk", *budget[command]],
         f"--out lnk is a symbolic link to {target}, which does not exist; create",
@@ -109,7 +95,7 @@ def test_an_out_that_is_a_dangling_link_is_named(capsys, tmp_path, monkeypatch, 
 def test_an_out_under_a_dangling_link_is_named(capsys, tmp_path):
     (tmp_path / "lnk").symlink_to(tmp_path / "gone")
     out = tmp_path / "lnk" / "run"
-    _one_line(capsys, ["train", "pendulum", "--out", out, *TINY], f"lies under {tmp_path / 'lnk'}")
+    one_line(capsys, ["train", "pendulum", "--out", out, *TINY], f"lies under {tmp_path / 'lnk'}")
 
 
 # --- 3. --resume only where there is something to resume ---------------------------------------
@@ -127,7 +113,7 @@ def test_a_permission_error_before_a_run_starts_does_not_advise_resume(
 ):
     out = tmp_path / "locked" / "run"
     _fails_with(monkeypatch, lambda o: PermissionError(errno.EACCES, "Permission denied", o))
-    _one_line(
+    one_line(
         capsys,
         ["train", "pendulum", "--out", out, *TINY],
         "Permission denied",
@@ -144,7 +130,7 @@ def test_a_full_disk_in_a_run_with_a_checkpoint_names_the_resume_command(
     (out / "run.json").write_text(json.dumps({"task": "pendulum", "config": {}}))
     (out / "checkpoint.npz").write_bytes(b"")
     _fails_with(monkeypatch, lambda o: OSError(errno.ENOSPC, "No space left on device", o))
-    err = _one_line(capsys, ["train", "pendulum", "--out", out, *TINY], "make room, then")
+    err = one_line(capsys, ["train", "pendulum", "--out", out, *TINY], "make room, then")
     again = shlex.split(err.split("continue with: ")[1])
     assert again == ["diffcontrol", "train", "pendulum", "--out", str(out), *TINY, "--resume"]
 
@@ -232,7 +218,7 @@ def test_ctrl_c_in_a_comparison_on_the_real_system_names_what_was_kept(
 def test_a_setting_swept_and_given_by_its_own_option_is_refused(capsys, tmp_path, given, needle):
     out = tmp_path / "sweep"
     argv = ["sweep", "pendulum", "--out", out, "--seeds", "0-1", *given, *TINY[:6]]
-    _one_line(capsys, argv, needle, "give it once")
+    one_line(capsys, argv, needle, "give it once")
     assert not out.exists()
 
 
@@ -241,7 +227,7 @@ def test_a_resumed_sweep_refuses_settings_it_would_drop(capsys, tmp_path):
     out.mkdir()
     doc = {"format": runs_sweep.SWEEP_FORMAT, "task": "pendulum", "config": {}, "seeds": [0]}
     (out / "sweep.json").write_text(json.dumps({**doc, "values": {}, "members": []}))
-    _one_line(
+    one_line(
         capsys,
         ["sweep", "--out", out, "--resume", "--learning-rate", "0.1"],
         "drop --learning-rate",

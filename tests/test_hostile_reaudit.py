@@ -16,19 +16,13 @@ import diffcontrol
 from diffcontrol.cli import main
 from diffcontrol.errors import ConfigError, DiffcontrolError
 
+from ._cli import one_line
+
 EVIL = "evil_module_of_the_reaudit"
 
 
 def _one_line(capsys, argv, *needles):
-    try:
-        code = main([str(a) for a in argv])
-    except SystemExit as e:
-        code = e.code
-    err = capsys.readouterr().err
-    assert code == 2, err
-    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
-    for needle in needles:
-        assert needle in err, err
+    one_line(capsys, argv, *needles)
     assert EVIL not in sys.modules
 
 
