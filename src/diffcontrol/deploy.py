@@ -10,11 +10,12 @@ output ``action`` is float32 ``[batch, action_size]`` within the action bounds f
 action, or int64 ``[batch]`` (the index) for a discrete one (CartPole's sign head: 1 pushes
 right; an N-way choice: the argmax, the first on a tie). The graph computes in float64, as
 ``load`` does, so that a discrete choice never flips on a near-tie, and casts at the end. A
-continuous-time task's controller takes the observation built from the state
-(``observation_features`` in the metadata: each a state name, ``cos(name)`` or ``sin(name)``).
+continuous-time task's controller takes the observation built from the state (the
+``features`` of ``observation_space`` in the metadata: each a name of its ``state``,
+``cos(name)`` or ``sin(name)``).
 
 The model's metadata (``metadata_props``) says what it is: ``task``, ``observation_space`` and
-``action_space`` (JSON), ``gym_id``, ``diffcontrol_version``. It is built with the ``onnx``
+``action_space`` (JSON), ``gym_id``, ``diffcontrol_version``, ``opset``. It is built with the ``onnx``
 package's helpers alone (``pip install "diffcontrol[export]"``): a small MLP needs no
 converter, and ``jax2onnx`` would pull in Flax and Orbax.
 """
