@@ -189,4 +189,4 @@ def test_cli_aim_bad_targets(trebuchet_run, capsys, argv, needle):
 
 def test_cli_aim_needs_an_aiming_run(cartpole_run, capsys):
     assert main(["aim", str(cartpole_run), "--target", "50"]) == 2
-    assert "trebuchet" in capsys.readouterr().err
+    assert "needs an aiming task" in capsys.readouterr().err
