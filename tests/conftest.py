@@ -3,11 +3,17 @@
 from __future__ import annotations
 
 import os
+import shutil
 import tempfile
 
 # A private persistent compilation cache for the whole test session, set before any
 # diffcontrol import reads it; the user's own cache is never touched by the tests.
-os.environ.setdefault("DIFFCONTROL_CACHE_DIR", tempfile.mkdtemp(prefix="diffcontrol-test-cache-"))
+# The process that makes it (pytest's, or xdist's controller, whose workers inherit it)
+# removes it at the end.
+_OWN_CACHE = None
+if "DIFFCONTROL_CACHE_DIR" not in os.environ:
+    _OWN_CACHE = tempfile.mkdtemp(prefix="diffcontrol-test-cache-")
+    os.environ["DIFFCONTROL_CACHE_DIR"] = _OWN_CACHE
 # XLA's CPU compiler, for the tests' programs, which are small and most run a few steps: its
 # older fusion emitters at backend optimisation level 1 compile them fastest (paired on the
 # 2-core AMD EPYC: the whole suite 9 min 18 s -> 7 min 20 s, the fast tier on one core 85 ->
@@ -74,9 +80,12 @@ def pytest_sessionfinish(session):
     ``__del__`` errors reach pytest's report of unraisable exceptions, then the session's
     objects frozen out of the collector, as the console script freezes a command's
     (``cli.run``). pytest ends a session with five full collections, each of a worker's
-    millions of objects (about a second each after one test file); four are spared."""
+    millions of objects (about a second each after one test file); four are spared. The
+    session's own compilation cache is removed by the process that made it."""
     gc.collect()
     gc.freeze()
+    if _OWN_CACHE is not None and not hasattr(session.config, "workerinput"):
+        shutil.rmtree(_OWN_CACHE, ignore_errors=True)
 
 
 def pytest_report_header(config):
