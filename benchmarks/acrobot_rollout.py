@@ -39,6 +39,8 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 from _common import discrete_choice_steps, machine  # noqa: E402
 
+from diffcontrol import _gym  # noqa: E402
+
 CAP = 300
 """Steps a teacher rollout follows the controller before it is cut off (return -CAP)."""
 STARTS = 256
@@ -144,7 +146,7 @@ def main() -> None:
     def teacher_gym(ctrl) -> tuple[float, float, float]:
         """Mean and worst return of the rollout policy on seeds 0-99, and ms per step."""
         env = gymnasium.make(task.gym_id)
-        one = jax.jit(lambda c, o: teacher(c, task.state_from_observation(o)[None])[0][0])
+        one = jax.jit(lambda c, o: teacher(c, _gym.state_from_observation(task, o)[None])[0][0])
         returns, steps, t0 = [], 0, None
         for seed in range(100):
             obs, _ = env.reset(seed=seed)

@@ -3,7 +3,7 @@
 For each task (and recipe) given, the run's training chunks (every stage) and its evaluation
 program are lowered once, as `diffcontrol train` lowers them, then compiled four ways: XLA's
 defaults, optimisation level 1, the older CPU emitters, and both (`_jax_setup.FAST_COMPILE`),
-and, where the task declares the older emitters (`Task.fast_compile`), a fifth: the declared
+and, where the task declares the older emitters (its `fast_compile`), a fifth: the declared
 options with `_jax_setup.ONE_CORE`, as a process on one core compiles them. Each compiled
 chunk runs `--updates` updates from the run's start and each evaluation program evaluates the
 start's controller; the outputs are compared leaf by leaf, to the bit, with the defaults'. Printed per program: the compile
@@ -119,10 +119,11 @@ def measure(spec: str, updates: int) -> list[dict]:
     import jax
 
     from diffcontrol._jax_setup import FAST_COMPILE, ONE_CORE
+    from diffcontrol.training._driver import compile_options
 
     rows = []
     for task, program, lowered, args in programs(spec, updates):
-        declared = task.compile_options(program.split()[0])
+        declared = compile_options(task, program.split()[0])
         options = {
             w: {**XLA_DEFAULTS, **{n: FAST_COMPILE[n] for n in names}} for w, names in WAYS.items()
         }

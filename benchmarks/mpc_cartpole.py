@@ -4,7 +4,7 @@ The CartPole's action is a push of fixed size left or right (``Discrete(2)``); t
 plans the relaxed push ``u`` in [-1, 1] (``make_planner(..., bounds=((-1,), (1,)))``: the force
 ``u * force_mag`` in the task's simulator) with the task's ``quadratic`` loss (cart position
 and pole angle over their limits, squared) and Gymnasium gets the sign of the first action
-(``task.gym_action``). Box-iLQR at horizons H, one solve per control step
+(``gym_action``). Box-iLQR at horizons H, one solve per control step
 (``PlannerPolicy``), in Gymnasium's own ``CartPole-v1`` on reset seeds 0-99; the wall-clock
 cost per control step is the median (and 95th percentile) over all calls of this process.
 

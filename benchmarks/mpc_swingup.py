@@ -42,7 +42,7 @@ import diffcontrol  # noqa: E402
 from diffcontrol import mpc, policies  # noqa: E402
 from diffcontrol.builtin.swingup.judge import swingup_result  # noqa: E402
 from diffcontrol.evaluation import ContinuousRecording  # noqa: E402
-from diffcontrol.rollout import solve_closed_loop  # noqa: E402
+from diffcontrol.rollout import force_fn, solve_closed_loop  # noqa: E402
 
 HORIZON_S = 10.0
 SETTINGS = [(0.05, 40, 6.0, 5), (0.05, 40, 5.0, 5), (0.05, 40, 4.5, 5), (0.05, 40, 4.0, 5)]
@@ -129,7 +129,7 @@ def trained_rows(task, controller, params, y0s) -> list[dict]:
 
         @jax.jit
         def one(y0):
-            sol = solve_closed_loop(task.vector_field, y0, ts, (p64, task.force_fn(ctrl)),
+            sol = solve_closed_loop(task.vector_field, y0, ts, (p64, force_fn(task, ctrl)),
                                     solver="dopri8", rtol=1e-9, atol=1e-9, max_steps=100_000)  # fmt: skip
             force = jax.vmap(lambda y: ctrl(task.observe(y[:4]))[0])(sol.ys)
             return sol.ys, force, sol.ok

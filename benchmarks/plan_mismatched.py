@@ -54,7 +54,7 @@ from _common import grid_optima, machine, planner_episodes  # noqa: E402
 from fit_gap_pendulum import EPISODES, NOISE, REAL, record_real  # noqa: E402
 
 import diffcontrol  # noqa: E402
-from diffcontrol import identify, mpc, policies  # noqa: E402
+from diffcontrol import _gym, identify, mpc, policies  # noqa: E402
 from diffcontrol.evaluation import evaluate  # noqa: E402
 from diffcontrol.settings import PlanConfig  # noqa: E402
 
@@ -241,7 +241,7 @@ def measure(args) -> dict:
             SEED_SETS[key] = seeds[:3]
     task = diffcontrol.make("pendulum")
     load_before = os.getloadavg()
-    real_params = task.params_of_env(*REAL)
+    real_params = _gym.params_of_env(task, *REAL)
     _, optima, solve_s = grid_optima(task, args.points, 41, SEED_SETS, real_params, REAL)
     for key, opt in optima.items():
         print(f"real-system optimum, seeds {key}: {opt.mean:.2f} (solved in {solve_s:.0f} s)")

@@ -42,6 +42,7 @@ from diffcontrol import mpc  # noqa: E402
 from diffcontrol.builtin.swingup import fitted as of  # noqa: E402
 from diffcontrol.builtin.swingup.fitted import FittedSwingUp  # noqa: E402
 from diffcontrol.evaluation import simulate_continuous  # noqa: E402
+from diffcontrol.mpc._config import default_plan_config  # noqa: E402
 
 TASK = "cartpole-swingup-friction"
 RECORDED = 10
@@ -57,7 +58,7 @@ def main() -> None:
     args = parser.parse_args()
     task = diffcontrol.make(TASK)
     real = task.default_params()
-    config = task.default_plan_config()
+    config = default_plan_config(task)
     trained = json.loads((HERE / "results" / "fit_swingup.json").read_text())
     trained_true = {r["seed"]: r["true"]["real_loss"] for r in trained["runs"]}
 

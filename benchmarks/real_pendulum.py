@@ -21,7 +21,7 @@ steps count every recorded transition; the evaluation episodes are not counted, 
     python benchmarks/real_pendulum.py --controllers plan --name _plan   # planners act
 
 With ``--controllers plan`` a planner through each round's fitted model acts instead of the
-trained MLP (``Task.loop_planner``: box-iLQR, H = 10, terminal cost ``-V_0`` of a 201-point
+trained MLP (``loop_planner``: box-iLQR, H = 10, terminal cost ``-V_0`` of a 201-point
 grid optimum solved through the fitted model; rows ``diffcontrol (grey box, planner)`` etc.).
 
 Prints the table and the real steps to -150 per seed, and writes

@@ -15,6 +15,7 @@ import diffcontrol
 from diffcontrol.cli import main
 from diffcontrol.errors import ConfigError
 from diffcontrol.identify import data
+from diffcontrol.identify._task import data_columns
 from diffcontrol.identify.data import DataFileError, TrajectoryData, read_trajectories
 from diffcontrol.io import write_json
 from diffcontrol.policies import controller_to_dict
@@ -205,7 +206,7 @@ def test_known_columns_are_the_tasks_data_columns(monkeypatch):
     known = data.known_columns()
     pendulum = diffcontrol.make("pendulum")
     for eid in ("Pendulum-v1", "diffcontrol/Pendulum-v0", "diffcontrol/PendulumFriction-v0"):
-        assert known[eid] == pendulum.data_columns()
+        assert known[eid] == data_columns(pendulum)
     assert known["CartPole-v1"] == diffcontrol.make("cartpole").data_columns()
     # tasks whose data are states (not their environment's observations) name no environment
     assert "diffcontrol/Trebuchet-v0" not in known
@@ -219,7 +220,7 @@ def test_known_columns_are_the_tasks_data_columns(monkeypatch):
 
     monkeypatch.setitem(tasks._REGISTRY, Renamed.name, Renamed())
     assert data.known_columns()["my_module:MyPendulum-v0"] == Renamed().data_columns()
-    assert data.known_columns()["Pendulum-v1"] == pendulum.data_columns()  # the first task's
+    assert data.known_columns()["Pendulum-v1"] == data_columns(pendulum)  # the first task's
     # a file that says it is from that environment must have its columns
     with pytest.raises(DataFileError, match="not those of my_module:MyPendulum-v0"):
         _small(env_id="my_module:MyPendulum-v0")

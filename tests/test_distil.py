@@ -16,7 +16,7 @@ from diffcontrol import _timing, mpc
 from diffcontrol.controllers import MLPController, apply_head, head_inverse
 from diffcontrol.errors import ConfigError, SolverFailed
 from diffcontrol.rollout import rollout
-from diffcontrol.tasks import Pendulum
+from diffcontrol.tasks import Pendulum, controller_kwargs
 
 from .test_mpc import LinearQuadratic
 
@@ -60,7 +60,7 @@ def _labelled(planner, controller, beta, seed=7, episodes=8):
 
 
 def _untrained(task, seed=0):
-    return MLPController(jax.random.key(seed), hidden=(64, 64), **task.controller_kwargs())
+    return MLPController(jax.random.key(seed), hidden=(64, 64), **controller_kwargs(task))
 
 
 @pytest.mark.slow

@@ -10,6 +10,7 @@ import pytest
 import diffcontrol
 from diffcontrol import evaluation, policies
 from diffcontrol.controllers import MLPController
+from diffcontrol.tasks import controller_kwargs
 
 
 class OneByOne:
@@ -38,7 +39,7 @@ class Counting(policies.NumpyPolicy):
 
 def _random_policy(name: str, seed: int) -> Counting:
     task = diffcontrol.make(name)
-    kwargs = task.controller_kwargs()
+    kwargs = controller_kwargs(task)
     controller = MLPController(jax.random.PRNGKey(seed), hidden=(16,), **kwargs)
     return Counting(policies.controller_to_dict(controller, task, {}))
 

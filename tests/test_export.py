@@ -22,6 +22,7 @@ from diffcontrol.cli import main
 from diffcontrol.controllers import MLPController
 from diffcontrol.errors import ConfigError
 from diffcontrol.settings import PlanConfig
+from diffcontrol.tasks import controller_kwargs
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 N = 4096
@@ -31,7 +32,7 @@ def _network_doc(task, activation: str | None = None, seed: int = 0) -> dict:
     """A network controller of ``task`` with the task's own settings (sizes, head, bounds,
     observation scaling), its weights spread so that actions reach their bounds."""
     cfg = task.default_config()
-    kwargs = task.controller_kwargs()
+    kwargs = controller_kwargs(task)
     if getattr(cfg, "head", None):
         kwargs["head"] = cfg.head
     key = jax.random.key(seed)

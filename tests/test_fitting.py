@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 import diffcontrol
-from diffcontrol import identify
+from diffcontrol import _gym, identify
 from diffcontrol.cli import main
 from diffcontrol.errors import ConfigError, DataFileError, InsufficientDataError
 from diffcontrol.identify.data import write_trajectories
@@ -243,7 +243,7 @@ def _window_loss(task, params, data, window=10):
             targets.append(ep.observations[t + 1 : t + window + 1])
     with jax.enable_x64(True):
         params = jax.tree.map(np.float64, params)
-        states = jax.vmap(task.state_from_observation)(np.stack(starts))
+        states = jax.vmap(_gym.state_from_observation.bound(task))(np.stack(starts))
         predict = jax.vmap(identify.steps.predict, in_axes=(None, None, 0, 0))
         pred = np.asarray(predict(task, params, states, np.stack(actions)))
     return float(np.mean((pred - np.stack(targets)) ** 2))

@@ -27,6 +27,7 @@ import pytest
 import diffcontrol.tasks
 from diffcontrol.controllers import MLPController, apply_head, straight_through_sign
 from diffcontrol.rollout import rollout
+from diffcontrol.tasks import controller_kwargs
 from diffcontrol.training import make_trainer, resolve_config, task_params
 
 EPS_FD = 1e-6
@@ -88,7 +89,7 @@ def test_cartpole_controller_sign_gradient():
     task = diffcontrol.tasks.make("cartpole")
     assert task.action_head == "sign"
     key = jax.random.key(4)
-    kwargs = dict(task.controller_kwargs(), final_scale=3.0)
+    kwargs = dict(controller_kwargs(task), final_scale=3.0)
     controller = MLPController(key, hidden=(8,), **kwargs)
     # The same weights (same key) with the raw output exposed.
     raw = MLPController(key, hidden=(8,), **dict(kwargs, head="linear"))
@@ -189,7 +190,7 @@ def test_pendulum_rollout_gradients_match_fd(task_name):
         params = task_params(task)
         assert params.g.dtype == jnp.float64
         controller = MLPController(
-            jax.random.key(0), hidden=(8, 8), final_scale=1.0, **task.controller_kwargs()
+            jax.random.key(0), hidden=(8, 8), final_scale=1.0, **controller_kwargs(task)
         )
         state0 = jnp.array([2.0, 0.5])
 
@@ -215,7 +216,7 @@ def test_cartpole_rollout_gradients_match_fd():
     task = diffcontrol.tasks.make("cartpole")
     with jax.enable_x64(True):
         params = task_params(task)
-        kwargs = dict(task.controller_kwargs(), head="tanh", final_scale=5.0)
+        kwargs = dict(controller_kwargs(task), head="tanh", final_scale=5.0)
         controller = MLPController(jax.random.key(1), hidden=(8, 8), activation="tanh", **kwargs)
         state0 = jnp.array([0.1, -0.2, 0.05, 0.1])
         weights = jnp.array([1.0, 0.5, 10.0, 1.0])
@@ -291,13 +292,13 @@ def task(request):
 def test_continuous_task_contract(name):
     """Every continuous-time task: its vector field under jit, vmap and grad, its controller,
     its trajectory and every built-in loss on a short solve."""
-    from diffcontrol.tasks._base import StateFeedback
+    from diffcontrol.rollout import StateFeedback
 
     task = diffcontrol.tasks.make(name)
     params = jax.tree.map(jnp.asarray, task.default_params())
     y0 = task.initial_state(params)
     assert y0.ndim == 1 and np.all(np.isfinite(np.asarray(y0)))
-    controller = MLPController(jax.random.key(0), hidden=(4,), **task.controller_kwargs())
+    controller = MLPController(jax.random.key(0), hidden=(4,), **controller_kwargs(task))
     force = StateFeedback(controller, task.observe)
     field = jax.jit(task.vector_field)
     rng = np.random.default_rng(0)
@@ -408,6 +409,6 @@ def test_task_contract(task):
     assert np.any(np.asarray(g_action) != 0) and np.any(np.asarray(g_state) != 0)
 
     # The task's controller fits its observation and action sizes.
-    controller = MLPController(jax.random.key(0), hidden=(4,), **task.controller_kwargs())
+    controller = MLPController(jax.random.key(0), hidden=(4,), **controller_kwargs(task))
     out = eqx.filter_jit(controller)(obs)
     assert out.shape == (task.action_size,) and np.all(np.isfinite(np.asarray(out)))

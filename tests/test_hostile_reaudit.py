@@ -15,6 +15,7 @@ import pytest
 import diffcontrol
 from diffcontrol.cli import main
 from diffcontrol.errors import ConfigError, DiffcontrolError
+from diffcontrol.tasks import check_params
 
 from ._cli import one_line
 
@@ -228,7 +229,7 @@ def test_a_fit_never_writes_a_parameter_out_of_its_range(fitted_dir):
     # frictionless data: the fitted friction lands either side of 0; never below it
     result = identify.fit(task, data, "params", steps=3, lm_steps=1)
     assert result.values["friction"] >= 0
-    task.check_params(result.params)
+    check_params(task, result.params)
 
 
 def test_library_inputs_of_the_wrong_kind(cartpole_run):

@@ -12,6 +12,7 @@ import diffcontrol
 from diffcontrol import identify
 from diffcontrol.cli import main
 from diffcontrol.errors import ConfigError, DataFileError
+from diffcontrol.identify._task import data_columns
 
 USER_ENV = """
 import gymnasium
@@ -43,7 +44,7 @@ def user_env(tmp_path, monkeypatch):
 def test_a_user_env_id_records_as_the_real_system_of_a_task_with_its_columns(user_env, tmp_path):
     task = diffcontrol.make("pendulum")
     data = identify.record(user_env, 2, seed=1, task=task)
-    assert (data.observation_columns, data.action_columns) == task.data_columns()
+    assert (data.observation_columns, data.action_columns) == data_columns(task)
     assert data.env_id == user_env and data.metadata["dt_s"] == 0.05
     fit = identify.fit(task, data, "params", names=("g",), steps=5, lm_steps=0)
     assert fit.model_type == "params" and fit.names == ("g",) and not fit.diverged

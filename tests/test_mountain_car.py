@@ -27,7 +27,7 @@ import numpy as np
 import pytest
 
 import diffcontrol
-from diffcontrol import policies
+from diffcontrol import _gym, policies
 from diffcontrol.evaluation import Recording, evaluate
 from diffcontrol.systems import mountain_car as mc
 from diffcontrol.training import resolve_config, train
@@ -223,7 +223,7 @@ def test_observation_is_the_state():
             obs, *_ = env.step(np.array([0.7], np.float32))
         state = env.unwrapped.state
         np.testing.assert_array_equal(np.asarray(task.observe(jnp.asarray(state))), obs)
-        np.testing.assert_array_equal(np.asarray(task.state_from_observation(obs)), state)
+        np.testing.assert_array_equal(np.asarray(_gym.state_from_observation(task, obs)), state)
 
 
 # --- gradients ---------------------------------------------------------------------------------

@@ -21,6 +21,7 @@ from diffcontrol.builtin.swingup.task import (
     limited_hold_end,
 )
 from diffcontrol.errors import ConfigError
+from diffcontrol.mpc._config import default_plan_config
 from diffcontrol.rollout import solve_closed_loop
 
 STATES = [
@@ -109,12 +110,12 @@ def test_the_friction_swingup_plans_its_own_loss_and_a_fitted_model_plans_like_i
     from diffcontrol.builtin.swingup.fitted import FittedSwingUp, nominal_model
 
     task = diffcontrol.make("cartpole-swingup-friction")
-    config = task.default_plan_config()
+    config = default_plan_config(task)
     assert task.planning_losses == ("limited_hold", "energy") and config.loss == "energy"
     assert config.action_bound == 40.0 and config.iterations == 10 and config.dt == 0.05
     fitted = FittedSwingUp(task, nominal_model(task.default_params()))
     assert fitted.planning_losses == task.planning_losses
-    assert fitted.default_plan_config() == config
+    assert default_plan_config(fitted) == config
     assert mpc.discretise(fitted, 0.05).losses == ("limited_hold", "energy")
     assert fitted.running_cost("energy") is energy_rate
     assert diffcontrol.make("cartpole-swingup").planning_losses[0] == "limited_hold"

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import diffcontrol
-from diffcontrol import optimal
+from diffcontrol import _gym, optimal
 from diffcontrol.errors import ConfigError
 from diffcontrol.tasks import Pendulum
 
@@ -129,12 +129,12 @@ REAL = ("diffcontrol/PendulumFriction-v0", {"g": 12.0, "friction": 0.1})
 def test_the_optimum_of_a_real_system_is_solved_on_its_physics():
     import gymnasium
 
-    params = TASK.params_of_env(*REAL)
+    params = _gym.params_of_env(TASK, *REAL)
     assert (float(params.g), float(params.friction)) == (12.0, 0.1)
-    assert TASK.params_of_env("Pendulum-v1", {}) == PARAMS
+    assert _gym.params_of_env(TASK, "Pendulum-v1", {}) == PARAMS
     # environments or arguments whose physics the task does not know
-    assert TASK.params_of_env("diffcontrol/Pendulum-v0", {}) is None
-    assert TASK.params_of_env(REAL[0], {"g": 12.0, "render_mode": "rgb_array"}) is None
+    assert _gym.params_of_env(TASK, "diffcontrol/Pendulum-v0", {}) is None
+    assert _gym.params_of_env(TASK, REAL[0], {"g": 12.0, "render_mode": "rgb_array"}) is None
 
     table = optimal.solve(TASK, points=61, levels=11, params=params)
     seeds = [0, 1, 2]
@@ -163,7 +163,9 @@ def test_evaluate_on_another_system_reports_that_systems_optimum(pendulum_run, c
     assert main(argv) == 0
     doc = json.loads(capsys.readouterr().out)
     assert doc["env_id"].startswith(REAL[0]) and doc["optimum"]["env_id"] == doc["env_id"]
-    real = optimal.optimal_return(TASK, [0, 1, 2], 41, params=TASK.params_of_env(*REAL), real=REAL)
+    real = optimal.optimal_return(
+        TASK, [0, 1, 2], 41, params=_gym.params_of_env(TASK, *REAL), real=REAL
+    )
     nominal = optimal.optimal_return(TASK, [0, 1, 2], 41)
     assert doc["optimum"]["mean_return"] == pytest.approx(real.mean, abs=1e-6)
     assert doc["optimum"]["predicted_mean"] == pytest.approx(real.predicted_mean, abs=1e-4)

@@ -10,6 +10,8 @@ import sys
 import numpy as np
 import pytest
 
+from diffcontrol.tasks import controller_kwargs
+
 HEAVY = ("jax", "equinox", "diffrax", "matplotlib", "imageio", "stable_baselines3", "torch")
 COMMANDS = (
     "list",
@@ -231,7 +233,7 @@ def test_a_tasks_fast_compile_options_give_the_defaults_bits():
     ts, k_eval = _driver._first_state(kept, config.seed, params)
     args = (ts.controller, params, k_eval)
     lowered = jax.jit(kept.trainer.evaluate).lower(*args)
-    declared = task.compile_options("evaluate")
+    declared = _driver.compile_options(task, "evaluate")
     fast = {**_DEFAULTS, **{n: _jax_setup.FAST_COMPILE[n] for n in declared}}
     ours, default = (np.asarray(lowered.compile(o)(*args)) for o in (fast, _DEFAULTS))
     assert declared and ours.size > 0 and np.isfinite(ours).all()
@@ -248,13 +250,14 @@ def test_fast_compile_options_are_read_from_the_tasks_own_class_and_kept_apart()
     from diffcontrol.training import _driver
 
     cartpole = diffcontrol.make("cartpole")
-    assert cartpole.compile_options("chunk") and cartpole.compile_options("evaluate")
-    assert type("Heavier", (type(cartpole),), {})().compile_options("chunk") == ()
-    assert diffcontrol.make("mountain-car-continuous").compile_options("chunk") == ()
+    options = _driver.compile_options
+    assert options(cartpole, "chunk") and options(cartpole, "evaluate")
+    assert options(type("Heavier", (type(cartpole),), {})(), "chunk") == ()
+    assert options(diffcontrol.make("mountain-car-continuous"), "chunk") == ()
     for wrong in ({"evaluate": "xla_backend_optimization_level"}, {"chunks": ()}):
         typo = type("Typo", (type(cartpole),), {"fast_compile": wrong})()
         with pytest.raises(diffcontrol.ConfigError, match="declares fast_compile"):
-            typo.compile_options("chunk")
+            options(typo, "chunk")
     lowered = jax.jit(lambda x: x * 3).lower(jnp.ones(2))
     level = ("xla_backend_optimization_level",)
     assert _driver.compiled_once(lowered, *level) is _driver.compiled_once(lowered, *level)
@@ -368,7 +371,7 @@ def test_the_reference_solve_compiled_for_speed_reports_the_defaults_loss(monkey
     from diffcontrol.evaluation import simulate_continuous
 
     task = diffcontrol.make("cartpole-swingup-friction")
-    controller = MLPController(jax.random.PRNGKey(1), **task.controller_kwargs(), hidden=(8,))
+    controller = MLPController(jax.random.PRNGKey(1), **controller_kwargs(task), hidden=(8,))
     seen, recordings = [], []
     for fast in (True, False):
         monkeypatch.setattr(_jax_setup, "compile_with", _compiled_as_users(fast, seen))

@@ -100,7 +100,7 @@ LAYERS = [
     "controllers policies",
     "systems",
     "tasks",
-    "rollout checks _checks",
+    "rollout checks _checks _gym",
     "training identify mpc evaluation envs wrappers plots animation optimal _run_files deploy",
     "runs",
     "compare cli",

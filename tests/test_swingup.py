@@ -508,16 +508,17 @@ def test_one_member_unbatched_trains_the_same_weights():
     rounds differently (3e-6 after three updates), and 50 updates of a swing-up grow that to
     1e-2, so three updates are compared, to 5e-5."""
     from diffcontrol.builtin.swingup.fitted import FittedSwingUp, nominal_model
+    from diffcontrol.training._ode import unbatched_member
 
     task = diffcontrol.make("cartpole-swingup")
 
     class Batched(type(task)):
         one_member_unbatched = False
 
-    assert task.unbatched_member() and not Batched().unbatched_member()
+    assert unbatched_member(task) and not unbatched_member(Batched())
     for name in ("cartpole-swingup-limited", "cartpole-swingup-friction"):
-        assert not diffcontrol.make(name).unbatched_member()
-    assert not FittedSwingUp(task, nominal_model(task.default_params())).unbatched_member()
+        assert not unbatched_member(diffcontrol.make(name))
+    assert not unbatched_member(FittedSwingUp(task, nominal_model(task.default_params())))
     config = task.default_config().replace(updates=3)
     batched, unbatched = (train(t, config).controller for t in (Batched(), task))
     for x, y in zip(jax.tree.leaves(batched), jax.tree.leaves(unbatched), strict=True):

@@ -12,6 +12,7 @@ import diffcontrol as dc
 from diffcontrol import optimal
 from diffcontrol.cli import main
 from diffcontrol.errors import RunDirectoryError
+from diffcontrol.mpc._config import default_plan_config, loop_planner
 from diffcontrol.training import make_trainer, train
 from diffcontrol.training._driver import _start
 
@@ -96,7 +97,7 @@ def test_the_mountain_car_keeps_its_own_planner():
 
     car = dc.make("mountain-car-continuous")
     assert car.state_grid(car.default_params()) is not None
-    assert car.loop_planner() == car.default_plan_config()
+    assert loop_planner(car) == default_plan_config(car)
     assert planning_methods(car) == [] and planning_methods(PENDULUM) != []
 
 

@@ -16,6 +16,7 @@ from diffcontrol.cli import main
 SRC = Path(diffcontrol.__file__).parent
 PUBLIC_IMPORTS = {
     "from ..config import TrainConfig": "from diffcontrol import TrainConfig",
+    "from ..settings import PlanConfig": "from diffcontrol.settings import PlanConfig",
     "from ._base import StepLoss, Task": "from diffcontrol.tasks import StepLoss, Task",
     "from ._scene import close, scene": "from diffcontrol.animation import close, scene",
     "from ._grid import GridAxis": "from diffcontrol.optimal import GridAxis",

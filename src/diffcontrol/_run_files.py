@@ -14,10 +14,25 @@ from . import _timing, io, policies
 from .errors import ModelFileError, RunDirectoryError
 from .evaluation import evaluate_run
 from .identify.fitted import real_params
-from .tasks import AnyTask
+from .tasks import AnyTask, ContinuousTask
+from .tasks._hooks import task_hook
 
 MODEL_FILE = "model.json"
 METRICS_FILE = "metrics.json"
+
+
+@task_hook(method="load_policy")
+def task_policy(task: AnyTask, doc: dict) -> Any:
+    """The NumPy policy of a ``model.json`` document (what ``diffcontrol.load`` returns); a
+    task changes it with a method ``load_policy(doc)``. Default: a ``NumpyPolicy``,
+    ``policy(obs) -> Gymnasium action``; for a continuous-time task a ``StatePolicy``,
+    ``policy(state) -> action`` on the physical state."""
+    return policies.NumpyPolicy(doc)
+
+
+@task_policy.register(ContinuousTask)
+def _state_policy(task: ContinuousTask, doc: dict) -> Any:
+    return policies.StatePolicy(doc)
 
 
 @dataclasses.dataclass
@@ -47,14 +62,14 @@ class Run:
     """Results the task's hooks share (e.g. one reference solve for evaluation and plots)."""
     loader: Callable[[AnyTask, dict], Any] | None = dataclasses.field(default=None, repr=False)
     """Builds ``policy`` from ``(task, model)``: ``runs.load_policy`` for a run read back (a
-    planner's too); ``None``: the task's ``load_policy``."""
+    planner's too); ``None``: the task's (``task_policy``)."""
 
     @functools.cached_property
     def policy(self) -> Any:
         """The policy of ``model``, built when first used."""
         if self.loader is not None:
             return self.loader(self.task, self.model)
-        return self.task.load_policy(self.model)
+        return task_policy(self.task, self.model)
 
     @property
     def feedback(self) -> Any:
@@ -138,7 +153,9 @@ def save_run(
     run = Run(task, result.controller, result.config, params, doc, metrics, real)
     if getattr(result, "policy", None) is not None:  # built already: not built again
         run.__dict__["policy"] = result.policy
-    if final_eval != 0 or not task.final_eval_skippable:
+    # A task whose final evaluation is part of what a run reports, its pictures drawn from it
+    # anyway (a reference solve), declares ``final_eval_skippable = False``.
+    if final_eval != 0 or not getattr(task, "final_eval_skippable", True):
         t0 = time.perf_counter()
         with _timing.phase(timings, "evaluate"):
             ev = evaluate_run(task, run, episodes=final_eval, seed=0)

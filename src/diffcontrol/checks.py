@@ -171,7 +171,7 @@ def check_task(
     finiteness, same key same result), then, for a discrete-time task with a Gymnasium twin,
     parity: from ``states`` reset states, ``steps`` steps each with random valid actions
     while the episode lasts; before every step the twin is put into the task's state
-    (``task.set_gym_state``) and stepped with ``task.gym_action(action)``, and its
+    (``set_gym_state``) and stepped with ``task.gym_action(action)``, and its
     observation, reward and termination must match ``observe(next_state)``, the reward and
     ``terminated`` within ``|ours - theirs| <= atol + rtol * |theirs|`` (termination exactly).
     The trajectory goes on from the task's own next state, so errors do not accumulate.
@@ -180,9 +180,9 @@ def check_task(
         task: the task (an instance, e.g. ``diffcontrol.make("pendulum")`` or your own).
         params: its physical parameters; the nominal ones when omitted. The twin must
             simulate the same system (``env_kwargs``).
-        env_id: the Gymnasium id of the twin; ``task.make_gym_env()`` (``task.gym_id``) when
+        env_id: the Gymnasium id of the twin; ``make_gym_env`` (``task.gym_id``) when
             omitted. Parity is skipped for a task with neither.
-        env_kwargs: keyword arguments of ``gymnasium.make`` (or ``task.make_gym_env``).
+        env_kwargs: keyword arguments of ``gymnasium.make`` (or ``make_gym_env``).
         states: reset states (the batch of the contract checks, the episodes of parity).
         steps: steps compared from each reset state (fewer if the episode terminates).
         seed: the seed of every key, action and controller of the checks.

@@ -11,7 +11,7 @@ standard episode length as Gymnasium's ``max_episode_steps``.
 Spaces follow the task's action head:
 
 - ``sign`` (CartPole): ``Discrete(2)``; action 1 is the push ``+1`` (right), 0 is ``-1``, as
-  ``task.gym_action`` maps a controller's output.
+  ``gym_action`` maps a controller's output.
 - bounded heads (``tanh``, ``sigmoid``): ``Box(action_low, action_high)``; actions outside the
   box are clipped to it (the heads never leave it; Pendulum's plant clips the torque itself).
 - ``linear`` with no bounds (the unclipped pendulum): an unbounded ``Box``.
@@ -35,7 +35,7 @@ import jax.numpy as jnp
 import numpy as np
 from gymnasium import spaces
 
-from . import _registry
+from . import _gym, _registry
 from . import tasks as _tasks
 from ._registry import NAMESPACE, VERSION, env_name
 from .errors import ConfigError
@@ -121,14 +121,14 @@ class TaskEnv(gymnasium.Env):
         self.task = task
         p = task.default_params() if params is None else params
         self.params = jax.tree.map(lambda x: jnp.asarray(x, dtype=float), p)
-        self.observation_space = task.observation_space()
-        self.action_space = task.action_space()
+        self.observation_space = _gym.observation_space(task)
+        self.action_space = _gym.action_space(task)
         self._reset, self._step = _compiled(task, self.params, params is None)
         self.state: jax.Array | None = None
 
     def task_action(self, action: Any) -> np.ndarray:
-        """The task's action vector for a Gymnasium action (``task.action_from_gym``)."""
-        return self.task.action_from_gym(action)
+        """The task's action vector for a Gymnasium action (``action_from_gym``)."""
+        return _gym.action_from_gym(self.task, action)
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)

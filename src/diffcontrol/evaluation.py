@@ -9,10 +9,10 @@ from typing import Any
 
 import numpy as np
 
-from . import _jax_setup
+from . import _gym, _jax_setup
 from .envs import make_env
 from .errors import ConfigError, DiffcontrolError
-from .rollout import solve_closed_loop
+from .rollout import force_fn, solve_closed_loop
 from .tasks import ContinuousTask, Task
 from .tasks._hooks import task_hook
 
@@ -134,6 +134,11 @@ def evaluate(
     return EvalResult(label, seed, returns, lengths)
 
 
+DEFAULT_EPISODES = 100
+"""How many episodes (or situations) the final evaluation of ``diffcontrol train`` runs, unless
+the task declares its own ``default_eval_episodes``."""
+
+
 @task_hook
 def evaluate_run(task: Any, run: Any, episodes: int | None = None, seed: int = 0) -> Any:
     """Judge a trained controller (a ``diffcontrol.runs.Run``): the final evaluation of
@@ -147,7 +152,7 @@ def evaluate_run(task: Any, run: Any, episodes: int | None = None, seed: int = 0
     defines its own (the built-in swing-ups' reference solve). A task overrides it as
     ``tasks._hooks`` says.
     """
-    n = episodes or task.default_eval_episodes
+    n = episodes or getattr(task, "default_eval_episodes", DEFAULT_EPISODES)
     return evaluate(run.policy, task, episodes=n, seed=seed, real=run.real_env)
 
 
@@ -276,7 +281,7 @@ def eval_environment(task: Task, real: tuple[str, dict | None] | None) -> tuple[
     """The environment to evaluate in and its label: the task's own, or ``real``
     (``(env_id, env_kwargs)``, labelled ``env_id(k=v, ...)``)."""
     if real is None:
-        return task.make_gym_env(), task.gym_label
+        return _gym.make_gym_env(task), _gym.gym_label(task)
     env_id, kwargs = real
     args = ", ".join(
         f"{k}={v!r}" if isinstance(v, str) else f"{k}={v}" for k, v in (kwargs or {}).items()
@@ -416,7 +421,7 @@ def simulate_continuous(
                 task.vector_field,
                 task.initial_state(p),
                 ts,
-                (p, task.force_fn(ctrl)),
+                (p, force_fn(task, ctrl)),
                 solver="dopri8",
                 rtol=REFERENCE_RTOL,
                 atol=REFERENCE_ATOL,

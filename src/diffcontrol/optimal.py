@@ -34,6 +34,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, PyTree
 
+from . import _gym
 from .errors import ConfigError
 from .evaluation import eval_environment
 from .tasks._grid import GridAxis
@@ -270,18 +271,18 @@ def optimal_return(
 ) -> OptimumResult:
     """The reference optimum of ``task`` on Gymnasium reset seeds: the greedy controller of
     the grid dynamic program (``solve``, or the given ``table``) run in the task's Gymnasium
-    environment (``task.make_gym_env()``, for Pendulum Gymnasium's own ``Pendulum-v1``), all
+    environment (``make_gym_env``, for Pendulum Gymnasium's own ``Pendulum-v1``), all
     episodes in lockstep with one batched controller call per step.
 
     The controller sees Gymnasium's observations and recovers the state with
-    ``task.state_from_observation``; the returns are Gymnasium's rewards.
+    ``state_from_observation``; the returns are Gymnasium's rewards.
 
     Args:
         params: the physical parameters to solve with (default the task's nominal ones);
             ignored with ``table`` (solved with its own).
         real: ``(env_id, env_kwargs)`` of another Gymnasium environment to run the episodes
             in, the system ``params`` describe (e.g. ``("diffcontrol/PendulumFriction-v0",
-            {"g": 12.0, "friction": 0.1})`` with ``task.params_of_env`` of the same), as
+            {"g": 12.0, "friction": 0.1})`` with ``params_of_env`` of the same), as
             ``evaluation.evaluate``'s ``real``; the optimum is then that system's.
     """
     seeds = [int(s) for s in seeds]
@@ -290,7 +291,7 @@ def optimal_return(
     table = solve(task, points, levels, params=params) if table is None else table
     act = jax.jit(jax.vmap(table.action, in_axes=(None, 0)))
     value = jax.jit(jax.vmap(table.value, in_axes=(None, 0)))
-    to_state = jax.jit(jax.vmap(task.state_from_observation))
+    to_state = jax.jit(jax.vmap(_gym.state_from_observation.bound(task)))
     envs, labels = zip(*(eval_environment(task, real) for _ in seeds))
     try:
         obs = np.stack([env.reset(seed=s)[0] for env, s in zip(envs, seeds)])
@@ -302,7 +303,9 @@ def optimal_return(
             for i, env in enumerate(envs):
                 if not running[i]:
                     continue
-                obs[i], reward, terminated, truncated, _ = env.step(task.gym_action(actions[i]))
+                obs[i], reward, terminated, truncated, _ = env.step(
+                    _gym.gym_action(task, actions[i])
+                )
                 returns[i] += float(reward)
                 running[i] = not (terminated or truncated)
             if not running.any():

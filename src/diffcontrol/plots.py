@@ -88,8 +88,10 @@ def rollout(recording: Recording, task: Task, path: str | Path) -> Path:
     """States and actions of one recorded episode against time."""
     states, actions = recording.states, recording.actions
     t = np.arange(states.shape[0]) * recording.dt
-    labels = list(task.state_labels) or [f"state {i}" for i in range(states.shape[1])]
-    alabels = list(task.action_labels)
+    labels = list(getattr(task, "state_labels", ())) or [
+        f"state {i}" for i in range(states.shape[1])
+    ]
+    alabels = list(getattr(task, "action_labels", ()))
     if len(alabels) != actions.shape[1]:  # e.g. the one-hot choices of a discrete head
         alabels = [f"action {i}" for i in range(actions.shape[1])]
     n = states.shape[1] + actions.shape[1]

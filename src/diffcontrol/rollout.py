@@ -17,7 +17,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int, PRNGKeyArray, PyTree
 
 from .config import GRADIENT_METHODS
-from .tasks import Task
+from .tasks import ContinuousTask, Task
 
 __all__ = [
     "GRADIENT_METHODS",
@@ -25,6 +25,7 @@ __all__ = [
     "ODESolution",
     "Trajectory",
     "batch_returns",
+    "force_fn",
     "rollout",
     "solve_closed_loop",
     "value_and_grad",
@@ -129,6 +130,22 @@ and no command's start-up waits for it."""
 # - ``forward``: forward mode through the solver's steps (``diffrax.ForwardMode`` under
 #   ``jax.jacfwd``): one tangent per weight, so the cost grows with the number of weights; the
 #   cheapest for a few dozen (the post's 41-weight controller).
+
+
+class StateFeedback(eqx.Module):
+    """``force_fn(t, state) = controller(observe(state))[0]``, the weights as PyTree leaves."""
+
+    controller: Any
+    observe: Any = eqx.field(static=True)
+
+    def __call__(self, t: Array, state: Array) -> Array:
+        return self.controller(self.observe(state))[0]
+
+
+def force_fn(task: ContinuousTask, controller: Any) -> StateFeedback:
+    """The controller as the closed loop's input ``(t, state) -> action``: state feedback
+    through ``task.observe``, as a PyTree whose leaves are the controller's weights."""
+    return StateFeedback(controller, task.observe)
 
 
 class ODESolution(eqx.Module):

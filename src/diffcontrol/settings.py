@@ -25,7 +25,7 @@ MIN_TRANSITIONS = {"hybrid": 200, "neural": 1000}
 200): a hybrid model only learns what the physics misses, a black box learns everything."""
 CONTROLLERS = ("train", "plan")
 """What acts on the real system in a loop: an MLP trained through the fitted model, or a
-planner through it (``Task.loop_planner``)."""
+planner through it (``mpc._config.loop_planner``)."""
 
 
 class _Settings:
@@ -353,15 +353,6 @@ class PlanConfig(_Settings):
             value = getattr(self, name)
             if value is not None and (isinstance(value, bool) or not 0 < value < math.inf):
                 raise ConfigError(f"{name} must be a finite number > 0, got {value!r}")
-
-    def for_task(self, task: Any) -> PlanConfig:
-        """These settings with what they leave open (``dt``, ``action_bound``: ``None``)
-        taken from the task's own planning defaults (``task.default_plan_config()``): what
-        ``diffcontrol plan`` stores, so that a stored planner does not change with them."""
-        own = task.default_plan_config()
-        return self.replace(
-            **{n: getattr(own, n) for n in ("dt", "action_bound") if getattr(self, n) is None}
-        )
 
     @property
     def solver_iterations(self) -> int:

@@ -11,6 +11,7 @@ import numpy as np
 from jaxtyping import PyTree
 
 from ..errors import TaskCheckError
+from ..rollout import force_fn
 from ..tasks import AnyTask, ContinuousTask, Task
 from .util import ACTION_SCALE, controller_for, fail, first_line, fmt, same, valid_action
 
@@ -180,7 +181,7 @@ def _continuous_contract(task: ContinuousTask, params: PyTree, n: int, seed: int
     name = type(task).__name__
 
     def field(controller, t, y, params):
-        return task.vector_field(t, y, (params, task.force_fn(controller)))
+        return task.vector_field(t, y, (params, force_fn(task, controller)))
 
     def probe(key, params):
         k_ctrl, k_t = jax.random.split(key)

@@ -2,7 +2,7 @@
 (``diffcontrol.check_task``).
 
 The general form of the comparison ``tests/test_systems_vs_gymnasium.py`` runs for the
-built-in tasks: any task whose twin can be put into one of its states (``Task.set_gym_state``)
+built-in tasks: any task whose twin can be put into one of its states (``_gym.set_gym_state``)
 is checked the same way, by ``diffcontrol.check_task``.
 """
 
@@ -16,6 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import PyTree
 
+from .. import _gym
 from ..errors import TaskCheckError
 from ..tasks import Task
 from .util import ACTION_SCALE, fail, fmt, valid_action
@@ -43,7 +44,7 @@ def check_parity(
         TaskCheckError: the first step where the observation, the reward or the termination
             differ beyond the tolerance, or the twin rejects the task's action.
     """
-    env = gymnasium.make(env_id, **env_kwargs) if env_id else task.make_gym_env(**env_kwargs)
+    env = gymnasium.make(env_id, **env_kwargs) if env_id else _gym.make_gym_env(task, **env_kwargs)
     label = env_id or task.gym_id
     try:
         return label, *_compare(task, params, env, label, states, steps, seed, rtol, atol)
@@ -92,8 +93,8 @@ def _compare(task, params, env, label, states, steps, seed, rtol, atol):
             where = (
                 f"from state {fmt(s[i, t])} with action {fmt(a[i, t])} (reset state {i}, step {t})"
             )
-            task.set_gym_state(env, s[i, t])
-            action = task.gym_action(a[i, t])
+            _gym.set_gym_state(task, env, s[i, t])
+            action = _gym.gym_action(task, a[i, t])
             try:
                 gym_obs, gym_reward, gym_term, _, _ = env.step(action)
             except Exception as e:

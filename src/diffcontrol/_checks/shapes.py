@@ -8,6 +8,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import PyTree
 
+from ..rollout import force_fn
 from ..tasks import AnyTask, ContinuousTask, Task
 from .util import controller_for, fail, trace
 
@@ -116,7 +117,7 @@ def _continuous_shapes(task: ContinuousTask, params: PyTree) -> jax.ShapeDtypeSt
 
     def field(t, y, params):
         controller = controller_for(task, jax.random.PRNGKey(0))
-        return task.vector_field(t, y, (params, task.force_fn(controller)))
+        return task.vector_field(t, y, (params, force_fn(task, controller)))
 
     t = jax.ShapeDtypeStruct((), y0.dtype)
     inputs = f"t, a state of shape {y0.shape} and args (params, force_fn)"

@@ -11,6 +11,7 @@ import numpy as np
 
 from ..controllers import MLPController, apply_head
 from ..errors import TaskCheckError
+from ..tasks import controller_kwargs
 
 ACTION_SCALE = 2.0
 """Random valid actions are the task's action head applied to raw outputs ``~ N(0, 2^2)``:
@@ -74,4 +75,4 @@ def valid_action(task: Any, raw: jax.Array) -> jax.Array:
 
 def controller_for(task: Any, key: jax.Array) -> MLPController:
     """A small random controller of the task's shape (one hidden layer of 8)."""
-    return MLPController(key, hidden=(8,), **task.controller_kwargs())
+    return MLPController(key, hidden=(8,), **controller_kwargs(task))

@@ -19,7 +19,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from .. import _jax_setup, envs, io
+from .. import _gym, _jax_setup, envs, io
 from .._shell import command as shell_command
 from ..errors import ConfigError, Interrupted, RunDirectoryError
 from ..settings import CompareConfig
@@ -146,7 +146,7 @@ def _compare(
         "eval_episodes": config.eval_episodes,
         "final_episodes": config.final_episodes,
         "eval_seed": config.eval_seed,
-        "eval_env": task.gym_label if task.gym_id else envs.env_id(task),
+        "eval_env": _gym.gym_label(task) if task.gym_id else envs.env_id(task),
     }
     out = _prepare(out_dir, settings, resume)
     runs_dir = out / "runs"

@@ -24,10 +24,11 @@ from collections.abc import Callable
 
 import numpy as np
 
-from .. import policies
+from .. import _gym, policies
 from ..errors import ConfigError
 from ..evaluation import evaluate
 from ..mpc import PlannerPolicy, distil, planner_from_config
+from ..mpc._config import loop_planner
 from ..settings import PlanConfig
 from ..tasks import Task
 from .baselines import rl_setup
@@ -42,10 +43,10 @@ DISTIL: dict = {}
 
 def planning_methods(task: Task) -> list[str]:
     """``PLANNING_METHODS`` where ``task`` can take them: action bounds, a state grid, and a
-    loop planner with a grid value (the task's choice: ``Task.loop_planner``; the mountain
+    loop planner with a grid value (the task's choice: ``loop_planner``; the mountain
     car, with a grid, declines it)."""
     bounded = task.action_low is not None and task.action_high is not None
-    grid = task.state_grid(task.default_params()) and task.loop_planner().value_grid
+    grid = task.state_grid(task.default_params()) and loop_planner(task).value_grid
     return list(PLANNING_METHODS) if bounded and grid else []
 
 
@@ -65,7 +66,7 @@ def run_planning(
     if "planner" not in memo:
         t0 = time.perf_counter()
         policy = PlannerPolicy(planner_from_config(task, PLANNER, progress=say))
-        policy(np.asarray(task.observation_space().sample()))  # compiled here, counted here
+        policy(np.asarray(_gym.observation_space(task).sample()))  # compiled here, counted here
         memo["planner"], memo["seconds"] = policy, time.perf_counter() - t0
     policy = memo["planner"]
     if method == "planner":

@@ -38,17 +38,36 @@ from typing import Any
 
 import numpy as np
 
-from .. import io
+from .. import _gym, io
 from ..errors import ConfigError, RunDirectoryError
 from ..runs import loop
-from ..settings import CONTROLLERS, LoopConfig
+from ..settings import CONTROLLERS, MIN_TRANSITIONS, LoopConfig
 from ..tasks import Task, make, names, resolve
+from ..tasks._hooks import task_hook
 from .baselines import rl_setup
 from .report import machine, plot, summarize, table
 from .run import first_reached
 
 LABELS = {"params": "grey box", "hybrid": "hybrid", "neural": "neural"}
 """The rows' names: ``diffcontrol (grey box)`` and so on."""
+
+
+@task_hook
+def real_steps_per_round(task: Task, model: str) -> int:
+    """The real environment steps a round of ``compare --real`` records to learn ``model``
+    (``params``, ``hybrid`` or ``neural``; episodes until the budget is spent, the last cut
+    short). Default: one standard episode (``episode_length``), and at least the transitions
+    a network is fitted to (``identify.MIN_TRANSITIONS``: 1,000 for a network alone), i.e.
+    200/200/1,000 on the Pendulum. A task whose episodes end early or run long chooses its
+    own."""
+    return max(task.episode_length, MIN_TRANSITIONS.get(model, 0))
+
+
+def real_start(task: Task) -> dict[str, float]:
+    """The wrong physics ``compare --real`` starts a grey box and a hybrid from: the task's
+    ``real_start`` declaration of ``(name, value)`` pairs, so that they are not handed the
+    truth (none: the nominal parameters, the truth when the real system is the task's own)."""
+    return dict(getattr(task, "real_start", ()))
 
 
 def run_real_comparison(
@@ -91,7 +110,7 @@ def run_real_comparison(
             1, one network; the grey box has none).
         controllers: what acts on the real system each round, each a row of its own:
             ``train`` (an MLP trained through the fitted model) and/or ``plan`` (a planner
-            through it, ``task.loop_planner()``).
+            through it, ``loop_planner``).
         explore_noise: action noise while a controller records (``runs.loop``).
         updates: gradient updates of each round's training (default the task's, which stops
             early at its target return).
@@ -123,8 +142,8 @@ def run_real_comparison(
         raise ConfigError(
             f"--controllers {','.join(controllers)}: choose among {','.join(CONTROLLERS)}"
         )
-    steps = {m: task.real_steps_per_round(m) for m in models} | (steps or {})
-    start = dict(task.real_start if start is None else start)
+    steps = {m: real_steps_per_round(task, m) for m in models} | (steps or {})
+    start = real_start(task) if start is None else dict(start)
     target = max(thresholds)  # returns: the highest is the hardest
     rl = _rl_runs(rl_results, task.name, eval_seed) if rl_results else []
     out = Path(out_dir)
@@ -208,7 +227,7 @@ def _can_learn(task: Task) -> bool:
     return (
         isinstance(task, Task)
         and bool(getattr(rl_setup(task), "thresholds", ()))
-        and type(task).state_from_observation is not Task.state_from_observation
+        and _gym.knows_state(task)
     )
 
 

@@ -31,7 +31,7 @@ from typing import Any
 import gymnasium
 import numpy as np
 
-from .. import envs, policies
+from .. import _gym, envs, policies
 from ..errors import ConfigError
 from ..tasks import Task
 from ..training import resolve_config, train
@@ -42,7 +42,7 @@ def make_eval_env(task: Task) -> gymnasium.Env:
     """The environment every method is evaluated (and RL trained) in: Gymnasium's own where
     the task has one (``Pendulum-v1``, ``CartPole-v1``), else ``diffcontrol/<Name>-v0``."""
     if task.gym_id is not None:
-        return task.make_gym_env()
+        return _gym.make_gym_env(task)
     return gymnasium.make(envs.env_id(task))
 
 

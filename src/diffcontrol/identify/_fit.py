@@ -71,7 +71,9 @@ def _within_ranges(task: Any, result: FitResult) -> FitResult:
     task's ``check_params`` refuses a negative friction). Positive parameters are fitted as
     ``exp(z)`` and cannot leave their range."""
     below = [
-        n for n in result.names if n in task.nonnegative_params and result.values.get(n, 0.0) < 0
+        n
+        for n in result.names
+        if n in getattr(task, "nonnegative_params", ()) and result.values.get(n, 0.0) < 0
     ]
     if not below or result.model_type != "params":
         return result

@@ -23,6 +23,7 @@ from ..errors import ConfigError
 from ..tasks import Task
 from ..tasks._hooks import task_hook
 from ._shooting import HORIZONS, FitResult
+from ._task import fit_parameter_names
 from .data import read_trajectories
 from .ensemble import Ensemble, ensemble_to_dict, mean_spread
 from .hybrid import fit_model, model_task
@@ -86,7 +87,7 @@ class TrajectoryRoute:
         return data.split(n)
 
     def announce(self, task, model_type, train, held_out, data_file, settings) -> str:
-        names = settings.get("names") or task.fit_parameter_names
+        names = settings.get("names") or fit_parameter_names(task)
         what = ", ".join(names) if model_type == "params" and names else f"a {model_type} model"
         return (
             f"fitting {what} of {task.name} to {train.num_episodes} episode(s) "

@@ -20,9 +20,10 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from .. import _gym
 from ..errors import ConfigError, ModelFileError
 from ..io import read_json, scalar_arguments
-from ..tasks import Task
+from ..tasks import Task, check_params
 from ..tasks._hooks import task_hook
 from ._shooting import MODEL_TYPES, NETWORK_MODELS
 from .ensemble import ensemble_from_dict
@@ -115,7 +116,7 @@ def network_sizes(task: Any) -> tuple[int, int]:
     """The inputs (observation and action) and outputs (the state) of the network of a
     discrete-time task's hybrid or neural model."""
     obs = jax.ShapeDtypeStruct((task.observation_size,), jnp.float32)
-    state = jax.eval_shape(task.state_from_observation, obs)
+    state = jax.eval_shape(_gym.state_from_observation.bound(task), obs)
     return task.observation_size + task.action_size, int(state.shape[0])
 
 
@@ -247,7 +248,7 @@ def real_params(task: Any, real: dict | None) -> Any:
     ):
         raise ModelFileError(f"the real system's parameters {values!r} are not finite numbers")
     params = fitted_physics(task, {"task": task.name, "all_parameters": values})
-    task.check_params(params)  # the ranges, as for --param
+    check_params(task, params)  # the ranges, as for --param
     return params
 
 

@@ -17,6 +17,7 @@ import numpy as np
 import optax
 from jaxtyping import Array
 
+from .. import _gym
 from ..errors import ConfigError, InsufficientDataError
 from ..settings import MIN_TRANSITIONS
 from ..tasks._base import Task
@@ -198,7 +199,7 @@ def _fit_model(task, data, model_type, params, window, steps, learning_rate, hid
     physics = f64(task.default_params() if params is None else params)
     obs, actions, next_obs = (np.asarray(a, np.float64) for a in data.transitions())
     actions = np.asarray(task_actions(task, actions), np.float64)  # a Discrete index: the task's
-    to_state = jax.jit(jax.vmap(task.state_from_observation))
+    to_state = jax.jit(jax.vmap(_gym.state_from_observation.bound(task)))
     states, next_states = np.asarray(to_state(obs)), np.asarray(to_state(next_obs))
     if model_type == "hybrid":
         step = jax.jit(jax.vmap(lambda s, a: task.step(physics, s, a)[0]))

@@ -44,6 +44,7 @@ from ._shooting import (
     lm_refine,
     standard_errors,
 )
+from ._task import data_columns, fit_parameter_names
 from .data import TrajectoryData, parse_column
 
 MIN_TRANSITIONS_NETWORK = 250
@@ -122,7 +123,7 @@ def check_data(task: Any, data: TrajectoryData) -> float:
         DataFileError: other columns (names or units), time not in seconds, no fixed step.
     """
     where = data.metadata.get("system") or data.metadata.get("env_id") or "the data"
-    expected = task.data_columns()
+    expected = data_columns(task)
     got = [parse_column(c) for c in (*data.observation_columns, *data.action_columns)]
     want = [parse_column(c) for c in (*expected[0], *expected[1])]
     if got != want:
@@ -215,7 +216,7 @@ def fit_vector_field(
     if not (math.isfinite(weight_decay) and weight_decay >= 0):
         raise ConfigError(f"weight_decay must be >= 0, got {weight_decay!r}")
     dt = check_data(task, data)
-    names = tuple(task.fit_parameter_names)
+    names = fit_parameter_names(task)
     need = (
         MIN_TRANSITIONS_PER_PARAMETER * len(names)
         if model_type == "params"
@@ -341,7 +342,7 @@ def prediction_errors(
         units), ``rmse_by_column`` and ``starts`` (0 and NaN where no episode is long enough).
     """
     dt = check_data(task, data)
-    names = [parse_column(c)[1] for c in task.data_columns()[0]]
+    names = [parse_column(c)[1] for c in data_columns(task)[0]]
     out = {}
     with jax.enable_x64(True):
         m = _f64(model)

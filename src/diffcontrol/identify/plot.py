@@ -16,6 +16,7 @@ import jax.numpy as jnp  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from .. import _gym
 from ..io import write_figure  # noqa: E402
 from .data import TrajectoryData  # noqa: E402
 from .ode import predict as ode_predict  # noqa: E402
@@ -31,7 +32,7 @@ def task_predictor(task: Any, params: Any) -> Predictor:
 
     @eqx.filter_jit  # one program per segment length, not one per segment
     def open_loop(p, obs0, actions):
-        return predict(task, p, task.state_from_observation(obs0), actions)
+        return predict(task, p, _gym.state_from_observation(task, obs0), actions)
 
     def run(obs0: np.ndarray, actions: np.ndarray) -> np.ndarray:
         with jax.enable_x64(True):

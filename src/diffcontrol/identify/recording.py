@@ -2,7 +2,7 @@
 
 ``record(env_id, ...)`` records any environment; with ``task=`` the environment is the real
 system of a task (its spaces must match the task's) and the columns are named by the task
-(``task.data_columns()``), and without it by the task that names that environment's columns
+(``data_columns``), and without it by the task that names that environment's columns
 (``data.known_columns()``). ``record_data(source, ...)`` is ``diffcontrol record``: a task's
 own recording (``record_task``: Gymnasium episodes by default; a task may record its own
 simulator, e.g. one-step episodes of a single measured outcome) or a plain Gymnasium id,
@@ -21,7 +21,7 @@ import gymnasium
 import numpy as np
 from gymnasium import spaces
 
-from .. import io, tasks
+from .. import _gym, io, tasks
 from .._version import __version__
 from ..envs import TaskEnv, make_env
 from ..envs import env_id as own_id
@@ -31,6 +31,7 @@ from ..policies import NumpyPolicy, read_model
 from ..settings import RecordConfig
 from ..tasks import Task
 from ..tasks._hooks import task_hook
+from ._task import data_columns, data_file_name, step_seconds
 from .data import DISCRETE_UNIT, TrajectoryData, known_columns, write_trajectories
 
 
@@ -42,7 +43,7 @@ def _time_step(env: gymnasium.Env) -> float | None:
         if isinstance(getattr(u, name, None), int | float):
             return float(getattr(u, name))
     if isinstance(u, TaskEnv):
-        return u.task.step_seconds(u.params)
+        return step_seconds(u.task, u.params)
     return None
 
 
@@ -83,7 +84,7 @@ def check_spaces(task: Any, env_id: str, env: gymnasium.Env) -> None:
         ConfigError: the spaces differ (naming both).
     """
     obs, act = env.observation_space, env.action_space
-    want = task.action_space()
+    want = _gym.action_space(task)
     same_obs = isinstance(obs, spaces.Box) and obs.shape == (task.observation_size,)
     if isinstance(want, spaces.Discrete):
         same_act = isinstance(act, spaces.Discrete) and act.n == want.n
@@ -193,7 +194,7 @@ def record(
     obs_columns, act_columns = columns_for(env_id, env)
     if task is not None:
         check_spaces(task, env_id, env)
-        obs_columns, act_columns = task.data_columns()
+        obs_columns, act_columns = data_columns(task)
     limit = max_steps or (env.spec.max_episode_steps if env.spec else None)
     if limit is None:
         raise ConfigError(f"{env_id} has no episode step limit; pass max_steps")
@@ -410,7 +411,9 @@ def record_data(
     env_id: str | None = source
     if task is None and source in tasks.names():
         task, env_id = tasks.make(source), None
-    path = Path(out or (task.data_file_name(env_id) if task else source.replace("/", "-") + ".csv"))
+    path = Path(
+        out or (data_file_name(task, env_id) if task else source.replace("/", "-") + ".csv")
+    )
     check_data_file(path, force)
     options = {f.name: getattr(config, f.name) for f in dataclasses.fields(config)}
     episodes = options.pop("episodes")

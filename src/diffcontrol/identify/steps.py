@@ -3,7 +3,7 @@
 The model is the task's own simulator (``task.step``) with some of its parameters unknown.
 They are fitted by differentiating the simulator through **short windows** (multiple
 shooting): from every recorded observation ``y_t`` of an episode (turned into a state by
-``task.state_from_observation``; for the Pendulum ``theta = atan2(sin, cos)``), the model is
+``state_from_observation``; for the Pendulum ``theta = atan2(sin, cos)``), the model is
 stepped ``window`` times with the recorded actions ``u_t .. u_{t+window-1}``, and the loss is
 the mean squared difference between the predicted and the recorded observations
 ``y_{t+1} .. y_{t+window}``, over every start of every episode. Short windows keep the
@@ -41,9 +41,9 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
+from .. import _gym
 from .._shell import command
 from ..errors import ConfigError, DataFileError, InsufficientDataError
-from ..tasks._base import Task
 from ._shooting import (
     HORIZONS,
     MIN_TRANSITIONS_PER_PARAMETER,
@@ -54,6 +54,7 @@ from ._shooting import (
     set_params,
     standard_errors,
 )
+from ._task import data_columns, fit_parameter_names
 from .data import TrajectoryData, parse_column
 
 
@@ -71,12 +72,12 @@ def check_data(task: Any, data: TrajectoryData) -> None:
         ConfigError: the task cannot be fitted to recorded observations.
     """
     where = data.metadata.get("env_id") or "the data"
-    if type(task).state_from_observation is Task.state_from_observation:
+    if not _gym.knows_state(task):
         raise ConfigError(
             f"task {task.name!r} cannot be fitted to recorded data yet (it does not reconstruct "
             "its state from observations: define its state_from_observation); fit the pendulum"
         )
-    expected = task.data_columns()
+    expected = data_columns(task)
     want = [parse_column(c) for c in (*expected[0], *expected[1])]
     got = [parse_column(c) for c in (*data.observation_columns, *data.action_columns)]
     if got != want:
@@ -114,14 +115,14 @@ def check_within_spaces(task: Any, data: TrajectoryData, where: str) -> None:
     """
     from gymnasium import spaces
 
-    observation_space = task.observation_space()
+    observation_space = _gym.observation_space(task)
     if task.gym_id and ":" not in task.gym_id:  # a Gymnasium twin: its bounds are the system's
-        twin = task.make_gym_env()
+        twin = _gym.make_gym_env(task)
         observation_space = twin.observation_space
         twin.close()
     tables = (
         (data.observations, observation_space, data.observation_columns, "observation"),
-        (data.actions, task.action_space(), data.action_columns, "action"),
+        (data.actions, _gym.action_space(task), data.action_columns, "action"),
     )
     for (values, space, columns, what), share in zip(tables, (OBSERVATION_SLACK, 0.0), strict=True):
         if isinstance(space, spaces.Discrete):
@@ -151,13 +152,13 @@ def check_within_spaces(task: Any, data: TrajectoryData, where: str) -> None:
 
 def task_actions(task: Any, actions: np.ndarray) -> np.ndarray:
     """Recorded actions [T, m] as the task's own action vectors: a Gymnasium ``Discrete``
-    index becomes what the task's step takes (``task.action_from_gym``: the push ``±1`` of a
+    index becomes what the task's step takes (``action_from_gym``: the push ``±1`` of a
     sign head, the one-hot choice of an argmax head); other actions are kept as recorded."""
     from gymnasium import spaces
 
-    if not isinstance(task.action_space(), spaces.Discrete):
+    if not isinstance(_gym.action_space(task), spaces.Discrete):
         return actions
-    vectors = [task.action_from_gym(int(a[0])) for a in np.asarray(actions)]
+    vectors = [_gym.action_from_gym(task, int(a[0])) for a in np.asarray(actions)]
     return np.stack(vectors) if vectors else np.zeros((0, task.action_size))
 
 
@@ -209,7 +210,7 @@ def _windows(task, data: TrajectoryData, window: int) -> Windows | None:
     extra = padded_size(count) - count  # padding rows: copies of the first window
     obs0, acts, outs = (np.stack([*x, *[x[0]] * extra]) for x in (starts, actions, targets))
     mask = np.concatenate([np.ones(count), np.zeros(extra)])
-    states = jax.vmap(task.state_from_observation)(jnp.asarray(obs0))
+    states = jax.vmap(_gym.state_from_observation.bound(task))(jnp.asarray(obs0))
     return Windows(states, jnp.asarray(acts), jnp.asarray(outs), jnp.asarray(mask))
 
 
@@ -268,7 +269,7 @@ def fit_parameters(
         InsufficientDataError: fewer than ``MIN_TRANSITIONS_PER_PARAMETER`` transitions per
             fitted parameter, or no episode longer than ``window``.
     """
-    names = tuple(names or task.fit_parameter_names)
+    names = tuple(names or fit_parameter_names(task))
     known = parameter_names(task)
     bad = [n for n in names if n not in known]
     if bad or not names or len(set(names)) != len(names):

@@ -14,10 +14,40 @@ from .. import optimal
 from ..errors import ConfigError
 from ..settings import PlanConfig
 from ..tasks._base import ContinuousTask
+from ..tasks._hooks import task_hook
 from ._discretise import DiscretisedTask, discretise
 from ._ilqr import ILQR
 from ._planner import Planner, make_planner
 from ._shooting import Shooting
+
+
+@task_hook
+def default_plan_config(task: Any) -> PlanConfig:
+    """The planner settings that ``diffcontrol plan NAME`` uses by default, options changing
+    them; default ``PlanConfig()``. A continuous-time task names its control period ``dt``
+    here, and a task without action bounds the planner's ``action_bound``."""
+    return PlanConfig()
+
+
+@task_hook
+def loop_planner(task: Any) -> PlanConfig:
+    """The planner that acts through a fitted model in ``loop --controller plan`` and in
+    ``compare --real``'s planner rows. Default: box-iLQR with H = 10 and the terminal cost
+    ``-V_0`` of a 201-point grid optimum solved through the fitted model, where the task has a
+    state grid (the Pendulum; see docs/planning.md), else ``default_plan_config``."""
+    if task.state_grid(task.default_params()):
+        return PlanConfig(horizon=10, value_grid=201)
+    return default_plan_config(task)
+
+
+def for_task(config: PlanConfig, task: Any) -> PlanConfig:
+    """``config`` with what it leaves open (``dt``, ``action_bound``: ``None``) taken from
+    the task's own planning defaults (``default_plan_config``): what ``diffcontrol plan``
+    stores, so that a stored planner does not change with them."""
+    own = default_plan_config(task)
+    return config.replace(
+        **{n: getattr(own, n) for n in ("dt", "action_bound") if getattr(config, n) is None}
+    )
 
 
 def planner_from_config(
@@ -32,9 +62,9 @@ def planner_from_config(
 
     A continuous-time task (a ``ContinuousTask``) is planned through its discrete-time view
     ``discretise(task, config.dt, config.substeps)`` (the action held for ``dt`` seconds,
-    RK4), with the task's end cost of the planning loss (``task.terminal_cost``) as the
+    RK4), with the task's end cost of the planning loss (``terminal_cost``) as the
     terminal cost unless a value network replaces it; ``dt`` and ``action_bound`` left
-    ``None`` are the task's (``PlanConfig.for_task``). Run such a planner against the ODE
+    ``None`` are the task's (``for_task``). Run such a planner against the ODE
     itself with ``ode_episode``, or wrap it as a ``SampledPlannerPolicy``.
 
     With ``config.value_grid`` the terminal cost is ``-V_0``, the value at time 0 of the task's
@@ -51,7 +81,7 @@ def planner_from_config(
             a task without a state grid, no action bounds, both a value grid and a network,
             ``dt`` or ``substeps`` for a discrete-time task, no ``dt`` for a continuous one).
     """
-    config = config.for_task(task)
+    config = for_task(config, task)
     if isinstance(task, ContinuousTask):
         if config.dt is None:
             raise ConfigError(

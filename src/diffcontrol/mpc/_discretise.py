@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 from typing import Any
 
 import equinox as eqx
@@ -34,6 +35,7 @@ from jaxtyping import Array, Float, PyTree
 from ..errors import ConfigError
 from ..rollout import solve_closed_loop
 from ..tasks._base import ContinuousTask, Task
+from ..tasks._hooks import task_hook
 
 
 class HeldAction(eqx.Module):
@@ -65,6 +67,31 @@ def rk4_hold(task: ContinuousTask, params: PyTree, y: Array, action: Array, dt: 
     return y
 
 
+def planning_losses(task: Any) -> tuple[str, ...]:
+    """The losses a planner can plan a continuous-time task with: the task's
+    ``planning_losses`` declaration (each with a ``running_cost``), none by default."""
+    return tuple(getattr(task, "planning_losses", ()))
+
+
+@task_hook
+def running_cost(task: Any, name: str) -> Callable[[PyTree, Array, Array], Array]:
+    """``rate(params, y, action)``: the cost per second of the planning loss ``name``, the
+    additive counterpart of the trajectory loss of that name (``discretise`` integrates it over
+    each control period).
+
+    Raises:
+        ConfigError: the task defines none (the default).
+    """
+    raise ConfigError(f"task {task.name!r} has no planning loss {name!r} (running_cost)")
+
+
+@task_hook
+def terminal_cost(task: Any, name: str) -> Callable[[PyTree, Array], Array] | None:
+    """``cost(params, y)`` at the end of a plan for the planning loss ``name``, or ``None``
+    (the default)."""
+    return None
+
+
 class DiscretisedTask(Task):
     """A ``ContinuousTask`` with its action held for ``dt`` seconds per step (``discretise``).
 
@@ -88,8 +115,9 @@ class DiscretisedTask(Task):
         self.action_size = task.action_size
         self.action_head = task.action_head
         self.action_low, self.action_high = task.action_low, task.action_high
-        self.losses = tuple(task.planning_losses)
-        self.state_labels, self.action_labels = task.state_labels, task.action_labels
+        self.losses = planning_losses(task)
+        self.state_labels = getattr(task, "state_labels", ())
+        self.action_labels = getattr(task, "action_labels", ())
         horizon_s = getattr(task.default_config(), "horizon_s", None)
         self.episode_length = max(1, round(horizon_s / dt)) if horizon_s else 1
 
@@ -119,19 +147,19 @@ class DiscretisedTask(Task):
 
     def step(self, params: PyTree, state: Array, action: Array):
         nxt = rk4_hold(self.continuous, params, state, action, self.dt, self.substeps)
-        rate = self.continuous.running_cost(self.losses[0])(params, state, action)
+        rate = running_cost(self.continuous, self.losses[0])(params, state, action)
         return nxt, -self.dt * rate, jnp.zeros((), bool)
 
     def step_loss(self, name: str):
         if name not in self.losses:
             raise ConfigError(f"loss={name!r} is not one of task {self.name!r}'s {self.losses}")
-        return PeriodCost(self.continuous.running_cost(name), self.dt)
+        return PeriodCost(running_cost(self.continuous, name), self.dt)
 
     def terminal_cost(self, name: str, params: PyTree | None = None):
         """``cost(state)`` at the end of a plan (the continuous task's ``terminal_cost`` with
         ``params``, default the task's), or ``None`` where it has none."""
         params = self.default_params() if params is None else params
-        end = self.continuous.terminal_cost(name)
+        end = terminal_cost(self.continuous, name)
         return None if end is None else EndCost(end, params)
 
 
@@ -178,7 +206,7 @@ def discretise(task: ContinuousTask, dt: float, substeps: int = 1) -> Discretise
         raise ConfigError(f"dt={dt!r} must be a finite number of seconds > 0, e.g. dt=0.05")
     if isinstance(substeps, bool) or not isinstance(substeps, int) or substeps < 1:
         raise ConfigError(f"substeps={substeps!r} must be an integer >= 1")
-    if not task.planning_losses:
+    if not planning_losses(task):
         raise ConfigError(
             f"task {task.name!r} has no planning losses; define its running_cost and "
             "planning_losses to plan it"

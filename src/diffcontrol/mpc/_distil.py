@@ -29,6 +29,7 @@ from ..config import TrainConfig
 from ..controllers import MLPController, head_inverse
 from ..errors import ConfigError, SolverFailed
 from ..rollout import batch_returns
+from ..tasks import controller_kwargs
 from ..training import TrainResult
 from ._planner import Planner
 
@@ -135,7 +136,7 @@ def _rms_error(controller, obs, labels, span, start, stop):
 
 def _default_controller(task: Any, config: TrainConfig, key: PRNGKeyArray) -> MLPController:
     """The task's default controller (the architecture ``train`` builds), randomly initialised."""
-    kwargs = task.controller_kwargs()
+    kwargs = controller_kwargs(task)
     if config.head:
         kwargs["head"] = config.head
     return MLPController(key, hidden=config.hidden, activation=config.activation, **kwargs)

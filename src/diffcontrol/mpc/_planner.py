@@ -193,7 +193,7 @@ def make_planner(
             ``action_high``. A task whose head makes a discrete action has none: the planner
             then plans the relaxed action within the bounds given, by default [-1, 1] for a
             ``sign`` head (the CartPole's push, the force ``u * force_mag``), and Gymnasium
-            gets ``task.gym_action`` of it (the push's sign).
+            gets ``gym_action`` of it (the push's sign).
         warm_policy: a controller ``observation -> action`` whose H-step rollout through the
             model is one more start of every solve (see ``Planner``), or ``None``.
 

@@ -8,6 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .. import _gym
 from ..evaluation import REFERENCE_ATOL, REFERENCE_RTOL
 from ._discretise import ode_closed_loop
 from ._planner import Planner
@@ -15,7 +16,7 @@ from ._planner import Planner
 
 class PlannerPolicy:
     """``policy(obs)``: one planner solve per call from the state behind the observation
-    (``task.state_from_observation``), warm-started from the previous call's shifted plan.
+    (``state_from_observation``), warm-started from the previous call's shifted plan.
 
     Unlike the NumPy policies of ``model.json``, this one needs JAX at run time: every call runs
     one compiled solve (compiled on the first call). Call ``reset()`` at the start of each
@@ -28,7 +29,7 @@ class PlannerPolicy:
     def __init__(self, planner: Planner):
         self.planner = planner
         self.task = planner.task
-        to_state = self.task.state_from_observation
+        to_state = _gym.state_from_observation.bound(self.task)
         # The planner is closed over (its arrays become constants of the program), so a call
         # passes two small arrays instead of flattening the planner's PyTree every step.
         self._control = jax.jit(
@@ -51,15 +52,15 @@ class PlannerPolicy:
         return self._last[1]
 
     def __call__(self, obs: np.ndarray) -> Any:
-        """The Gymnasium action for ``obs`` (``task.gym_action`` of ``action``). Right after
+        """The Gymnasium action for ``obs`` (``gym_action`` of ``action``). Right after
         ``action(obs)`` with the same observation (a recorder asking for both), that action,
         not a second solve: every solve advances the warm start."""
         last, self._last = self._last, None
         if last is not None and np.array_equal(last[0], np.asarray(obs, np.float32)):
-            return self.task.gym_action(last[1])
+            return _gym.gym_action(self.task, last[1])
         u = self.action(obs)
         self._last = None  # only an explicit action() call is reused (a pendulum at rest
-        return self.task.gym_action(u)  # upright sees the same observation twice in a row)
+        return _gym.gym_action(self.task, u)  # upright sees the same observation twice in a row)
 
     def summary(self) -> str:
         """One line: how many solves did not converge or fell back to the warm start."""

@@ -24,6 +24,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from .. import _gym
 from .._run_files import read_run_file, release_claim, save_run
 from .._shell import command as shell_command
 from ..envs import env_id as own_id
@@ -34,6 +35,7 @@ from ..identify._rounds import NoisyPolicy, model_error, parse_start, predictor_
 from ..identify.data import concat, read_trajectories, write_trajectories
 from ..identify.recording import check_spaces, make_env, record, record_task
 from ..io import make_dir, now_iso, read_json, write_figure, write_json
+from ..mpc._config import loop_planner
 from ..policies import read_model
 from ..settings import FitConfig, LoopConfig
 from ..tasks import Task
@@ -81,7 +83,7 @@ def loop(
             steps recorded per round in place of whole ``episodes``: episodes until the
             budget is spent, the last one cut short (``record``'s ``total_steps``);
             ``controller="plan"`` acts with a planner through each round's fitted model
-            (``runs.plan_run`` with ``task.loop_planner()``) instead of training an MLP
+            (``runs.plan_run`` with ``loop_planner``) instead of training an MLP
             through it.
 
     Raises:
@@ -136,7 +138,7 @@ def _loop(
         )
     # Gymnasium episodes (the default recorder) or the task's own data (the trebuchet's throws)
     episodes_of_env = record_task.implementation(task) is record_task.dispatch(Task)
-    if episodes_of_env and type(task).state_from_observation is Task.state_from_observation:
+    if episodes_of_env and not _gym.knows_state(task):
         raise ConfigError(
             f"loop cannot fit a model of {task.name!r} (it does not reconstruct its state from "
             "observations: define its state_from_observation); e.g. pendulum"
@@ -208,7 +210,7 @@ def _loop(
                 source = "random actions" if policy is None else f"round {k} controller"
                 if policy is not None and explore_noise:
                     policy = NoisyPolicy(
-                        policy, task.action_space(), explore_noise, seed + 1000 * k
+                        policy, _gym.action_space(task), explore_noise, seed + 1000 * k
                     )
                     source += f" with action noise {explore_noise:g}"
                 data = record(
@@ -267,7 +269,7 @@ def _loop(
         if not done and c.controller == "plan":
             if (here / "run").exists():  # a planner cut short: nothing in it to continue
                 shutil.rmtree(here / "run")
-            run, _ = plan_run(here / "run", task, task.loop_planner(), model=here / "fit",
+            run, _ = plan_run(here / "run", task, loop_planner(task), model=here / "fit",
                               env_id=env_id, final_eval=own_eval, animation=False,
                               progress=say, invocation={"loop_round": k})  # fmt: skip
             policies[here / "run"] = run.policy

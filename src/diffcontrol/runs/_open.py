@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from .. import io, policies, tasks
-from .._run_files import METRICS_FILE, Run, judged
+from .._run_files import METRICS_FILE, Run, judged, task_policy
 from ..errors import ModelFileError
 from ..identify.fitted import checked_env
 from ..mpc import planner_policy
@@ -21,7 +21,7 @@ def load_policy(task: AnyTask, doc: dict) -> Any:
     or for a planner its ``mpc.PlannerPolicy`` (which imports JAX)."""
     if policies.is_planner(doc):
         return planner_policy(task, doc)
-    return task.load_policy(doc)
+    return task_policy(task, doc)
 
 
 def load(run_dir: str | os.PathLike, task: AnyTask | str | None = None) -> Any:

@@ -21,12 +21,13 @@ from typing import Any
 
 import numpy as np
 
-from .. import io, policies
+from .. import _gym, io, policies
 from .._run_files import Run, mark_complete, save_run
 from .._version import __version__
 from ..errors import ConfigError, ModelFileError
 from ..identify.fitted import read_fitted, real_system
 from ..mpc import ValueNetwork, make_planner_policy
+from ..mpc._config import default_plan_config, for_task
 from ..settings import PlanConfig
 from ..tasks import AnyTask, Task, resolve, task_params
 
@@ -116,8 +117,8 @@ def plan_run(
         out_dir: a new or empty directory.
         task: a task with action bounds, or a continuous-time one (or its name); a task
             without bounds takes ``config.action_bound``.
-        config: the planner's settings (default the task's, ``task.default_plan_config()``);
-            what ``dt`` and ``action_bound`` leave open is the task's (``PlanConfig.for_task``),
+        config: the planner's settings (default the task's, ``default_plan_config``);
+            what ``dt`` and ``action_bound`` leave open is the task's (``mpc._config.for_task``),
             and ``model.json`` stores them filled in.
         model: a directory (or ``fitted.json``) of ``diffcontrol fit`` to plan through instead
             of the task's simulator; its data's system is then where it is evaluated.
@@ -144,18 +145,18 @@ def plan_run(
     import time
 
     task = resolve(task) if isinstance(task, str) else task
-    if isinstance(task, Task) and type(task).state_from_observation is Task.state_from_observation:
+    if isinstance(task, Task) and not _gym.knows_state(task):
         raise ConfigError(
             f"task {task.name!r} cannot be planned: a planner acts from the system's state, and "
             "the task does not reconstruct it from an observation (it defines no "
             "state_from_observation)"
         )
-    config = task.default_plan_config() if config is None else config
+    config = default_plan_config(task) if config is None else config
     unknown = set(settings or {}) - {f.name for f in dataclasses.fields(PlanConfig)}
     if unknown:
         raise ConfigError(f"unknown planner settings {sorted(unknown)}; see PlanConfig's fields")
     config = config.replace(**{k: v for k, v in (settings or {}).items() if v is not None})
-    config = config.for_task(task)
+    config = for_task(config, task)
     say = progress or (lambda line: None)
     if value is not None:
         value = read_value(task, value)

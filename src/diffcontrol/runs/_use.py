@@ -6,7 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from .. import io
+from .. import _gym, io
 from .._run_files import Run
 from ..errors import ConfigError
 from ..evaluation import evaluate_run
@@ -37,7 +37,7 @@ def evaluate_dir(
         optimum: also run the reference optimum on the same seeds (``optimal.optimal_return``
             on a grid of ``optimum`` points per state axis, 41 actions) and report the gap to
             it; for tasks with a state grid (Pendulum), on the system evaluated: the task's own,
-            or a real system whose physics the task knows (``Task.params_of_env``:
+            or a real system whose physics the task knows (``_gym.params_of_env``:
             ``diffcontrol/PendulumFriction-v0`` with ``g`` and ``friction``).
 
     Returns:
@@ -76,10 +76,10 @@ def _optimum(run: Run, ev: Any, points: int) -> Any:
     came from) solved with its physics (the task's ``params_of_env``)."""
     real, params = run.real_env, None
     if real is not None and ev.key == "gym_eval":
-        params = run.task.params_of_env(*real)
+        params = _gym.params_of_env(run.task, *real)
     if (
         ev.key != "gym_eval"
-        or (real is None and ev.env_id != run.task.gym_label)
+        or (real is None and ev.env_id != _gym.gym_label(run.task))
         or (real is not None and params is None)
     ):
         raise ConfigError(

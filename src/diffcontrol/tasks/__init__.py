@@ -18,7 +18,15 @@ from typing import Any
 from .. import _registry
 from .._registry import BUILTIN, ENTRY_POINT_GROUP
 from ..errors import ConfigError, UnknownTaskError
-from ._base import ContinuousTask, StepLoss, Task, TrajectoryLoss, task_params
+from ._base import (
+    ContinuousTask,
+    StepLoss,
+    Task,
+    TrajectoryLoss,
+    check_params,
+    controller_kwargs,
+    task_params,
+)
 
 AnyTask = Task | ContinuousTask
 _REGISTRY: dict[str, AnyTask] = {}
@@ -267,6 +275,8 @@ __all__ = [
     "supports_env",
     "resolve",
     "task_params",
+    "check_params",
+    "controller_kwargs",
     "ENTRY_POINT_GROUP",
     "Pendulum",
     "PendulumUnclipped",

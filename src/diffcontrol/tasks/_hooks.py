@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import functools
 import importlib
+import types
 from collections.abc import Callable
 from typing import Any
 
@@ -65,4 +66,7 @@ def task_hook(default: Callable[..., Any] | None = None, *, method: str | None =
     call.register = dispatch.register  # type: ignore[attr-defined]
     call.dispatch = dispatch.dispatch  # type: ignore[attr-defined]
     call.implementation = implementation  # type: ignore[attr-defined]
+    # ``hook.bound(task)``: the function for ``task`` with ``task`` bound, as a method (equal
+    # for the same task, so that programs traced from it are cached as a method's would be).
+    call.bound = lambda task: types.MethodType(implementation(task), task)  # type: ignore
     return call

@@ -8,6 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..config import TrainConfig
+from ..settings import MIN_TRANSITIONS
 from ..systems import cartpole as cp
 from ._base import StepLoss, Task
 
@@ -69,7 +70,11 @@ class CartPole(Task):
         # not episodes. 250 random steps (~12 episodes) determine the grey box's 3 parameters
         # and the hybrid's correction, so 2 rounds stay within a budget of 500 real steps; a
         # network alone needs its 1,000 transitions (2 rounds: 2,000).
-        return 250 if model in ("params", "hybrid") else super().real_steps_per_round(model)
+        return (
+            250
+            if model in ("params", "hybrid")
+            else max(self.episode_length, MIN_TRANSITIONS.get(model, 0))
+        )
 
     def data_columns(self):
         return ("obs.x [m]", "obs.x_dot [m/s]", "obs.theta [rad]", "obs.theta_dot [rad/s]"), (

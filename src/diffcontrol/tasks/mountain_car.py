@@ -7,6 +7,7 @@ from typing import Any, ClassVar
 import jax.numpy as jnp
 
 from ..config import TrainConfig
+from ..settings import PlanConfig
 from ..systems import mountain_car as mc
 from ._base import StepLoss, Task
 from ._grid import GridAxis
@@ -136,11 +137,11 @@ class MountainCarContinuous(Task):
         )
 
     def loop_planner(self) -> Any:
-        """The task's own planner (``default_plan_config``), not the grid-valued one a task with
+        """The planner's default settings (``PlanConfig()``), not the grid-valued one a task with
         a state grid gets by default: its terminal cost ``-V_0`` makes waiting free here (a car
         at rest can still reach the flag within a whole episode), so that planner stays at
         rest."""
-        return self.default_plan_config()
+        return PlanConfig()
 
     def recipes(self) -> dict[str, dict[str, Any]]:
         return {

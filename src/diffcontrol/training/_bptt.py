@@ -26,7 +26,7 @@ from ..config import MAX_VALUE_GRID, TrainConfig
 from ..controllers import MLPController
 from ..errors import ConfigError, TrainingDiverged
 from ..rollout import batch_returns
-from ..tasks import StepLoss, Task, task_params
+from ..tasks import StepLoss, Task, controller_kwargs, task_params
 
 
 class TrainState(eqx.Module):
@@ -113,7 +113,7 @@ class Trainer(eqx.Module):
         """A fresh training state: a random controller and ``batch`` reset simulations."""
         k_ctrl, k_env, k_run = jax.random.split(key, 3)
         cfg = self.config
-        kwargs = self.task.controller_kwargs()
+        kwargs = controller_kwargs(self.task)
         if cfg.head:
             kwargs["head"] = cfg.head
         controller = MLPController(k_ctrl, hidden=cfg.hidden, activation=cfg.activation, **kwargs)

@@ -22,7 +22,7 @@ import numpy as np
 from jaxtyping import Array, PRNGKeyArray, PyTree
 
 from .. import _timing, io, policies
-from .._jax_setup import compile_with
+from .._jax_setup import FAST_COMPILE, compile_with
 from .._run_files import save_run
 from ..checks import validate_task
 from ..controllers import MLPController
@@ -242,7 +242,7 @@ def train(
     with interrupts_deferred():
         evaluate = kept.jitted("evaluate", trainer, whole)
         lowered = evaluate.lower(ts.controller, params, k_eval)
-        evaluate = compiled_once(lowered, *task.compile_options("evaluate"))
+        evaluate = compiled_once(lowered, *compile_options(task, "evaluate"))
 
     curve: list[dict[str, Any]] = list(meta["curve"])
     seconds_before = float(meta["seconds_before"])
@@ -304,7 +304,7 @@ def train(
             if end > int(ts.update):
                 chunk = kept.jitted(f"chunk {i}", stage, ts_sharding and (ts_sharding, whole))
                 lowered = chunk.lower(ts, params, total)
-                chunks.append((end, compiled_once(lowered, *task.compile_options("chunk"))))
+                chunks.append((end, compiled_once(lowered, *compile_options(task, "chunk"))))
 
     stopped_early = False
     target = config.target_return
@@ -619,6 +619,38 @@ def _check_head(task: AnyTask, head: str) -> None:
 _EXECUTABLES: collections.OrderedDict[Any, Any] = collections.OrderedDict()
 EXECUTABLES_KEPT = 16
 """Compiled programs kept in the process by ``compiled_once`` (the most recently used)."""
+
+
+def compile_options(task: AnyTask, program: str) -> tuple[str, ...]:
+    """The options of ``_jax_setup.FAST_COMPILE`` (XLA's level 1, the older CPU emitters) that
+    the task's own class declares for ``program`` (``"chunk"``, the training updates, or
+    ``"evaluate"``, an evaluation point) in its ``fast_compile`` mapping; none by default
+    (XLA's defaults).
+
+    A built-in task names those under which its programs gave the defaults' bits in its
+    default settings and every recipe, or, where they did not (CartPole's chunk, the
+    trebuchet's evaluation), whole runs gave the same documented results
+    (``benchmarks/compile_options.py``). Other settings (another ODE solver, loss or network)
+    may round differently in the last bits: the options compile faster, they do not promise
+    the defaults' bits. Read from the task's own class only: a subclass (another system, a
+    fitted model) compiles with XLA's defaults unless it names its own.
+
+    Raises:
+        ConfigError: the declaration names another program, or an option that is not in
+            ``_jax_setup.FAST_COMPILE``.
+    """
+    own = vars(type(task)).get("fast_compile", {})
+    for key, names in own.items():
+        if (
+            key not in ("chunk", "evaluate")
+            or isinstance(names, str)
+            or any(n not in FAST_COMPILE for n in names)
+        ):
+            raise ConfigError(
+                f"task {task.name!r} declares fast_compile[{key!r}] = {names!r}; use "
+                f"'chunk' or 'evaluate' with a tuple of {', '.join(sorted(FAST_COMPILE))}"
+            )
+    return tuple(own.get(program, ()))
 
 
 def compiled_once(lowered: jax.stages.Lowered, *options: str) -> jax.stages.Compiled:

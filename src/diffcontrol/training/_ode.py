@@ -24,11 +24,25 @@ from jaxtyping import Array, Float, Int, PRNGKeyArray, PyTree
 from ..config import ODETrainConfig
 from ..controllers import MLPController
 from ..errors import ConfigError, SolverFailed
-from ..rollout import solve_closed_loop, value_and_grad
-from ..tasks import ContinuousTask, TrajectoryLoss
+from ..rollout import force_fn, solve_closed_loop, value_and_grad
+from ..tasks import ContinuousTask, TrajectoryLoss, controller_kwargs
 from ._bptt import builtin_loss_name, make_optimizer
 
 FAIL_NONE, FAIL_MAX_STEPS, FAIL_SOLVER, FAIL_NAN = 0, 1, 2, 3
+
+
+def unbatched_member(task: Any) -> bool:
+    """Whether the task's own class lets a population of 1 go unbatched: it declares
+    ``one_member_unbatched = True``.
+
+    A population of 1 is then differentiated and evaluated as one member, not under ``vmap``:
+    batching Diffrax's loops is much of tracing and compiling the training chunk, so it is
+    faster, but XLA then fuses the arithmetic differently and may round it differently. A
+    built-in task declares it where its default settings and every recipe with a population
+    of 1 trained to the same weights, bit for bit (docs/benchmarks.md). Read from the task's
+    own class only: a subclass (another system, a fitted model) keeps the batched programs
+    unless it declares its own."""
+    return bool(vars(type(task)).get("one_member_unbatched", False))
 
 
 class ODETrainState(eqx.Module):
@@ -79,7 +93,7 @@ class ODETrainer(eqx.Module):
 
     def new_controller(self, key: PRNGKeyArray) -> MLPController:
         cfg = self.config
-        kwargs = self.task.controller_kwargs()
+        kwargs = controller_kwargs(self.task)
         if cfg.head:
             kwargs["head"] = cfg.head
         return MLPController(key, hidden=cfg.hidden, activation=cfg.activation, **kwargs)
@@ -100,7 +114,7 @@ class ODETrainer(eqx.Module):
         saved at ``saves`` points of ``[0, horizon]``."""
         cfg = self.config
         ts = jnp.linspace(0.0, 1.0, cfg.saves) * horizon
-        args = (params, self.task.force_fn(controller))
+        args = (params, force_fn(self.task, controller))
         return solve_closed_loop(
             self.task.vector_field,
             self.task.initial_state(params) if y0 is None else y0,
@@ -159,8 +173,7 @@ class ODETrainer(eqx.Module):
 
     def _one_member(self) -> bool:
         """A population of 1 that the task lets go unbatched (``unbatched_member``)."""
-        unbatched = getattr(self.task, "unbatched_member", None)  # a ContinuousTask's
-        return self.config.population == 1 and unbatched is not None and unbatched()
+        return self.config.population == 1 and unbatched_member(self.task)
 
     def _member_grad(self, controller, params, horizon, y0s):
         """One member's loss, its solve's flags and the gradient of its trainable weights."""
@@ -205,7 +218,7 @@ class ODETrainer(eqx.Module):
         key, k_starts = jax.random.split(ts.key)
         y0s = self.starts_of(k_starts, params)  # the same starts for every member
         # One member's solve differentiated as it is, not under vmap, where the task says so
-        # (ContinuousTask.one_member_unbatched); the optimiser's step stays under vmap.
+        # (``_one_member``); the optimiser's step stays under vmap.
         if self._one_member():
             out = _as_members(self._member_grad(_only(ts.controller), params, horizon, y0s))
         else:

@@ -47,6 +47,7 @@ from ...identify.data import TrajectoryData
 from ...identify.network import Correction, correction_from_dict, correction_to_dict
 from ...identify.ode import fit_vector_field
 from ...identify.ode import prediction_errors as ode_prediction_errors
+from ...tasks import check_params
 from . import system as cp
 from .task import ACTION_COLUMNS, STATE_COLUMNS, CartPoleSwingUp
 
@@ -239,7 +240,7 @@ class FittedSwingUp(CartPoleSwingUp):
                 "fitted model's network; set physical parameters only (correction is the "
                 "network the fit wrote)"
             )
-        super().check_params(params)
+        check_params.dispatch(object)(self, params)  # every task's checks (the default)
 
     def __repr__(self) -> str:
         return f"<task {self.name}>"

@@ -39,6 +39,7 @@ from jaxtyping import Array, Float
 import diffcontrol.builtin.swingup.system as cp
 
 from ...config import ODETrainConfig
+from ...errors import ConfigError
 from ...settings import PlanConfig
 from ...tasks import ContinuousTask, TrajectoryLoss
 
@@ -247,7 +248,7 @@ class CartPoleSwingUp(ContinuousTask):
     def running_cost(self, name: str):
         """``limited_hold_rate`` and ``energy_rate`` (the planning forms of those losses)."""
         if name not in PLANNING_COSTS:
-            return super().running_cost(name)
+            raise ConfigError(f"task {self.name!r} has no planning loss {name!r} (running_cost)")
         return PLANNING_COSTS[name][0]
 
     def terminal_cost(self, name: str):

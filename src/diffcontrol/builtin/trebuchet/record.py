@@ -21,7 +21,7 @@ from ...errors import ConfigError
 from ...identify.data import TrajectoryData
 from ...io import now_iso
 from ...policies import AimingPolicy, read_model
-from ...tasks import make
+from ...tasks import check_params, make
 from . import system as tb
 from .task import TARGET_RANGE_M
 from .throws import Throws, throws_table
@@ -59,7 +59,7 @@ def trebuchet_params(env_args: list[tuple[str, float]]) -> tb.TrebuchetParams:
             f"{', '.join(known)} (e.g. --env-arg drag_coefficient=1.5 --env-arg wind_factor=1.5)"
         )
     params = tb.TrebuchetParams(**{name: float(value) for name, value in env_args})
-    make("trebuchet").check_params(params)  # the task's ranges, as for --param
+    check_params(make("trebuchet"), params)  # the task's ranges, as for --param
     return params
 
 

@@ -11,6 +11,7 @@ import numpy as np
 from ... import tasks
 from ..._registry import env_id as own_env_id
 from ...errors import DataFileError
+from .._task import data_columns
 
 FORMAT = "diffcontrol-trajectories"
 VERSION = 1
@@ -37,13 +38,13 @@ def _known_columns(names: tuple[str, ...]) -> dict[str, Columns]:
     known: dict[str, Columns] = {}
     for name in names:
         task = tasks.make(name)
-        obs, act = (tuple(c) for c in task.data_columns())
+        obs, act = (tuple(c) for c in data_columns(task))
         parsed = [parse_column(c) for c in (*obs, *act)]
         if any(p != "obs" for p, _, _ in parsed[: len(obs)]) or any(
             u in (None, "", "?") for _, _, u in parsed
         ):
             continue
-        for eid in (task.gym_id, own_env_id(task), *task.data_env_ids):
+        for eid in (task.gym_id, own_env_id(task), *getattr(task, "data_env_ids", ())):
             if eid:
                 known.setdefault(eid, (obs, act))
     return known
