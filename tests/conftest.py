@@ -88,6 +88,13 @@ def pytest_sessionfinish(session):
         shutil.rmtree(_OWN_CACHE, ignore_errors=True)
 
 
+def pytest_collection_modifyitems(config, items):
+    """The slow tests first (longest first, as a scheduler packs jobs): each xdist worker
+    then ends on short tests, and no worker is left running a long one while the other
+    waits. The order within each kind is the files' own."""
+    items.sort(key=lambda item: item.get_closest_marker("slow") is None)
+
+
 def pytest_report_header(config):
     """The compiler flags the session runs under (see above), in pytest's header."""
     return f"XLA_FLAGS: {os.environ.get('XLA_FLAGS', '')!r}"

@@ -14,7 +14,8 @@ import pytest
 
 
 def _runs() -> dict:
-    """The last controllers' weights and the curves of three short trainings.
+    """The last controllers' weights and the curves of two short trainings, discrete-time
+    (BPTT) and continuous-time (an ODE population).
 
     ``keep_best=False``: which evaluation point is best could hinge on a tie. The swing-up's
     population under the horizon curriculum is where the older emitters at level 0 gave
@@ -27,7 +28,6 @@ def _runs() -> dict:
     discrete = dict(updates=10, eval_every=5, batch=4, window=10, eval_episodes=4, keep_best=False)
     runs = {
         "cartpole": discrete,
-        "pendulum": discrete,
         "cartpole-swingup": dict(
             updates=20, eval_every=10, population=3, curriculum_start=0.5, keep_best=False
         ),
@@ -44,10 +44,10 @@ def _runs() -> dict:
     return json.loads(json.dumps(out))  # what a process writes and the other reads
 
 
-WEIGHTS_ATOL = {"cartpole": 1e-5, "pendulum": 1e-5, "cartpole-swingup": 1e-2}
+WEIGHTS_ATOL = {"cartpole": 1e-5, "cartpole-swingup": 1e-2}
 """How far apart the weights may end. The swing-up's adaptive solves over 20 updates at a rate
 of 0.05 carry rounding further: measured 1.5e-3 apart under the session's flags, 1.65e-3 at
-the level 0 the suite used before (CartPole 1.2e-7 and 1.25e-6, the Pendulum 0 and 1.9e-7)."""
+the level 0 the suite used before (CartPole 1.2e-7 and 1.25e-6)."""
 
 
 def _trained_with_xlas_defaults() -> dict:

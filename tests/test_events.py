@@ -58,6 +58,7 @@ def test_train_logs_every_update_and_evaluation_point(tmp_path):
     assert len(set(rates)) > 1, "the default schedule should change the rate"
 
 
+@pytest.mark.slow
 def test_a_sweep_logs_a_run_per_member_or_their_summary(tmp_path, monkeypatch):
     logs = tmp_path / "logs"
     argv = ["sweep", "pendulum", "--seeds", "0-1", "--out", str(tmp_path / "s"), *TINY]
@@ -78,6 +79,7 @@ def test_a_sweep_logs_a_run_per_member_or_their_summary(tmp_path, monkeypatch):
         assert sorted(scalars[tag]) == [0, 3, 6]
 
 
+@pytest.mark.slow
 def test_the_loop_logs_each_round(tmp_path):
     logs, out = tmp_path / "logs", tmp_path / "loop"
     argv = ["loop", "pendulum", "--rounds", "2", "--episodes", "1", "--updates", "3"]

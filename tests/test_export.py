@@ -130,6 +130,7 @@ def test_a_users_own_task_exports(module, cls, tmp_path):
     _assert_same(_onnx_actions(path, obs), _loaded_actions(loaded, obs), doc)
 
 
+@pytest.mark.slow  # the runs are trained by the command line (the session's shared runs)
 @pytest.mark.parametrize("fixture", ["pendulum_run", "cartpole_run", "swingup_run"])
 def test_runs_trained_by_the_cli_export_from_the_command_line(fixture, request, tmp_path, capsys):
     run = request.getfixturevalue(fixture)
