@@ -218,6 +218,21 @@ def test_persistent_compile_cache_hits_on_a_second_run(tmp_path, task):
     assert caches[0]["misses"] >= 2 and caches[0]["hits"] == 0
     assert caches[0]["misses"] == caches[0]["requests"]
     assert caches[1]["misses"] == 0 and caches[1]["hits"] == caches[1]["requests"]
+    if task != "cartpole":
+        return
+    # Entries swapped among themselves (each another program's valid executable) are not run
+    # as this program's: every one is a miss, compiled again, and the run is the same.
+    entries = sorted((tmp_path / "cache").glob("*-cache"))  # JAX's file cache: KEY-cache
+    contents = [p.read_bytes() for p in entries]
+    assert len(contents) >= 2
+    for path, content in zip(entries, contents[1:] + contents[:1], strict=True):
+        path.write_bytes(content)
+    cmd = [sys.executable, "-m", "diffcontrol.cli", *args, "--out", str(tmp_path / "r2")]
+    subprocess.run(cmd, check=True, env=env, capture_output=True)
+    swapped = json.loads((tmp_path / "r2" / "metrics.json").read_text())["compile_cache"]
+    assert swapped["hits"] == 0 and swapped["misses"] == swapped["requests"] >= 2
+    models = [json.loads((tmp_path / r / "model.json").read_text()) for r in ("r0", "r2")]
+    assert models[0]["network"] == models[1]["network"]
 
 
 @pytest.mark.slow  # three to six small trainings: 3-6 s

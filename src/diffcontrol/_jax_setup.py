@@ -61,10 +61,57 @@ def enable_compile_cache(cache_dir: str | Path | None = None) -> Path | None:
     # Cache every program, however quick to compile: short runs are where it matters.
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+    _entries_carry_their_keys(path)
     if not _LISTENING:
         monitoring.register_event_listener(_on_event)
         _LISTENING = True
     return path
+
+
+def _entries_carry_their_keys(path: Path) -> None:
+    """Make every entry of the cache at ``path`` carry its own key, and load only those whose
+    key is the program's.
+
+    JAX finds an entry by its file's name alone. An entry that deserialises but is another
+    program's (files swapped, copied or restored under other names) would be run as this one,
+    and fail inside JAX with the other program's arguments. Here each entry starts with its
+    key; one without it, or with another, counts as a miss: the program is compiled and the
+    entry written again. JAX offers no hook for this, so the wrapper replaces the file cache
+    of its private ``compilation_cache`` module (as it is from JAX 0.8 to 0.10, the releases the
+    pins allow); where that module differs, the cache stays JAX's own.
+    """
+    try:
+        from jax._src import compilation_cache as cc
+
+        if not cc._is_cache_enabled():  # JAX_ENABLE_COMPILATION_CACHE=false: none at all
+            return
+        base, _ = cc.get_file_cache(str(path))
+        with cc._cache_initialized_mutex:
+            cc._cache = _KeyedEntries(base)
+            cc._cache_initialized = True
+    except (ImportError, AttributeError, TypeError):
+        return
+
+
+class _KeyedEntries:
+    """A JAX cache (``get``, ``put``) whose entries start with their key and a newline."""
+
+    def __init__(self, base: Any):
+        self._base = base
+        self._path = getattr(base, "_path", None)
+
+    def get(self, key: str) -> bytes | None:
+        value = self._base.get(key)
+        tag = key.encode() + b"\n"
+        if value is None or not value.startswith(tag):
+            return None
+        return value[len(tag) :]
+
+    def put(self, key: str, value: bytes) -> None:
+        self._base.put(key, key.encode() + b"\n" + value)
+
+    def clear(self) -> None:
+        self._base.clear()
 
 
 def _on_event(event: str, **kwargs) -> None:
