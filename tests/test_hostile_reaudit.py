@@ -551,6 +551,29 @@ def test_data_naming_an_unknown_environment_fits_nothing(capsys, fitted_dir, tmp
     assert not out.exists()
 
 
+def test_data_from_a_system_with_impossible_physics_fits_and_trains_nothing(
+    capsys, fitted_dir, tmp_path
+):
+    """Environment arguments in a data file (or a fitted file) that name the task's physics
+    with values its simulator has no meaning for are refused, not stored as the real system
+    that train --model then judges on."""
+    lines = fitted_dir[1].read_text().splitlines()
+    header = json.loads(lines[0][2:])
+    kwargs, needle = {"g": 1e308}, "g=1e+308"
+    header["metadata"]["env_kwargs"] = kwargs
+    data = tmp_path / "bad.csv"
+    data.write_text("# " + json.dumps(header) + "\n" + "\n".join(lines[1:]) + "\n")
+    out = tmp_path / "fit"
+    argv = ["fit", "pendulum", "--data", data, "--model", "params", "--out", out]
+    _one_line(capsys, argv, "Pendulum-v1", needle)
+    assert not out.exists()
+    fit = tmp_path / "copied"
+    shutil.copytree(fitted_dir[0], fit)
+    _edit(fit / "fitted.json", lambda f: f["data"].update(env_kwargs=kwargs))
+    _one_line(capsys, ["train", "pendulum", "--model", fit, "--out", tmp_path / "run"], needle)
+    assert not (tmp_path / "run").exists()
+
+
 @pytest.mark.parametrize(("grid", "levels"), [(1001, 1001), (1001, 41), (401, 1001)])
 def test_a_planner_file_asking_for_hours_of_grid_is_refused_at_once(capsys, tmp_path, grid, levels):
     """A downloaded planner's stored grid is solved again at every load: one within minutes

@@ -19,7 +19,7 @@ from ..tasks import as_task
 from ._routes import model_route
 from ._shooting import MODEL_TYPES, FitResult
 from .data import TrajectoryData
-from .fitted import FITTED_FILE, FITTED_FORMAT, checked_env, real_params
+from .fitted import FITTED_FILE, FITTED_FORMAT, check_real_env, checked_env, real_params
 
 
 def fit(task: Any, data: Any, model: str = "params", **settings: Any) -> FitResult:
@@ -172,7 +172,8 @@ def fit_dir(
         # what train --model will judge on: checked now
         real_params(task, {"params": meta["params"]})
     if meta.get("env_id"):  # the real system train --model judges on: checked now too
-        checked_env(meta["env_id"], meta.get("env_kwargs"), str(data_file))
+        env_id, env_kwargs = checked_env(meta["env_id"], meta.get("env_kwargs"), str(data_file))
+        check_real_env(task, env_id, env_kwargs, str(data_file))
     out = Path(out)
     check_fit_dir(out, force)
     train, held_out = split(route, data, holdout)

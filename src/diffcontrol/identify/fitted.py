@@ -120,7 +120,7 @@ def network_sizes(task: Any) -> tuple[int, int]:
     return task.observation_size + task.action_size, int(state.shape[0])
 
 
-def real_system(doc: dict, trusted: str | None = None) -> dict | None:
+def real_system(doc: dict, trusted: str | None = None, task: Any = None) -> dict | None:
     """The system a fitted model's data came from: ``{"env_id", "env_kwargs"}`` for data
     recorded from a Gymnasium environment, ``{"params"}`` (the physical parameters of a
     simulated system, from the data's metadata), or None. ``trusted``: an id the user named
@@ -128,7 +128,8 @@ def real_system(doc: dict, trusted: str | None = None) -> dict | None:
 
     Raises:
         ModelFileError: ``data`` (or its metadata) is not a JSON object.
-        ConfigError: an environment id or arguments that are not usable (``checked_env``).
+        ConfigError: an environment id or arguments that are not usable (``checked_env``),
+            or physics ``task`` (where given) has no meaning for (``check_real_env``).
     """
     where = doc.get("_path", "the fitted model")
     data = doc.get("data") or {}
@@ -141,6 +142,8 @@ def real_system(doc: dict, trusted: str | None = None) -> dict | None:
         )
     if data.get("env_id"):
         env_id, env_kwargs = checked_env(data["env_id"], data.get("env_kwargs"), where, trusted)
+        if task is not None:
+            check_real_env(task, env_id, env_kwargs, where)
         return {"env_id": env_id, "env_kwargs": env_kwargs}
     params = (data.get("metadata") or {}).get("params")
     return {"params": params} if isinstance(params, dict) else None
@@ -171,6 +174,23 @@ def checked_env(
             "render_mode from the file"
         )
     return env_id, dict(env_kwargs)
+
+
+def check_real_env(task: Any, env_id: str, env_kwargs: dict, where: str) -> None:
+    """Refuse arguments of an environment that is the task's system with other physics
+    (``params_of_env``) whose values the simulator has no meaning for (``check_params``: a
+    gravity of 1e308, a negative friction).
+
+    Raises:
+        ConfigError: one line naming the file, the environment and the bad parameter.
+    """
+    params = _gym.params_of_env(task, env_id, env_kwargs)
+    if params is None:
+        return
+    try:
+        check_params(task, params)
+    except ConfigError as e:
+        raise ConfigError(f"{where} names the real system {env_id} {env_kwargs}: {e}") from None
 
 
 def checked_env_id(env_id: Any, where: str = "a file") -> str:

@@ -163,7 +163,7 @@ def plan_run(
     real, info = None, {"kind": "simulator"}
     if model is not None:
         fitted = read_fitted(model)
-        real = real_system(fitted, trusted=env_id)
+        real = real_system(fitted, trusted=env_id, task=task)
         stored = {k: v for k, v in fitted.items() if k != "_path"}  # the file, not where it was
         info = {"kind": "fitted", "fitted": stored}
     run = {"task": task.name, "config": config.to_json(), "planner": True}

@@ -287,7 +287,7 @@ def fitted_training(
 
     doc = read_fitted(fit_dir)
     fitted_physics(task, doc)  # refuses a model of another task
-    real = real_system(doc, trusted=env_id)
+    real = real_system(doc, trusted=env_id, task=task)
     if real and "env_id" in real:  # the final evaluation's environment, made before training
         make_env(real["env_id"], real["env_kwargs"]).close()
     info = {"dir": str(fit_dir), "kind": doc["model"], "real_system": real}
