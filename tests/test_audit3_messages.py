@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from diffcontrol import io, runs
+from diffcontrol import _run_dir, runs
 from diffcontrol.cli import main
 from diffcontrol.config import TrainConfig
 from diffcontrol.errors import ConfigError
@@ -105,7 +105,7 @@ def _fails_with(monkeypatch, error):
     def check_run_dir(out_dir, run, resume):  # where a parent without permissions fails
         raise error(out_dir)
 
-    monkeypatch.setattr(io, "check_run_dir", check_run_dir)
+    monkeypatch.setattr(_run_dir, "check_run_dir", check_run_dir)
 
 
 def test_a_permission_error_before_a_run_starts_does_not_advise_resume(

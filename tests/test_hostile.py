@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 import diffcontrol
-from diffcontrol import io
 from diffcontrol.cli import main
 from diffcontrol.errors import ConfigError, ModelFileError
+from diffcontrol.training import _checkpoint
 
 PENDULUM = diffcontrol.make("pendulum")
 
@@ -192,7 +192,7 @@ def test_damaged_checkpoints_get_one_line(resumable, capsys):
         assert before == after, what
         ckpt.write_bytes(original)
     with pytest.raises(ModelFileError):
-        io.load_checkpoint(resumable / "missing.npz", None)
+        _checkpoint.load_checkpoint(resumable / "missing.npz", None)
 
 
 # --- data files ------------------------------------------------------------------------------

@@ -8,7 +8,7 @@ import threading
 
 import pytest
 
-from diffcontrol import io, runs
+from diffcontrol import _run_dir, runs
 from diffcontrol.cli import main
 from diffcontrol.errors import RunDirectoryError
 
@@ -80,7 +80,7 @@ def test_of_two_processes_claiming_a_directory_one_wins(tmp_path):
         def claim(out=out, barrier=barrier, outcomes=outcomes):
             barrier.wait()
             try:
-                io.prepare_run_dir(out, {"task": "t", "config": {"seed": 0}}, resume=False)
+                _run_dir.prepare_run_dir(out, {"task": "t", "config": {"seed": 0}}, resume=False)
                 outcomes.append("won")
             except RunDirectoryError:
                 outcomes.append("refused")
@@ -99,16 +99,16 @@ def test_a_claim_made_between_the_check_and_the_write_is_refused(tmp_path, monke
     as a run to resume, so both processes trained into one directory)."""
     out = tmp_path / "race"
     run = {"task": "t", "config": {"seed": 0}}
-    monkeypatch.setattr(io, "check_run_dir", lambda *args: None)  # the check passed earlier
-    io.prepare_run_dir(out, run, resume=False)  # the other process's claim
+    monkeypatch.setattr(_run_dir, "check_run_dir", lambda *args: None)  # the check passed earlier
+    _run_dir.prepare_run_dir(out, run, resume=False)  # the other process's claim
     with pytest.raises(RunDirectoryError, match="another process has just claimed"):
-        io.prepare_run_dir(out, run, resume=False)
+        _run_dir.prepare_run_dir(out, run, resume=False)
 
 
 def test_a_finished_run_refuses_the_library_resume(cartpole_run):
     doc = json.loads((cartpole_run / "run.json").read_text())
     with pytest.raises(RunDirectoryError, match="finished run"):
-        io.prepare_run_dir(cartpole_run, doc, resume=True)
+        _run_dir.prepare_run_dir(cartpole_run, doc, resume=True)
 
 
 def test_result_save_never_overwrites_another_run(cartpole_run, tmp_path):

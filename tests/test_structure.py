@@ -96,7 +96,7 @@ def test_no_import_cycle():
 
 
 LAYERS = [
-    "errors _version _registry _shell _timing _interrupts _jax_setup io config settings "
+    "errors _version _registry _shell _timing _interrupts _jax_setup io _run_dir config settings "
     "controllers policies",
     "systems",
     "tasks",

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import diffcontrol as dc
-from diffcontrol import optimal
+from diffcontrol import _run_dir, optimal
 from diffcontrol.cli import main
 from diffcontrol.errors import RunDirectoryError
 from diffcontrol.mpc._config import default_plan_config, loop_planner
@@ -162,14 +162,13 @@ def test_too_many_grid_points_over_more_axes_are_refused_before_anything_is_solv
 
 
 def test_a_run_stored_before_the_setting_existed_is_still_the_same_run(tmp_path):
-    from diffcontrol import io
 
     config = PENDULUM.default_config().to_json()
     old = {"task": "pendulum", "config": {k: v for k, v in config.items() if k != "value_grid"}}
-    io.check_same_run(tmp_path, old, {"task": "pendulum", "config": config})  # no error
+    _run_dir.check_same_run(tmp_path, old, {"task": "pendulum", "config": config})  # no error
     changed = {"task": "pendulum", "config": {**config, "value_grid": 11}}
     with pytest.raises(RunDirectoryError, match="differs in: value_grid"):
-        io.check_same_run(tmp_path, old, changed)
+        _run_dir.check_same_run(tmp_path, old, changed)
 
 
 def test_a_directory_that_cannot_take_the_run_is_named_before_the_grid_is_solved(tmp_path):

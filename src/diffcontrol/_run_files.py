@@ -10,7 +10,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from . import _timing, io, policies
+from . import _run_dir, _timing, io, policies
 from .errors import ModelFileError, RunDirectoryError
 from .evaluation import evaluate_run
 from .identify.fitted import real_params
@@ -131,7 +131,7 @@ def save_run(
     """
     out = Path(out_dir)
     own = getattr(result, "out_dir", None)
-    held = [n for n in (MODEL_FILE, io.RUN_FILE) if (out / n).exists()]
+    held = [n for n in (MODEL_FILE, _run_dir.RUN_FILE) if (out / n).exists()]
     if held and not overwrite and not (own is not None and _same_dir(own, out)):
         raise RunDirectoryError(
             f"{out} holds another run ({', '.join(held)}); save into a new or empty directory, "
@@ -185,7 +185,7 @@ def save_run(
 
 def read_run_file(run_dir: str | Path) -> dict | None:
     """``run.json`` of ``run_dir`` (what the run is and how it was started), or ``None``."""
-    path = Path(run_dir) / io.RUN_FILE
+    path = Path(run_dir) / _run_dir.RUN_FILE
     if not path.is_file():
         return None
     doc = io.read_json(path, "run file")
@@ -198,7 +198,7 @@ def mark_complete(run_dir: str | Path) -> None:
     """Record in ``run.json`` that the run and its files are finished (a resume then has
     nothing to do and changes nothing)."""
     doc = read_run_file(run_dir) or {}
-    io.write_json(Path(run_dir) / io.RUN_FILE, {**doc, "complete": True})
+    io.write_json(Path(run_dir) / _run_dir.RUN_FILE, {**doc, "complete": True})
 
 
 def release_claim(run_dir: str | Path) -> bool:
@@ -209,7 +209,7 @@ def release_claim(run_dir: str | Path) -> bool:
     doc = read_run_file(out)
     if doc is None or doc.get("complete") or (out / "checkpoint.npz").exists():
         return False
-    (out / io.RUN_FILE).unlink()
+    (out / _run_dir.RUN_FILE).unlink()
     if not any(out.iterdir()):
         out.rmdir()
     return True

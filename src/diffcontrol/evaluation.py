@@ -445,10 +445,9 @@ def simulate_continuous(
             both = np.union1d(np.asarray(ts), np.asarray(ts_loss))
             at, at_loss = (np.searchsorted(both, np.asarray(t)) for t in (ts, ts_loss))
             args = (ctrl, p64, jax.device_put(both), at_loss)
-            # Solved once per report: the older CPU emitters compile it in 0.6 s less. Against
-            # the loss computed op by op after the solve (before 2026-11-26), the loss moves by
-            # at most an ulp or two, and the friction swing-up's trajectory by up to 2e-9
-            # relative (the emitters); level 1 would move the swing-up's last bits too.
+            # Solved once per report: compiled with the older CPU emitters, which compile it
+            # faster and move a trajectory by rounding only (2e-9 relative at most for the
+            # friction swing-up; docs/benchmarks.md); level 1 would move its last bits too.
             program = _jax_setup.compile_with(run.lower(*args), "xla_cpu_use_fusion_emitters")
             ys_all, force_all, loss, ok = (np.asarray(x) for x in program(*args))
             ys, force, loss, ok_loss = ys_all[at], force_all[at], float(loss), True

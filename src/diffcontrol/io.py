@@ -1,5 +1,6 @@
-"""Files, written atomically and read back checked: ``metrics.json``, ``run.json`` and
-checkpoints (``model.json`` and its policies are ``diffcontrol.policy``'s).
+"""Files, written atomically and read back checked: JSON documents, figures and bytes (a run
+directory's claim is ``_run_dir``'s, checkpoints ``training._checkpoint``'s, ``model.json``
+and its policies ``diffcontrol.policies``').
 
 Nothing here loads pickle: JSON for everything people read, ``.npz`` opened with
 ``allow_pickle=False`` for checkpoints. Every write goes to a temporary file in the same
@@ -21,15 +22,12 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-import jax
 import numpy as np
 
 from .errors import ModelFileError, RunDirectoryError
 
 MAX_JSON_BYTES = 256 * 2**20
 """The largest JSON file read (a model.json of a very wide network is a few MiB)."""
-CHECKPOINT_FORMAT = "diffcontrol-checkpoint"
-CHECKPOINT_VERSION = 1
 
 # ---------------------------------------------------------------------------------------------
 # atomic writes
@@ -184,6 +182,20 @@ def read_limited(path: Path, limit: int, what: str) -> bytes:
     return data
 
 
+def npz_shape(data: Any, name: str) -> tuple[tuple[int, ...], np.dtype]:
+    """The shape and dtype an ``.npz`` member declares, read from its header alone."""
+    with data.zip.open(f"{name}.npy") as f:
+        version = np.lib.format.read_magic(f)
+        read = {
+            (1, 0): np.lib.format.read_array_header_1_0,
+            (2, 0): np.lib.format.read_array_header_2_0,
+        }.get(version)
+        if read is None:
+            raise ValueError(f"unsupported .npy version {version}")
+        shape, _, dtype = read(f)
+    return tuple(shape), dtype
+
+
 def read_json(path: str | os.PathLike, what: str = "file") -> Any:
     """Read JSON, turning a missing, oversized or malformed file into a ``ModelFileError``."""
     path = Path(path)
@@ -229,217 +241,3 @@ def check_new_file(path: str | os.PathLike, suffix: str) -> Path:
     if not path.parent.is_dir():
         raise RunDirectoryError(f"the folder {path.parent} does not exist; create it first")
     return path
-
-
-# ---------------------------------------------------------------------------------------------
-# checkpoints: one .npz of arrays plus a JSON header, no pickle
-
-
-def save_checkpoint(path: str | os.PathLike, tree: Any, meta: dict) -> None:
-    """Save the array leaves of ``tree`` and a JSON-able ``meta`` dict to ``path`` atomically."""
-    leaves = jax.tree.leaves(tree)
-    header = {"format": CHECKPOINT_FORMAT, "version": CHECKPOINT_VERSION, "leaves": len(leaves)}
-    header["meta"] = _finite(meta)
-    arrays = {f"leaf_{i:04d}": np.asarray(x) for i, x in enumerate(leaves)}
-    arrays["header"] = np.frombuffer(json.dumps(header).encode(), dtype=np.uint8)
-    buf = _io.BytesIO()
-    np.savez(buf, **arrays)
-    write_bytes(path, buf.getvalue())
-
-
-def npz_shape(data: Any, name: str) -> tuple[tuple[int, ...], np.dtype]:
-    """The shape and dtype an ``.npz`` member declares, read from its header alone."""
-    with data.zip.open(f"{name}.npy") as f:
-        version = np.lib.format.read_magic(f)
-        read = {
-            (1, 0): np.lib.format.read_array_header_1_0,
-            (2, 0): np.lib.format.read_array_header_2_0,
-        }.get(version)
-        if read is None:
-            raise ValueError(f"unsupported .npy version {version}")
-        shape, _, dtype = read(f)
-    return tuple(shape), dtype
-
-
-def _check_meta(meta: Any, bad: Any) -> None:
-    """A checkpoint's ``meta``: the curve so far, the best point's index, the seconds."""
-    if not isinstance(meta, dict) or not isinstance(meta.get("curve"), list):
-        raise bad("holds no learning curve")
-    curve = meta["curve"]
-    if not all(isinstance(p, dict) and isinstance(p.get("update"), int) for p in curve):
-        raise bad("holds a malformed learning curve")
-    best = meta.get("best_index")
-    if not isinstance(best, int) or not (0 <= best < max(1, len(curve))):
-        raise bad(f"holds a best point {best!r} outside its curve")
-    for name in ("seconds_before", "compile_seconds_before"):
-        value = meta.get(name)
-        if not isinstance(value, int | float) or not (0 <= value < math.inf):
-            raise bad(f"holds a bad {name} ({value!r})")
-
-
-def load_checkpoint(path: str | os.PathLike, like: Any) -> tuple[Any, dict]:
-    """Load a checkpoint into the structure of ``like``; returns ``(tree, meta)``.
-
-    Raises:
-        ModelFileError: the file is missing, corrupt, or does not fit ``like`` (a different
-            run's checkpoint).
-    """
-    path = Path(path)
-    leaves_like, treedef = jax.tree.flatten(like)
-
-    def bad(problem: str) -> ModelFileError:
-        return ModelFileError(f"checkpoint {path} {problem}; start a new run in a new directory")
-
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            header = parse_json(bytes(data["header"]))
-            if (
-                header.get("format") != CHECKPOINT_FORMAT
-                or header.get("version") != CHECKPOINT_VERSION
-            ):
-                raise bad("has an unknown format or version")
-            if header["leaves"] != len(leaves_like):
-                raise bad("does not match this run's configuration")
-            _check_meta(header.get("meta"), bad)
-            leaves = []
-            for i, ref in enumerate(leaves_like):
-                name = f"leaf_{i:04d}"
-                ref_arr = np.asarray(ref)
-                # the stored shape first: a file that claims a huge array is refused unread
-                if npz_shape(data, name) != (ref_arr.shape, ref_arr.dtype):
-                    raise bad("does not match this run's configuration")
-                leaves.append(jax.numpy.asarray(data[name]))
-    except ModelFileError:
-        raise
-    except FileNotFoundError:
-        raise bad("does not exist") from None
-    except Exception as e:  # truncated, not a zip, a list header...: never a traceback
-        raise bad(f"is corrupt ({type(e).__name__}: {e})") from None
-    return jax.tree.unflatten(treedef, leaves), header["meta"]
-
-
-# ---------------------------------------------------------------------------------------------
-# run directories
-
-RUN_FILE = "run.json"
-
-
-ADDED_SETTINGS = {"value_grid": 0, "value_time": False}
-"""Settings added to the configs after runs were stored, each with the value that trains as
-before it existed: a stored config without one is read as having that value, so that its run
-can still be resumed (``check_same_run``, and the sweeps' claim)."""
-
-
-def stored_config(config: Any) -> Any:
-    """A stored config (a dict from ``run.json`` or ``sweep.json``) with the settings added
-    since it was written (``ADDED_SETTINGS``) at their old behaviour; anything else as is."""
-    if not isinstance(config, dict):
-        return config
-    return {**{k: v for k, v in ADDED_SETTINGS.items() if k not in config}, **config}
-
-
-def check_same_run(out: Path, old: dict, run: dict) -> None:
-    """Refuse to resume ``old`` (a ``run.json``) as ``run``: another task or other settings.
-
-    Raises:
-        RunDirectoryError: naming what differs.
-    """
-    old = {**old, "config": stored_config(old.get("config"))}
-    run = {**run, "config": stored_config(run["config"])}
-    if old.get("task") != run["task"] or old.get("config") != run["config"]:
-        stored = old.get("config") if isinstance(old.get("config"), dict) else {}
-        changed = sorted(
-            k for k in set(stored) | set(run["config"]) if stored.get(k) != run["config"].get(k)
-        )
-        what = "task" if old.get("task") != run["task"] else ", ".join(changed)
-        raise RunDirectoryError(
-            f"{out} holds a different run (differs in: {what}); resume it with the same "
-            "options or choose a new --out"
-        )
-
-
-def check_no_dangling_link(out: Path) -> None:
-    """Refuse an output directory ``out`` that is, or lies under, a symbolic link to nothing:
-    creating it would fail with "File exists", which reads as another process's claim.
-
-    Raises:
-        RunDirectoryError: naming the link, where it points, and what to do.
-    """
-    for link in (out, *out.parents):
-        if link.is_symlink() and not link.exists():
-            target = os.readlink(link)
-            where = f"--out {out} is" if link == out else f"--out {out} lies under {link},"
-            raise RunDirectoryError(
-                f"{where} a symbolic link to {target}, which does not exist; create "
-                f"{link.parent / target} first, or choose another --out"
-            )
-
-
-def make_dir(out: Path) -> None:
-    """Create the output directory ``out`` and its parents (``check_no_dangling_link``)."""
-    check_no_dangling_link(out)
-    out.mkdir(parents=True, exist_ok=True)
-
-
-def check_run_dir(out_dir: str | os.PathLike, run: dict, resume: bool) -> None:
-    """Refuse a directory that cannot take this run (``prepare_run_dir``'s checks), writing
-    nothing: a run with work to do before it claims its directory (a grid to solve) calls it
-    first, so that a directory it cannot have is named before that work.
-
-    Raises:
-        RunDirectoryError: as ``prepare_run_dir``.
-    """
-    out = Path(out_dir)
-    check_no_dangling_link(out)
-    if out.exists() and not out.is_dir():
-        raise RunDirectoryError(f"--out {out} is a file, not a directory; choose a directory")
-    existing = out / RUN_FILE
-    if existing.exists():
-        old = read_json(existing, "run file")
-        if not resume:
-            seed = (old.get("config") or {}).get("seed")  # a planner's run has none
-            seed = "" if seed is None else f", seed {seed!r}"
-            raise RunDirectoryError(
-                f"{out} already holds a run (task {old.get('task')!r}{seed}); pass --resume to "
-                "continue it or choose a new --out"
-            )
-        check_same_run(out, old, run)
-        if old.get("complete"):
-            raise RunDirectoryError(f"{out} holds a finished run; there is nothing to resume")
-        return
-    if resume:
-        raise RunDirectoryError(f"nothing to resume: {out} holds no {RUN_FILE}; drop --resume")
-    if out.exists() and any(out.iterdir()):
-        raise RunDirectoryError(
-            f"{out} is not empty and holds no diffcontrol run; choose a new or empty --out"
-        )
-
-
-def prepare_run_dir(out_dir: str | os.PathLike, run: dict, resume: bool) -> Path:
-    """Check that ``out_dir`` can take this run (``check_run_dir``), create it, and write
-    ``run.json``.
-
-    ``run`` identifies the run (task and config). Without ``resume`` the directory must be
-    new or empty; with it, it must hold the same run. Nothing existing is overwritten.
-
-    Raises:
-        RunDirectoryError: the directory is not writable, holds something else, or holds a
-            different run.
-    """
-    check_run_dir(out_dir, run, resume)
-    out = Path(out_dir)
-    existing = out / RUN_FILE
-    if resume and existing.exists():  # the same run (check_run_dir compared them)
-        return out
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        write_json_new(existing, run)  # the claim: of two processes, one gets the directory
-    except FileExistsError:
-        raise RunDirectoryError(
-            f"another process has just claimed {out}; choose a new --out"
-        ) from None
-    except OSError as e:
-        raise RunDirectoryError(
-            f"cannot write to {out} ({e.strerror}); choose a writable --out"
-        ) from None
-    return out

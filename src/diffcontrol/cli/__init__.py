@@ -77,7 +77,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 # What a command's --resume starts from in its --out, any one of these sets of files
-# (io.RUN_FILE with training's CHECKPOINT_FILE, runs.SWEEP_FILE, runs.LOOP_FILE or the first
+# (_run_dir.RUN_FILE with training's CHECKPOINT_FILE, runs.SWEEP_FILE, runs.LOOP_FILE or the first
 # round's data, compare's SETTINGS_FILE or compare --real's file): named as files, so that
 # the advice after an error imports nothing.
 _RESUME_FROM = {

@@ -19,7 +19,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from .. import _gym, _jax_setup, envs, io
+from .. import _gym, _jax_setup, _run_dir, envs, io
 from .._shell import command as shell_command
 from ..errors import ConfigError, Interrupted, RunDirectoryError
 from ..settings import CompareConfig
@@ -224,7 +224,7 @@ def _prepare(out: Path, settings: dict, resume: bool) -> Path:
             )
     else:
         try:
-            io.make_dir(out)
+            _run_dir.make_dir(out)
             if any(out.iterdir()):
                 raise RunDirectoryError(
                     f"{out} is not empty and holds no comparison; choose a new or empty --out"

@@ -38,7 +38,7 @@ from typing import Any
 
 import numpy as np
 
-from .. import _gym, io
+from .. import _gym, _run_dir, io
 from ..errors import ConfigError, RunDirectoryError
 from ..runs import loop
 from ..settings import CONTROLLERS, MIN_TRANSITIONS, LoopConfig
@@ -320,7 +320,7 @@ def _prepare(out: Path, settings: dict, resume: bool) -> None:
         return
     if out.exists() and any(out.iterdir()):
         raise RunDirectoryError(f"--out {out} is not empty; choose a new or empty directory")
-    io.make_dir(out)
+    _run_dir.make_dir(out)
     io.write_json(path, {**settings, "created": io.now_iso()})
 
 

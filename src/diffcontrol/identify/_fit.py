@@ -11,9 +11,10 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from .._run_dir import check_no_dangling_link
 from .._version import __version__
 from ..errors import ConfigError, RunDirectoryError
-from ..io import check_no_dangling_link, now_iso, write_json, write_json_new
+from ..io import now_iso, write_json, write_json_new
 from ..settings import FitConfig
 from ..tasks import as_task
 from ._routes import model_route

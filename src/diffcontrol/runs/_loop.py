@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from .. import _gym
+from .._run_dir import make_dir
 from .._run_files import read_run_file, release_claim, save_run
 from .._shell import command as shell_command
 from ..envs import env_id as own_id
@@ -34,7 +35,7 @@ from ..identify import fit_dir
 from ..identify._rounds import NoisyPolicy, model_error, parse_start, predictor_of, start_params
 from ..identify.data import concat, read_trajectories, write_trajectories
 from ..identify.recording import check_spaces, make_env, record, record_task
-from ..io import make_dir, now_iso, read_json, write_figure, write_json
+from ..io import now_iso, read_json, write_figure, write_json
 from ..mpc._config import loop_planner
 from ..policies import read_model
 from ..settings import FitConfig, LoopConfig

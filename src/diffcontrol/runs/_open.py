@@ -7,7 +7,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-from .. import io, policies, tasks
+from .. import _run_dir, io, policies, tasks
 from .._run_files import METRICS_FILE, Run, judged, task_policy
 from ..errors import ModelFileError
 from ..identify.fitted import checked_env
@@ -91,8 +91,8 @@ def open_run(
     config = task.default_config()
     planner = policies.is_planner(doc)  # its run.json holds the planner's settings, not training's
     fitted_model = None  # the --model a run was trained through, as its run.json says
-    if (directory / io.RUN_FILE).exists() and not planner:
-        run_doc = io.read_json(directory / io.RUN_FILE, "run file")
+    if (directory / _run_dir.RUN_FILE).exists() and not planner:
+        run_doc = io.read_json(directory / _run_dir.RUN_FILE, "run file")
         stored = run_doc.get("config")
         invocation = run_doc.get("invocation")
         fitted_model = invocation.get("model") if isinstance(invocation, dict) else None
@@ -100,7 +100,7 @@ def open_run(
             config = type(config).from_json(stored)
         except (TypeError, ValueError, KeyError, AttributeError) as e:
             raise ModelFileError(
-                f"{directory / io.RUN_FILE} holds settings this task cannot read ({e}); "
+                f"{directory / _run_dir.RUN_FILE} holds settings this task cannot read ({e}); "
                 "re-create the run with `diffcontrol train`"
             ) from None
     metrics = {}

@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from .. import _gym, io, policies
+from .. import _gym, _run_dir, io, policies
 from .._run_files import Run, mark_complete, save_run
 from .._version import __version__
 from ..errors import ConfigError, ModelFileError
@@ -169,7 +169,7 @@ def plan_run(
     run = {"task": task.name, "config": config.to_json(), "planner": True}
     run["invocation"] = invocation or {"task": task.name}
     existed = Path(out_dir).is_dir()  # an empty directory of the user's is left in place
-    out = io.prepare_run_dir(out_dir, run, resume=False)
+    out = _run_dir.prepare_run_dir(out_dir, run, resume=False)
     try:
         t0 = time.perf_counter()
         policy = make_planner_policy(task, config, info, say, value)

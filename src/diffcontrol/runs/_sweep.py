@@ -20,7 +20,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from .. import _jax_setup, io, policies
+from .. import _jax_setup, _run_dir, io, policies
 from .._run_files import METRICS_FILE, MODEL_FILE, mark_complete, read_run_file, save_run
 from .._shell import command as shell_command
 from ..errors import ConfigError, RunDirectoryError
@@ -222,7 +222,9 @@ def _claim(out: Path, doc: dict, resume: bool) -> None:
         same = isinstance(stored, dict) and all(
             stored.get(k) == doc[k] for k in ("format", "task", "seeds", "values")
         )
-        same = same and io.stored_config(stored.get("config")) == io.stored_config(doc["config"])
+        same = same and _run_dir.stored_config(stored.get("config")) == _run_dir.stored_config(
+            doc["config"]
+        )
         if not same:
             raise RunDirectoryError(
                 f"{out} holds a different sweep; resume it with its own settings "
@@ -231,7 +233,7 @@ def _claim(out: Path, doc: dict, resume: bool) -> None:
         return
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
         raise RunDirectoryError(f"--out {out} exists and is not an empty directory; choose another")
-    io.make_dir(out)
+    _run_dir.make_dir(out)
     try:
         io.write_json_new(path, doc)
     except FileExistsError:
@@ -275,7 +277,7 @@ def _write_member(member_dir: Path, result: Any, task_spec: str) -> None:
     member_dir.mkdir(parents=True, exist_ok=True)
     metrics = {**result.metrics, "created": io.now_iso()}
     io.write_json(
-        member_dir / io.RUN_FILE,
+        member_dir / _run_dir.RUN_FILE,
         {
             "format": "diffcontrol-run",
             "task": result.task.name,

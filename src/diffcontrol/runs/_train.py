@@ -15,7 +15,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from .. import _jax_setup, _timing, io, tasks
+from .. import _jax_setup, _run_dir, _timing, io, tasks
 from .._run_files import Run, mark_complete, read_run_file, release_claim, save_run
 from .._shell import command as shell_command
 from ..envs import make_env
@@ -117,12 +117,12 @@ def train_run(
         if stored is None:
             raise ConfigError("name the TASK to train (or --resume the run in --out)")
         fix = shell_command("train", str(task), "--out", out, "--resume")
-        task = named_by_file(task, str(out / io.RUN_FILE), fix).name
+        task = named_by_file(task, str(out / _run_dir.RUN_FILE), fix).name
     model = model or invocation.get("model")
     if env_id and not model:
         raise ConfigError("--env names the real system of a fitted model: give --model too")
     if env_id is None and invocation.get("env"):  # run.json's: used if it imports nothing
-        env_id = checked_env_id(invocation["env"], str(out / io.RUN_FILE))
+        env_id = checked_env_id(invocation["env"], str(out / _run_dir.RUN_FILE))
     final_eval = invocation.get("final_eval") if final_eval is None else final_eval
     animation = animation and invocation.get("animation") is not False
     devices = devices or invocation.get("devices")
@@ -152,7 +152,7 @@ def train_run(
         config = resolve_config(the_task, recipe, **overrides)
 
     if stored is not None and stored.get("complete"):
-        io.check_same_run(out, stored, {"task": the_task.name, "config": config.to_json()})
+        _run_dir.check_same_run(out, stored, {"task": the_task.name, "config": config.to_json()})
         return RunOutcome(None, [], f"{out} holds a finished run; nothing to resume")
 
     cache_dir = None
@@ -194,7 +194,9 @@ def train_run(
     except BaseException as e:
         # nothing to resume (no run.json yet, or one without a checkpoint): say so
         kept = (
-            resume or not is_writer() or (not release_claim(out) and (out / io.RUN_FILE).is_file())
+            resume
+            or not is_writer()
+            or (not release_claim(out) and (out / _run_dir.RUN_FILE).is_file())
         )
         if isinstance(e, TrainingDiverged) and kept and not resume:  # other settings: new dir
             raise type(e)(

@@ -21,7 +21,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, PRNGKeyArray, PyTree
 
-from .. import _timing, io, policies
+from .. import _run_dir, _timing, io, policies
 from .._jax_setup import FAST_COMPILE, compile_with
 from .._run_files import save_run
 from ..checks import validate_task
@@ -29,6 +29,7 @@ from ..controllers import MLPController
 from ..errors import ConfigError, ModelFileError, TrainingDiverged
 from ..tasks import AnyTask, ContinuousTask, StepLoss, TrajectoryLoss, as_task, task_params
 from ._bptt import make_trainer
+from ._checkpoint import load_checkpoint, save_checkpoint
 from ._devices import batch_placement, check_devices, divisible, gathered, is_writer, placer
 from ._diagnostics import Diagnostics
 from ._events import learning_rates, open_log
@@ -193,7 +194,7 @@ def train(
     if invocation:
         run["invocation"] = invocation
     if out_dir is not None and is_writer():  # before a terminal value's grid is solved
-        io.check_run_dir(out_dir, run, resume)
+        _run_dir.check_run_dir(out_dir, run, resume)
     kept = _kept_trainer(task, config, step_loss, trajectory_loss, params, say)
     trainer = kept.trainer
     custom = step_loss is not None or trajectory_loss is not None
@@ -221,11 +222,11 @@ def train(
         "best_index": 0,
     }
     if out_dir is not None:
-        out = io.prepare_run_dir(out_dir, run, resume) if is_writer() else Path(out_dir)
+        out = _run_dir.prepare_run_dir(out_dir, run, resume) if is_writer() else Path(out_dir)
         ckpt = out / CHECKPOINT_FILE
         if resume and ckpt.exists():
             like_best = trainer.pick(ts.controller, np.zeros(_population(config)))
-            (ts, best), meta = io.load_checkpoint(ckpt, (ts, like_best))
+            (ts, best), meta = load_checkpoint(ckpt, (ts, like_best))
             if not _finite(best):  # a damaged checkpoint: nothing is trained or written from it
                 raise ModelFileError(
                     f"checkpoint {ckpt} holds a controller whose weights are not finite; it "
@@ -335,7 +336,7 @@ def train(
         if out is not None:
             whole_state = gathered((ts, best))  # every process takes part; process 0 writes
         if out is not None and is_writer():
-            io.save_checkpoint(
+            save_checkpoint(
                 out / CHECKPOINT_FILE,
                 whole_state,
                 {
