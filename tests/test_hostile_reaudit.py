@@ -539,6 +539,35 @@ def test_data_the_system_cannot_produce_fits_nothing(
     assert not out.exists()
 
 
+@pytest.mark.parametrize(
+    ("env_id", "needle"),
+    [  # new-fit-envid_colon_number: a module named by the file is not imported
+        ("Pendulum-v1:2", "pass --env Pendulum-v1:2 explicitly"),
+        (f"{EVIL}:Pendulum-v1", "does not import modules named by files"),
+    ],
+)
+def test_data_naming_a_module_imports_nothing_and_fits_nothing(
+    capsys, fitted_dir, tmp_path, env_id, needle
+):
+    lines = fitted_dir[1].read_text().splitlines()
+    header = json.loads(lines[0][2:])
+    header["metadata"]["env_id"] = env_id
+    data = tmp_path / "bad.csv"
+    data.write_text("# " + json.dumps(header) + "\n" + "\n".join(lines[1:]) + "\n")
+    out = tmp_path / "fit"
+    argv = ["fit", "pendulum", "--data", data, "--model", "params", "--out", out]
+    _one_line(capsys, argv, needle)
+    assert not out.exists()
+
+
+def test_a_task_that_cannot_read_its_state_is_not_planned(capsys, tmp_path):
+    """new-plan-14: a task without state_from_observation (the trebuchet's aim) is refused
+    before a planner is built, and no directory is left."""
+    out = tmp_path / "plan"
+    _one_line(capsys, ["plan", "trebuchet", "--out", out], "cannot be planned")
+    assert not out.exists()
+
+
 def test_data_naming_an_unknown_environment_fits_nothing(capsys, fitted_dir, tmp_path):
     lines = fitted_dir[1].read_text().splitlines()
     header = json.loads(lines[0][2:])
@@ -572,6 +601,65 @@ def test_data_from_a_system_with_impossible_physics_fits_and_trains_nothing(
     _edit(fit / "fitted.json", lambda f: f["data"].update(env_kwargs=kwargs))
     _one_line(capsys, ["train", "pendulum", "--model", fit, "--out", tmp_path / "run"], needle)
     assert not (tmp_path / "run").exists()
+
+
+def test_a_sweep_larger_than_the_memory_is_refused_before_anything_is_allocated(
+    capsys, tmp_path, monkeypatch
+):
+    """The members' training state is estimated from one member's shapes and refused, in one
+    line that names how many fit, where it exceeds the memory the process may use."""
+    from diffcontrol.training import _sweep
+
+    monkeypatch.setattr(_sweep, "available_memory", lambda: 8 * 2**20)  # 8 MiB
+    out = tmp_path / "sweep"
+    argv = ["sweep", "pendulum", "--seeds", "0-15", "--updates", "2", "--out", out]
+    one_line(capsys, argv, "a sweep of 16 members of 'pendulum' needs about", "members at once")
+    monkeypatch.setattr(_sweep, "available_memory", lambda: 2**10)
+    one_line(capsys, argv, "one member alone needs more")
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(("suffix", "needle"), [(".csv", "larger than 1024 MiB"), (".npz", "")])
+def test_a_data_file_past_its_size_limit_is_refused_unread(
+    capsys, tmp_path, monkeypatch, suffix, needle
+):
+    """A file larger than diffcontrol reads (here 5 GiB, sparse: no disk is used) is refused
+    by its size, not read up to the limit first."""
+    from diffcontrol import io
+
+    data = tmp_path / f"huge{suffix}"
+    with open(data, "wb") as f:
+        f.truncate(5 * 2**30)
+    real_open = open
+
+    def no_big_reads(*args, **kwargs):
+        f = real_open(*args, **kwargs)
+        read = f.read
+        f.read = lambda n=-1: read(min(n, 2**20)) if 0 <= n else pytest.fail("read it all")
+        return f
+
+    monkeypatch.setattr(io, "open", no_big_reads, raising=False)
+    argv = ["fit", "pendulum", "--data", data, "--model", "params", "--out", tmp_path / "fit"]
+    one_line(capsys, argv, str(data), needle)
+
+
+def test_a_long_read_and_fit_say_how_far_they_are(fitted_dir, tmp_path, monkeypatch):
+    """A large data file's parsing and a long fit's Adam steps report as they go (every
+    ``_progress.SECONDS``, here every time they may), and the fit is the same as a silent one."""
+    from diffcontrol import identify
+    from diffcontrol.identify import _progress
+
+    task = diffcontrol.make("pendulum")
+    monkeypatch.setattr(_progress, "SECONDS", 0.0)
+    lines = []
+    kw = {"window": 5, "steps": 100, "lm_steps": 0}
+    said = identify.fit_dir(
+        task, fitted_dir[1], "params", tmp_path / "a", progress=lines.append, **kw
+    )
+    quiet = identify.fit_dir(task, fitted_dir[1], "params", tmp_path / "b", **kw)
+    assert any(line.startswith(f"parsing {fitted_dir[1]}: 0 of ") for line in lines), lines
+    assert any(line.startswith("Adam step 50/100: best loss ") for line in lines), lines
+    assert said.result.values == quiet.result.values
 
 
 @pytest.mark.parametrize(("grid", "levels"), [(1001, 1001), (1001, 41), (401, 1001)])

@@ -26,6 +26,9 @@ interval of the loss's save grid, and the episode's return minus the task's loss
 
 from __future__ import annotations
 
+import importlib
+import os
+import sys
 from typing import Any
 
 import equinox as eqx
@@ -260,13 +263,41 @@ class _Hold(eqx.Module):
         return self.force
 
 
+def _import_typed_module(env_id: str) -> None:
+    """Import the module of a ``module:Env-v0`` id from the current directory as well, as a
+    task's import path is (``tasks.resolve``): such an id reaches here only as the user typed
+    it (``--env``, ``record``). An id read from a file has passed
+    ``identify.fitted.checked_env_id``, which refuses a module not imported already, so
+    nothing is imported here because a file named it."""
+    module, sep, _ = env_id.partition(":")
+    if not sep or not module or module in sys.modules:
+        return
+    here = os.getcwd()
+    added = here not in sys.path and "" not in sys.path
+    if added:
+        sys.path.insert(0, here)
+    try:
+        importlib.import_module(module)
+    except Exception as e:  # noqa: BLE001 - any failure of the user's module is reported
+        raise ConfigError(
+            f"cannot make the environment {env_id!r}: importing {module!r} raised "
+            f"{type(e).__name__}: {' '.join(str(e).split())[:200]}; check the module path (run "
+            "from the directory that holds it, or install its package)"
+        ) from None
+    finally:
+        if added:
+            sys.path.remove(here)
+
+
 def make_env(env_id: str, env_kwargs: dict | None = None) -> gymnasium.Env:
-    """``gymnasium.make(env_id, **env_kwargs)``, with an unknown id as a ``ConfigError``.
+    """``gymnasium.make(env_id, **env_kwargs)``, with an unknown id as a ``ConfigError``; the
+    module of a ``module:Env-v0`` id is found in the current directory too.
 
     Raises:
         ConfigError: Gymnasium does not know ``env_id`` (the message lists a few it does), or
             refuses ``env_kwargs``.
     """
+    _import_typed_module(env_id)
     try:
         return gymnasium.make(env_id, **(env_kwargs or {}))
     except gymnasium.error.Error as e:

@@ -174,8 +174,10 @@ def read_limited(path: Path, limit: int, what: str) -> bytes:
         ModelFileError: the file is larger than ``limit``.
     """
     with open(path, "rb") as f:
-        data = f.read(limit + 1)
-    if len(data) > limit:
+        # a regular file by its size, before a byte is read; anything else by what it yields
+        too_big = os.fstat(f.fileno()).st_size > limit
+        data = b"" if too_big else f.read(limit + 1)
+    if too_big or len(data) > limit:
         raise ModelFileError(
             f"{what} {path} is larger than {limit // 2**20} MiB; it is not one diffcontrol writes"
         )

@@ -63,6 +63,9 @@ def add_parsers(sub: Any) -> None:
         ("--model", MODELS, REQUIRED, None, "grey box, hybrid or neural"),
         ("--out", str, REQUIRED, "DIR", "output directory"),
         *config_specs(FitConfig),
+        ("--env", str, None, "ENV_ID", "the environment the data came from, where its module "
+         "is yours (my_envs:MyPendulum-v0): imported because you name it, never because the "
+         "file does"),
         ("--force", FLAG, False, None, "replace DIR/fitted.json if it exists"),
         QUIET,
     )
@@ -93,7 +96,7 @@ def add_parsers(sub: Any) -> None:
 def cmd_fit(args: argparse.Namespace) -> int:
     from .. import identify, tasks  # JAX: the library, when the command runs
 
-    more = {"force": args.force, "progress": say(args)}
+    more = {"force": args.force, "progress": say(args), "env_id": args.env}
     task, config = tasks.resolve(args.task), config_of(FitConfig, args)
     done = identify.fit_dir(task, args.data, args.model, args.out, config, **more)
     print("\n".join(done.lines))

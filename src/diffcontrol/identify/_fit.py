@@ -17,6 +17,7 @@ from ..errors import ConfigError, RunDirectoryError
 from ..io import now_iso, write_json, write_json_new
 from ..settings import FitConfig
 from ..tasks import as_task
+from ._progress import reporting
 from ._routes import model_route
 from ._shooting import MODEL_TYPES, FitResult
 from .data import TrajectoryData
@@ -148,13 +149,16 @@ def fit_dir(
     *,
     force: bool = False,
     progress: Callable[[str], None] | None = None,
+    env_id: str | None = None,
     **start: Any,
 ) -> FitDir:
     """``diffcontrol fit``: read ``data_file``, hold out its last ``config.holdout`` fraction,
     fit ``model`` (``fit``, with the settings ``config``: a ``FitConfig``, by default
     ``FitConfig()``) and write ``out/fitted.json`` and ``out/prediction.png``. ``start`` is
     what the fit starts from, as ``fit`` takes it: ``init`` (a grey box's initial values) or
-    ``params`` (a hybrid's physics).
+    ``params`` (a hybrid's physics). ``env_id``: the data's environment as the user names it
+    (``--env``), for an id whose module is the user's (``my_envs:MyPendulum-v0``), which is
+    not imported because the file names it.
 
     Raises:
         RunDirectoryError: ``out`` cannot take the files (or holds a fit, without ``force``);
@@ -167,14 +171,22 @@ def fit_dir(
     given = {k: v for k, v in dataclasses.asdict(config or FitConfig()).items() if v is not None}
     settings = {"steps": steps, "learning_rate": lr, **given, **start}
     holdout = settings["holdout"]
-    data = route.read(data_file)
+    with reporting(progress):
+        data = route.read(data_file)
     meta = getattr(data, "metadata", None) or {}
     if isinstance(meta.get("params"), dict) and not meta.get("env_id"):
         # what train --model will judge on: checked now
         real_params(task, {"params": meta["params"]})
+    if env_id is not None and meta.get("env_id") != env_id:
+        raise ConfigError(
+            f"--env {env_id} is not the environment the data of {data_file} came from "
+            f"({meta.get('env_id')!r}); leave --env out, or fit data of {env_id}"
+        )
     if meta.get("env_id"):  # the real system train --model judges on: checked now too
-        env_id, env_kwargs = checked_env(meta["env_id"], meta.get("env_kwargs"), str(data_file))
-        check_real_env(task, env_id, env_kwargs, str(data_file))
+        real_id, env_kwargs = checked_env(
+            meta["env_id"], meta.get("env_kwargs"), str(data_file), trusted=env_id
+        )
+        check_real_env(task, real_id, env_kwargs, str(data_file))
     out = Path(out)
     check_fit_dir(out, force)
     train, held_out = split(route, data, holdout)
@@ -184,7 +196,8 @@ def fit_dir(
         route.check_split(task, data, train, held_out, settings)
     t0 = time.perf_counter()
     fit_settings = {k: v for k, v in settings.items() if k != "holdout"}
-    result = fit(task, train, model, **fit_settings)
+    with reporting(progress):
+        result = fit(task, train, model, **fit_settings)
     seconds = time.perf_counter() - t0
     try:
         out.mkdir(parents=True, exist_ok=True)

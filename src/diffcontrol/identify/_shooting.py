@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import time
 from collections.abc import Sequence
 from typing import Any
 
@@ -19,6 +20,7 @@ import numpy as np
 import optax
 
 from ..errors import ConfigError
+from ._progress import due, reporter
 
 MIN_TRANSITIONS_PER_PARAMETER = 50
 """The fewest recorded transitions ``(y_t, u_t, y_{t+1})`` per fitted parameter."""
@@ -105,6 +107,11 @@ def set_params(params: Any, names: Sequence[str], values: jax.Array) -> Any:
     )
 
 
+CHUNK_STEPS = 50
+"""The most Adam steps one compiled program runs: a fit of many steps runs as chunks of a
+divisor of its steps (one program), so that a long one can say how far it is between them."""
+
+
 def adam_fit(loss: Any, z: Any, optimiser: Any, steps: int, batch: Any, what: str = "parameters"):
     """``adam_scan``, and what every fit does with it: the best ``z`` (the last one if its loss
     is lower still, unless the run diverged), its loss, the loss history of the steps taken,
@@ -130,12 +137,23 @@ def adam_fit(loss: Any, z: Any, optimiser: Any, steps: int, batch: Any, what: st
     return best, best_loss, history, diverged, message
 
 
+def chunk_steps(steps: int) -> int:
+    """The steps of one compiled chunk: ``steps`` itself up to ``CHUNK_STEPS``, else its
+    largest divisor up to ``CHUNK_STEPS``, so that every chunk is the same program."""
+    if steps <= CHUNK_STEPS:
+        return max(steps, 1)
+    return max(d for d in range(1, CHUNK_STEPS + 1) if steps % d == 0)
+
+
 def adam_scan(loss: Any, z: Any, optimiser: Any, steps: int, batch: Any):
-    """``steps`` optimiser steps on ``loss(z, batch)`` under one jitted ``lax.scan``.
+    """``steps`` optimiser steps on ``loss(z, batch)`` under jitted ``lax.scan`` chunks.
 
     ``z`` is any PyTree of arrays (parameters, or a network filtered with ``eqx.filter``). A
     step whose loss or new ``z`` is non-finite freezes the run there (``alive`` turns false);
-    the best ``z`` is the one with the lowest loss seen before it.
+    the best ``z`` is the one with the lowest loss seen before it. The steps run in chunks of
+    ``chunk_steps(steps)``, one compiled program, with the state carried between them; a fit
+    inside ``_progress.reporting`` says how far it is between chunks once it has run
+    ``_progress.SECONDS``.
 
     It returns ``(z, best_z, best_loss, alive), (losses, was_alive)``: the last and best ``z``,
     the best loss (``inf`` if no step ran), whether no step diverged, and per step the loss
@@ -148,8 +166,10 @@ def adam_scan(loss: Any, z: Any, optimiser: Any, steps: int, batch: Any):
     def where(c, a, b):
         return jax.tree.map(lambda x, y: jnp.where(c, x, y), a, b)
 
+    length = chunk_steps(steps)
+
     @jax.jit
-    def run(z, batch):
+    def run(carry, batch):
         def body(carry, _):
             z, opt_state, best_z, best_loss, alive = carry
             value, grad = jax.value_and_grad(loss)(z, batch)  # the loss at z, before the step
@@ -166,12 +186,29 @@ def adam_scan(loss: Any, z: Any, optimiser: Any, steps: int, batch: Any):
             )
             return carry, (value, alive)
 
-        inf = jnp.asarray(jnp.inf, jnp.result_type(float))
-        init = (z, optimiser.init(z), z, inf, jnp.asarray(True))
-        (z, _, best_z, best_loss, alive), history = jax.lax.scan(body, init, None, length=steps)
-        return (z, best_z, best_loss, alive), history
+        return jax.lax.scan(body, carry, None, length=length)
 
-    return run(z, batch)
+    inf = jnp.asarray(jnp.inf, jnp.result_type(float))
+    carry = (z, optimiser.init(z), z, inf, jnp.asarray(True))
+    progress, t0 = reporter(), time.perf_counter()
+    said, values, was_alive = t0, [], []
+    for done in range(length, steps + 1, length):
+        carry, (value, alive) = run(carry, batch)
+        values.append(value)
+        was_alive.append(alive)
+        if progress:  # the chunk done, not only dispatched, before the time is read
+            jax.block_until_ready(carry)
+        if progress and done < steps and due(said):
+            said = now = time.perf_counter()
+            left = (now - t0) / done * (steps - done)
+            progress(
+                f"Adam step {done}/{steps}: best loss {float(carry[3]):.4g} "
+                f"({now - t0:.0f} s, about {left:.0f} s left)"
+            )
+    z, _, best_z, best_loss, alive = carry
+    if not values:  # no step
+        return (z, best_z, best_loss, alive), (jnp.zeros((0,)), jnp.zeros((0,), bool))
+    return (z, best_z, best_loss, alive), (jnp.concatenate(values), jnp.concatenate(was_alive))
 
 
 def standard_errors(residual_fn, values: jax.Array, *args: Any, size: int | None = None):

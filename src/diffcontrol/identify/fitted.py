@@ -223,8 +223,9 @@ def checked_env_id(env_id: Any, where: str = "a file") -> str:
     if spec is None:
         raise ConfigError(
             f"{where} names the environment {env_id!r}, which Gymnasium does not know here; "
-            'pass --env with a registered id (`python -c "import gymnasium; '
-            'gymnasium.pprint_registry()"` lists them)'
+            "import or install the package that registers it, or re-create the file from a "
+            'registered environment (`python -c "import gymnasium; gymnasium.pprint_registry()"` '
+            "lists them)"
         )
     entry = spec.entry_point
     if isinstance(entry, str) and entry.partition(":")[0] not in sys.modules:

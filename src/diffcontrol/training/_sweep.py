@@ -18,6 +18,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
+import os
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -251,6 +252,48 @@ def check_members(task: Task, configs: Sequence[TrainConfig], devices: int | Non
     check_devices(devices)
 
 
+STATE_COPIES = 4
+"""How many copies of the members' training state a sweep holds at once, at most: the state,
+the chunk's new state, the best controllers and the evaluation's episodes (about one more)."""
+
+
+def available_memory() -> int:
+    """The bytes this process may use: the machine's memory, or less where a limit on the
+    address space (``ulimit -v``) says so."""
+    import resource
+
+    total = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+    return min(total, soft) if soft != resource.RLIM_INFINITY else total
+
+
+def check_memory(task: Task, members: int, state: PyTree, say: Callable[[str], None]) -> None:
+    """Refuse a sweep whose members' training state (one member's ``state``, as
+    ``jax.eval_shape`` gives it, ``STATE_COPIES`` times) would not fit in the memory this
+    process may use, before anything is allocated; say how much it needs when that is over a
+    gigabyte.
+
+    Raises:
+        ConfigError: naming the members, the memory they need and the memory there is.
+    """
+    one = sum(math.prod(x.shape) * x.dtype.itemsize for x in jax.tree.leaves(state))
+    need, have = STATE_COPIES * one * members, available_memory()
+    if need > have:
+        fit = have // (STATE_COPIES * one)
+        advice = (
+            f"sweep at most {fit:,} members at once"
+            if fit
+            else "one member alone needs more: make the network or the batch smaller"
+        )
+        raise ConfigError(
+            f"a sweep of {members:,} members of {task.name!r} needs about {need / 2**30:.2f} "
+            f"GiB for their training state, more than the {have / 2**30:.2f} GiB this process "
+            f"may use; {advice}"
+        )
+    if need > 2**30:
+        say(f"{members:,} members: about {need / 2**30:.1f} GiB of training state")
+
+
 def _differing(configs: Sequence[TrainConfig]) -> list[str]:
     """The settings (other than the seed) whose values differ between members."""
     first = configs[0]
@@ -315,7 +358,10 @@ def _run_program(
         value=value,
     )
     n = len(configs)
-    keys = jnp.stack([jax.random.split(jax.random.PRNGKey(c.seed)) for c in configs])
+    # every member's keys by one program: a key stacked per member would be a concatenation of
+    # as many operands, which XLA compiles for minutes when there are thousands
+    seeds = jnp.asarray(np.asarray([c.seed for c in configs], np.int32))
+    keys = jax.vmap(lambda seed: jax.random.split(jax.random.PRNGKey(seed)))(seeds)
     k_train, k_eval = keys[:, 0], keys[:, 1]
     lrs = jnp.asarray([c.learning_rate for c in configs], jnp.float32)
 
@@ -323,6 +369,13 @@ def _run_program(
         ts = trainer.init(k, params)
         return eqx.tree_at(lambda t: t.opt_state.hyperparams["learning_rate"], ts, lr)
 
+    check_memory(task, n, jax.eval_shape(init, k_train[0], lrs[0]), say)
+    per_point = n * cfg.eval_episodes * (cfg.horizon or task.episode_length)
+    if per_point >= 10**8:  # minutes on a CPU before the first line of the curve
+        say(
+            f"each evaluation point simulates {per_point:,} steps ({n:,} members x "
+            f"{cfg.eval_episodes} episodes); the first comes after compiling"
+        )
     ndev = _member_devices(n, devices)
     shard, replicate = _placement(ndev)
     params = replicate(params)

@@ -16,6 +16,7 @@ import numpy as np
 
 from ...errors import DataFileError
 from ...io import _finite, npz_shape, parse_json, read_limited, scalar_arguments, write_bytes
+from .._progress import ticking
 from ._format import FORMAT, VERSION, parse_column, validate
 from ._table import TrajectoryData
 
@@ -163,7 +164,8 @@ def csv_parts(path: Path, format_: str, version: int) -> tuple[Any, list[str], l
             f'# {{"format": "{format_}", "version": {version}, "metadata": {{...}}}}'
         )
     try:
-        body = [(n, row) for n, row in enumerate(csv.reader(lines[1:]), start=2) if row]
+        rows = ticking(csv.reader(lines[1:]), len(lines) - 1, f"parsing {path}")
+        body = [(n, row) for n, row in enumerate(rows, start=2) if row]
     except csv.Error as e:  # e.g. a field longer than the csv module's limit
         raise DataFileError(f"{path}: not a CSV table diffcontrol can read ({e})") from None
     if not body:
@@ -177,7 +179,7 @@ def csv_table(path: Path, columns: list[str], rows: list, rule: str) -> np.ndarr
     ``DataFileError`` naming the file, the line and the column (``rule`` says what a row
     needs)."""
     table = np.empty((len(rows), len(columns)))
-    for i, (line, cells) in enumerate(rows):
+    for i, (line, cells) in enumerate(ticking(rows, len(rows), f"reading the numbers of {path}")):
         if len(cells) != len(columns):
             raise DataFileError(
                 f"{path}, line {line}: {len(cells)} cells but {len(columns)} columns; {rule}"
