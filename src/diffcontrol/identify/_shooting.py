@@ -206,9 +206,11 @@ def adam_scan(loss: Any, z: Any, optimiser: Any, steps: int, batch: Any):
                 f"({now - t0:.0f} s, about {left:.0f} s left)"
             )
     z, _, best_z, best_loss, alive = carry
-    if not values:  # no step
-        return (z, best_z, best_loss, alive), (jnp.zeros((0,)), jnp.zeros((0,), bool))
-    return (z, best_z, best_loss, alive), (jnp.concatenate(values), jnp.concatenate(was_alive))
+    # the chunks' histories joined by NumPy: no program compiled for each number of chunks
+    history = [
+        np.concatenate([np.asarray(h) for h in hs] or [np.zeros(0)]) for hs in (values, was_alive)
+    ]
+    return (z, best_z, best_loss, alive), (history[0], history[1].astype(bool))
 
 
 def standard_errors(residual_fn, values: jax.Array, *args: Any, size: int | None = None):
