@@ -171,7 +171,7 @@ def check_task(
     finiteness, same key same result), then, for a discrete-time task with a Gymnasium twin,
     parity: from ``states`` reset states, ``steps`` steps each with random valid actions
     while the episode lasts; before every step the twin is put into the task's state
-    (``set_gym_state``) and stepped with ``task.gym_action(action)``, and its
+    (``set_gym_state``) and stepped with the task's ``gym_action`` of the action, and its
     observation, reward and termination must match ``observe(next_state)``, the reward and
     ``terminated`` within ``|ours - theirs| <= atol + rtol * |theirs|`` (termination exactly).
     The trajectory goes on from the task's own next state, so errors do not accumulate.
