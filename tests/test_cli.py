@@ -151,6 +151,9 @@ def test_unknown_task(capsys, tmp_path):
         ("--keep-best", "maybe", "--keep-best"),
         ("--final-window", "-1", "--final-window"),
         ("--value-grid", "1002", "--value-grid"),
+        ("--learning-rate", "-0.1", "--learning-rate"),
+        ("--lr-schedule", "wavy", "--lr-schedule"),
+        ("--final-window-fraction", "0", "--final-window-fraction"),
     ],
 )
 def test_bad_option_values(capsys, tmp_path, option, value, needle):
@@ -163,12 +166,9 @@ def test_bad_option_values(capsys, tmp_path, option, value, needle):
 @pytest.mark.parametrize(
     "args, needle",
     [
-        (["--learning-rate", "-0.1"], "learning_rate"),
-        (["--lr-schedule", "wavy"], "lr_schedule"),
         (["--loss", "nope"], "'nope'"),
         (["--param", "gravity=3"], "'gravity'"),
         (["--recipe", "fancy"], "'fancy'"),
-        (["--final-window-fraction", "0"], "final_window_fraction"),
         (["--value-grid", "2"], "value_grid"),
     ],
 )

@@ -47,7 +47,7 @@ def _one_line(capsys, argv, *needles):
         (dict(activation=5), "activation must be text"),
         (dict(activation="nope"), "activation must be one of"),
         (dict(head="nope"), "head must be empty"),
-        (dict(target_return=-math.inf), "target_return must be a finite return"),
+        (dict(target_return=-math.inf), "target_return must be a finite number, or nan"),
         (dict(batch=10**13), "batch must be in"),
         (dict(updates=10**13), "updates must be in"),
         (dict(hidden=(64, 10**13)), "hidden must be layer widths of at most 1,048,576"),

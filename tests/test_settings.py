@@ -1,9 +1,12 @@
-"""The settings of fit, loop and compare: checked on construction, and the command line's flags
-are their fields (the name, the default, the bounds and the help come from one place)."""
+"""Every configuration (training, record, fit, loop, compare, plan): checked on construction,
+and the command line's flags are their fields (the name, the default, the bounds and the help
+come from one place, the fields' metadata)."""
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
+import math
 
 import pytest
 
@@ -11,7 +14,7 @@ from diffcontrol.cli import COMMANDS, build_parser
 from diffcontrol.cli import _args as a
 from diffcontrol.config import ODETrainConfig, TrainConfig
 from diffcontrol.errors import ConfigError
-from diffcontrol.settings import CompareConfig, FitConfig, LoopConfig
+from diffcontrol.settings import CompareConfig, FitConfig, LoopConfig, PlanConfig, RecordConfig
 
 SETTINGS = (FitConfig, LoopConfig, CompareConfig)
 
@@ -26,7 +29,7 @@ SETTINGS = (FitConfig, LoopConfig, CompareConfig)
         (LoopConfig, dict(names="g"), "names must be names such as"),
         (FitConfig, dict(hidden=(32, 0)), "hidden must be positive layer widths"),
         (FitConfig, dict(window=True), "window must be a positive integer"),
-        (CompareConfig, dict(seeds=2**21), "seeds must be at most 1,048,576"),
+        (CompareConfig, dict(seeds=2**21), "seeds must be in 1 ... 1,048,576"),
         (CompareConfig, dict(torch_threads=0), "torch_threads must be a positive integer"),
     ],
 )
@@ -62,3 +65,71 @@ def test_every_training_field_is_a_train_flag_and_every_command_runs_a_function(
         for f in dataclasses.fields(cls):
             flag = "--param" if f.name == "params" else "--" + f.name.replace("_", "-")
             assert flag in train, flag
+
+
+CONFIGS = (
+    TrainConfig,
+    ODETrainConfig,
+    RecordConfig,
+    FitConfig,
+    LoopConfig,
+    CompareConfig,
+    PlanConfig,
+)
+# rules between fields, which the flags (one value each) cannot know
+_BETWEEN_FIELDS = {("TrainConfig", "value_grid", 1), ("TrainConfig", "value_grid", 2)}
+
+
+def _accepts(parse, text: str) -> bool:
+    try:
+        parse(text)
+    except argparse.ArgumentTypeError:
+        return False
+    return True
+
+
+@pytest.mark.parametrize("cls", CONFIGS, ids=lambda c: c.__name__)
+def test_the_flags_and_the_configs_take_the_same_numbers(cls):
+    """One rule per field, read by both sides: every number a field's flag refuses, the
+    configuration refuses too (naming the field), and every number the flag takes, the
+    configuration takes."""
+    required = {"episodes": 1} if cls is RecordConfig else {}
+    specs = {spec[0]: spec for spec in a.config_specs(cls, skip=("params",))}
+    checked = 0
+    for f in (f for f in dataclasses.fields(cls) if f.name != "params"):
+        parse = specs["--" + f.metadata.get("flag", f.name).replace("_", "-")][1]
+        declared = str(f.type).removesuffix(" | None")
+        if declared == "int":
+            low, high = a.int_bounds(f)
+            values = [low - 1, low, low + 1, high, high + 1, 2**40]
+        elif declared == "float":
+            values = [-1.0, 0.0, 1e-9, 0.5, 1.0, 2.0, 1e7, math.inf, -math.inf, math.nan]
+        else:
+            continue
+        for value in values:
+            if (cls.__name__, f.name, value) in _BETWEEN_FIELDS:
+                continue
+            flag_takes = _accepts(parse, repr(value) if declared == "float" else str(value))
+            try:
+                cls(**{**required, f.name: value})
+                config_takes = True
+            except ConfigError as e:
+                assert str(e).startswith(f.name + " must be"), str(e)
+                config_takes = False
+            assert flag_takes == config_takes, (cls.__name__, f.name, value, flag_takes)
+            checked += 1
+    assert checked >= 6 * 3
+
+
+def test_a_config_round_trips_through_json():
+    config = TrainConfig(target_return=100.0, hidden=(8, 4), params=(("g", 9.0),))
+    doc = config.to_json()
+    assert doc["hidden"] == [8, 4] and doc["params"] == [["g", 9.0]]
+    assert TrainConfig.from_json(doc) == config
+    nan = TrainConfig().to_json()
+    assert nan["target_return"] is None and math.isnan(TrainConfig.from_json(nan).target_return)
+    assert PlanConfig.from_json(PlanConfig(dt=0.05).to_json()) == PlanConfig(dt=0.05)
+    with pytest.raises(ConfigError, match="unknown PlanConfig keys"):
+        PlanConfig.from_json({"horizonn": 3})
+    with pytest.raises(ConfigError, match="PlanConfig must be an object"):
+        PlanConfig.from_json([3])

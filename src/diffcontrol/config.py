@@ -1,8 +1,13 @@
-"""Training configuration: frozen, typed dataclasses whose field docs are the CLI help.
+"""Configuration: frozen, typed dataclasses whose fields are the command line's flags.
 
-``TrainConfig`` is for discrete-time tasks (windowed BPTT), ``ODETrainConfig`` for
-continuous-time ones (differentiation through an ODE solve). Both validate on construction,
-so a bad value is caught where it is set, with a message that names it.
+Every configuration (the training ones here, the settings of the work around training in
+``settings``) is a ``_Config``: each field states its help, its default and its bounds in its
+metadata (``_opt``), which both the command line (``cli._args.config_specs``) and the
+configuration's own check on construction read, so a bad value is caught where it is set,
+with a message that names it. ``TrainConfig`` is for discrete-time tasks (windowed BPTT),
+``ODETrainConfig`` for continuous-time ones (differentiation through an ODE solve).
+
+Importing this module imports no JAX.
 """
 
 from __future__ import annotations
@@ -15,18 +20,12 @@ from typing import Any
 from .errors import ConfigError
 
 SCHEDULES = ("constant", "cosine", "warmup_cosine")
-
-
-def _opt(doc: str, default: Any, metavar: str | None = None, **cli: Any) -> Any:
-    """A config field: its help ``doc``, its ``default``, and how the command line reads it:
-    the flag's ``metavar``, a number's bounds ``low`` (default 1) and ``high`` (default
-    ``MAX_COUNT``), a float's ``form`` (``"fraction"``, ``"positive"``; ``"any"`` takes nan),
-    text's ``choices``, or a ``flag`` named otherwise than the field."""
-    meta = {"help": doc, "metavar": metavar, **cli}
-    if isinstance(default, dict):
-        return field(default_factory=dict, metadata=meta)
-    return field(default=default, metadata=meta)
-
+ACTIVATION_NAMES = ("tanh", "relu", "sigmoid", "elu")
+"""The controllers' hidden activations (``controllers.ACTIVATIONS``)."""
+HEADS = ("linear", "tanh", "sigmoid", "sign", "argmax")
+"""The controllers' action heads (``controllers.head_fn``)."""
+GRADIENT_METHODS = ("checkpoint", "backsolve", "forward")
+SOLVER_NAMES = ("tsit5", "dopri5", "dopri8", "bosh3", "kvaerno5")
 
 MAX_COUNT = 2**31 - 1
 """The largest count (updates, steps, seed): the trainer counts in 32-bit integers."""
@@ -37,81 +36,103 @@ MAX_WIDTH = 2**20
 MAX_VALUE_GRID = 1001
 """The finest grid of a terminal value (a planner's, a training window's): points per state
 axis; its table is solved once per load or run (Pendulum: 0.8 GB)."""
-_WIDE = ("batch", "eval_episodes", "population", "starts")
+
+
+def _opt(doc: str, default: Any, metavar: str | None = None, **rule: Any) -> Any:
+    """A config field: its help ``doc``, its ``default``, the flag's ``metavar``, and the rule
+    its values follow: an integer's bounds ``low`` (default 1) and ``high`` (default
+    ``MAX_COUNT``), and ``must``, the words for them where the bounds alone would mislead; a
+    float's ``form`` (``FLOAT_FORMS``; default finite) and ``high``; text's ``choices``; a
+    ``flag`` named otherwise than the field."""
+    meta = {"help": doc, "metavar": metavar, **rule}
+    if isinstance(default, dict):
+        return field(default_factory=dict, metadata=meta)
+    return field(default=default, metadata=meta)
+
+
+FLOAT_FORMS = {
+    "finite": (math.isfinite, "a finite number"),
+    "any": (lambda v: not math.isinf(v), "a finite number, or nan"),
+    "positive": (lambda v: 0 < v < math.inf, "a finite number > 0"),
+    "nonneg": (lambda v: 0 <= v < math.inf, "a finite number >= 0"),
+    "fraction": (lambda v: 0 <= v <= 1, "in [0, 1]"),
+    "share": (lambda v: 0 < v <= 1, "a fraction in (0, 1]"),
+    "tolerance": (lambda v: 0 < v < 1, "a tolerance in (0, 1) such as 1e-3 or 1e-6"),
+}
+"""The forms of a float field (``_opt(form=...)``): which values it takes, in words."""
 
 
 def int_bounds(f: dataclasses.Field) -> tuple[int, int]:
     """The bounds of the integer config field ``f``: its ``low`` (default 1) and ``high``
-    (default ``MAX_WIDTH`` for the sizes of what runs side by side, else ``MAX_COUNT``), which
-    the command line and the config's own checks both state."""
-    high = MAX_WIDTH if f.name in _WIDE else MAX_COUNT
-    return f.metadata.get("low", 1), f.metadata.get("high", high)
+    (default ``MAX_COUNT``), which the command line and the config's own check both state."""
+    return f.metadata.get("low", 1), f.metadata.get("high", MAX_COUNT)
+
+
+def _least(low: int) -> str:
+    return {0: "an integer >= 0", 1: "a positive integer"}.get(low, f"an integer >= {low}")
+
+
+def _checked(f: dataclasses.Field, value: Any) -> Any:
+    """``value`` of the field ``f``, checked against the field's declared type and the rule in
+    its metadata; integers given for floats and lists for tuples are converted.
+
+    Raises:
+        ConfigError: a value of another type or outside the rule, naming the field.
+    """
+    name, meta, declared = f.name, f.metadata, str(f.type).removesuffix(" | None")
+    if declared == "int":
+        low, high = int_bounds(f)
+        if not isinstance(value, int) or isinstance(value, bool):
+            raise ConfigError(f"{name} must be {_least(low)}, got {value!r}")
+        if not low <= value <= high:
+            must = meta.get("must") or (_least(low) if value < low else f"in {low} ... {high:,}")
+            raise ConfigError(f"{name} must be {must}, got {value!r}")
+    elif declared == "float":
+        if not isinstance(value, int | float) or isinstance(value, bool):
+            raise ConfigError(f"{name} must be a number, got {value!r}")
+        ok, must = FLOAT_FORMS[meta.get("form", "finite")]
+        high = meta.get("high", math.inf)
+        if not ok(value) or value > high:
+            upto = f" up to {high:g}" if high < math.inf else ""
+            raise ConfigError(f"{name} must be {must}{upto}, got {value!r}")
+        return float(value)
+    elif declared in ("str", "bool"):
+        if type(value).__name__ != declared:
+            what = "text" if declared == "str" else "true or false"
+            raise ConfigError(f"{name} must be {what}, got {value!r}")
+        choices = meta.get("choices", (value,))
+        if value not in choices:
+            empty = "empty or " if "" in choices else ""
+            choose = ", ".join(c for c in choices if c)
+            raise ConfigError(f"{name} must be {empty}one of {choose}, got {value!r}")
+    elif declared == "tuple[int, ...]":
+        return layer_widths(name, value)
+    elif declared == "tuple[str, ...]":
+        if not isinstance(value, tuple | list) or not all(isinstance(v, str) for v in value):
+            raise ConfigError(f"{name} must be names such as ('g',), got {value!r}")
+        return tuple(value)
+    elif declared == "tuple[tuple[str, float], ...]":
+        return _pairs(name, value)
+    return value
 
 
 class _Config:
-    """What every configuration shares: validation helpers, ``replace`` and JSON round trips."""
+    """What every configuration shares: each field checked on construction against its type
+    and the rule in its metadata (``_checked``), then the rules between fields (``_check``);
+    ``replace`` and JSON round trips."""
 
-    def _check_types(self) -> None:
-        """Every field has its declared type (numbers of the right kind, strings, a tuple of
-        widths, (name, value) pairs), within the bounds a run can hold; integers given for
-        floats and lists for tuples are converted."""
+    def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
-            value, declared = getattr(self, f.name), str(f.type)
-            if declared == "int":
-                if not isinstance(value, int) or isinstance(value, bool):
-                    raise ConfigError(f"{f.name} must be an integer, got {value!r}")
-                low, limit = int_bounds(f)
-                if not (0 <= value <= limit):  # 0: a field's own check names its lower bound
-                    raise ConfigError(f"{f.name} must be in {low} ... {limit:,}, got {value!r}")
-            elif declared == "float":
-                if not isinstance(value, int | float) or isinstance(value, bool):
-                    raise ConfigError(f"{f.name} must be a number, got {value!r}")
-                object.__setattr__(self, f.name, float(value))
-            elif declared in ("str", "bool"):
-                if type(value).__name__ != declared:
-                    what = "text" if declared == "str" else "true or false"
-                    raise ConfigError(f"{f.name} must be {what}, got {value!r}")
-            elif declared == "tuple[int, ...]":
-                object.__setattr__(self, f.name, layer_widths(f.name, value))
-            elif f.name == "params":
-                object.__setattr__(self, f.name, _pairs(value))
+            value = getattr(self, f.name)
+            if value is None and str(f.type).endswith("| None"):
+                continue
+            checked = _checked(f, value)
+            if checked is not value:
+                object.__setattr__(self, f.name, checked)
+        self._check()
 
-    def _check_common(self) -> None:
-        from .controllers import ACTIVATIONS, HEADS  # JAX: config is read by --help
-
-        if self.activation not in ACTIVATIONS:
-            raise ConfigError(
-                f"activation must be one of {', '.join(ACTIVATIONS)}, got {self.activation!r}"
-            )
-        if self.head and self.head not in HEADS:
-            raise ConfigError(
-                f"head must be empty (the task's) or one of {', '.join(HEADS)}, got {self.head!r}"
-            )
-        for name in ("updates", "eval_every"):
-            value = getattr(self, name)
-            if not isinstance(value, int) or isinstance(value, bool) or value <= 0:
-                raise ConfigError(f"{name} must be a positive integer, got {value!r}")
-        if not (math.isfinite(self.learning_rate) and self.learning_rate > 0):
-            raise ConfigError(
-                f"learning_rate must be a positive finite number, got {self.learning_rate!r}"
-            )
-        if not isinstance(self.keep_best, bool):
-            raise ConfigError(f"keep_best must be true or false, got {self.keep_best!r}")
-        if not (math.isfinite(self.grad_clip) and self.grad_clip >= 0):
-            raise ConfigError(f"grad_clip must be >= 0 (0 disables), got {self.grad_clip!r}")
-        if not (0 <= self.lr_final_fraction <= 1):
-            raise ConfigError(
-                f"lr_final_fraction must be in [0, 1], got {self.lr_final_fraction!r}"
-            )
-        if self.lr_schedule not in SCHEDULES:
-            raise ConfigError(
-                f"lr_schedule must be one of {', '.join(SCHEDULES)}, got {self.lr_schedule!r}"
-            )
-        if not self.hidden or any((not isinstance(h, int)) or h <= 0 for h in self.hidden):
-            raise ConfigError(f"hidden must be positive layer widths, got {self.hidden!r}")
-        for name, value in self.params:
-            if not math.isfinite(value):
-                raise ConfigError(f"parameter override {name}={value!r} is not a finite number")
+    def _check(self) -> None:
+        """The rules between fields, where a configuration has any."""
 
     def replace(self, **changes: Any) -> Any:
         """A copy with some fields changed (validated again)."""
@@ -120,25 +141,23 @@ class _Config:
     def to_json(self) -> dict[str, Any]:
         """A JSON-ready dict (tuples become lists, nan becomes None)."""
         out = dataclasses.asdict(self)
-        out["hidden"] = list(self.hidden)
-        out["params"] = [list(p) for p in self.params]
         for name, value in out.items():
             if isinstance(value, float) and math.isnan(value):
                 out[name] = None
+            elif isinstance(value, tuple):
+                out[name] = [list(v) if isinstance(v, tuple) else v for v in value]
         return out
 
     @classmethod
-    def from_json(cls, data: dict[str, Any]) -> Any:
-        """Inverse of ``to_json``; unknown keys are an error."""
+    def from_json(cls, data: Any) -> Any:
+        """Inverse of ``to_json``; anything but an object of the fields is a ``ConfigError``."""
+        if not isinstance(data, dict):
+            raise ConfigError(f"{cls.__name__} must be an object, got {data!r}")
         fields = {f.name: f for f in dataclasses.fields(cls)}
         unknown = set(data) - set(fields)
         if unknown:
-            raise ConfigError(f"unknown config keys {sorted(unknown)}")
+            raise ConfigError(f"unknown {cls.__name__} keys {sorted(unknown)}")
         data = dict(data)
-        if "hidden" in data:
-            data["hidden"] = tuple(data["hidden"])
-        if "params" in data:
-            data["params"] = tuple((str(k), float(v)) for k, v in data["params"])
         for name, value in list(data.items()):
             if value is None and isinstance(fields[name].default, float):
                 data[name] = math.nan
@@ -162,8 +181,8 @@ def layer_widths(name: str, value: Any) -> tuple[int, ...]:
     return tuple(value)
 
 
-def _pairs(value: Any) -> tuple[tuple[str, float], ...]:
-    """``params`` as ``((name, value), ...)``: names are text, values finite numbers."""
+def _pairs(name: str, value: Any) -> tuple[tuple[str, float], ...]:
+    """``value`` as ``((name, value), ...)``: names are text, values finite numbers."""
     ok = isinstance(value, tuple | list) and all(
         isinstance(p, tuple | list)
         and len(p) == 2
@@ -174,21 +193,58 @@ def _pairs(value: Any) -> tuple[tuple[str, float], ...]:
     )
     if not ok:
         raise ConfigError(
-            f"params must be (name, value) pairs such as (('g', 9.81),), got {value!r}"
+            f"{name} must be (name, value) pairs such as (('g', 9.81),), got {value!r}"
         )
-    return tuple((name, float(v)) for name, v in value)
+    for key, v in value:
+        if not math.isfinite(v):
+            raise ConfigError(f"parameter override {key}={v!r} is not a finite number")
+    return tuple((key, float(v)) for key, v in value)
 
 
-def _check_curriculum(config: Any) -> None:
-    if not (0 < config.curriculum_start <= 1):
-        raise ConfigError(
-            f"curriculum_start must be a fraction in (0, 1] (1 turns the curriculum off), "
-            f"got {config.curriculum_start!r}"
-        )
-    if not (0 < config.curriculum_fraction <= 1):
-        raise ConfigError(
-            f"curriculum_fraction must be a fraction in (0, 1], got {config.curriculum_fraction!r}"
-        )
+# The fields both training configurations have, with their help and rules; a configuration
+# gives each its own default (and, where the two trainers differ, its own help).
+_SHARED = {
+    "seed": ("PRNG seed: a run is a function of this seed.", {"low": 0}),
+    "learning_rate": (
+        "Adam learning rate (peak value for schedules).",
+        {"metavar": "LR", "form": "positive"},
+    ),
+    "lr_schedule": (
+        "Learning-rate schedule: constant, cosine (decay to lr_final_fraction), or "
+        "warmup_cosine (5% linear warm-up, then cosine).",
+        {"choices": SCHEDULES},
+    ),
+    "lr_final_fraction": ("Final learning rate as a fraction of the peak.", {"form": "fraction"}),
+    "grad_clip": (
+        "Clip the gradient's global norm to this; 0 disables.",
+        {"metavar": "NORM", "form": "nonneg"},
+    ),
+    "hidden": ("Hidden layer widths of the MLP controller.", {}),
+    "activation": ("Hidden activation: tanh, relu, sigmoid or elu.", {"choices": ACTIVATION_NAMES}),
+    "loss": ("Training loss; empty means the task's default (see `list`).", {}),
+    "eval_every": (
+        "Updates between evaluation points; also the length of one compiled training chunk.",
+        {},
+    ),
+    "params": ("Overrides of the simulator's physical parameters, as (name, value) pairs.", {}),
+    "curriculum_fraction": (
+        "Share of the updates over which the curriculum's horizon grows to the full one.",
+        {"form": "share"},
+    ),
+}
+
+
+def _shared(name: str, default: Any, doc: str | None = None, **rule: Any) -> Any:
+    """The shared training field ``name`` (``_SHARED``) with this ``default``."""
+    help, own = _SHARED.get(name, ("", {}))
+    return _opt(doc or help, default, **{**own, **rule})
+
+
+_VALUE_GRID = f"0 (no terminal value) or 3 ... {MAX_VALUE_GRID} grid points per state axis"
+
+
+def _head(doc: str) -> Any:
+    return _opt(doc, "", "HEAD", choices=("", *HEADS))
 
 
 @dataclass(frozen=True)
@@ -203,9 +259,11 @@ class TrainConfig(_Config):
     full BPTT over whole episodes.
     """
 
-    seed: int = _opt("PRNG seed: a run is a function of this seed.", default=0, low=0)
+    seed: int = _shared("seed", 0)
     updates: int = _opt("Number of gradient updates (one per window).", default=500)
-    batch: int = _opt("Simulations run side by side (initial states under vmap).", default=32)
+    batch: int = _opt(
+        "Simulations run side by side (initial states under vmap).", default=32, high=MAX_WIDTH
+    )
     window: int = _opt(
         "Simulated steps per update (the truncated-BPTT window).", default=200, metavar="STEPS"
     )
@@ -216,30 +274,19 @@ class TrainConfig(_Config):
         metavar="STEPS",
         low=0,
     )
-    learning_rate: float = _opt(
-        "Adam learning rate (peak value for schedules).", default=3e-3, metavar="LR"
-    )
-    lr_schedule: str = _opt(
-        "Learning-rate schedule: constant, cosine (decay to lr_final_fraction), or "
-        "warmup_cosine (5% linear warm-up, then cosine).",
-        default="cosine",
-    )
-    lr_final_fraction: float = _opt("Final learning rate as a fraction of the peak.", default=0.05)
-    grad_clip: float = _opt(
-        "Clip the gradient's global norm to this; 0 disables.", default=1.0, metavar="NORM"
-    )
-    hidden: tuple[int, ...] = _opt("Hidden layer widths of the MLP controller.", default=(64, 64))
-    activation: str = _opt("Hidden activation: tanh, relu, sigmoid or elu.", default="tanh")
-    head: str = _opt(
-        "Action head; empty means the task's (tanh for torques, sign for pushes).", default=""
-    )
-    loss: str = _opt("Training loss; empty means the task's default (see `list`).", default="")
-    eval_every: int = _opt(
-        "Updates between evaluation points; also the length of one compiled training chunk.",
-        default=50,
-    )
+    learning_rate: float = _shared("learning_rate", 3e-3)
+    lr_schedule: str = _shared("lr_schedule", "cosine")
+    lr_final_fraction: float = _shared("lr_final_fraction", 0.05)
+    grad_clip: float = _shared("grad_clip", 1.0)
+    hidden: tuple[int, ...] = _shared("hidden", (64, 64))
+    activation: str = _shared("activation", "tanh")
+    head: str = _head("Action head; empty means the task's (tanh for torques, sign for pushes).")
+    loss: str = _shared("loss", "")
+    eval_every: int = _shared("eval_every", 50)
     eval_episodes: int = _opt(
-        "Episodes of the in-simulator evaluation at each evaluation point.", default=32
+        "Episodes of the in-simulator evaluation at each evaluation point.",
+        default=32,
+        high=MAX_WIDTH,
     )
     target_return: float = _opt(
         "Stop early once the in-simulator evaluation return reaches this; nan disables.",
@@ -253,26 +300,22 @@ class TrainConfig(_Config):
         "It ranks by the task's return: turn it off when a custom loss aims at something else.",
         default=True,
     )
-    params: tuple[tuple[str, float], ...] = _opt(
-        "Overrides of the simulator's physical parameters, as (name, value) pairs.",
-        default=(),
-    )
+    params: tuple[tuple[str, float], ...] = _shared("params", ())
     population: int = _opt(
         "Controllers trained side by side from different random initialisations (restarts "
         "against local optima, one compiled program); the best at each evaluation point is "
         "kept.",
         default=1,
+        high=MAX_WIDTH,
     )
     curriculum_start: float = _opt(
         "Growing-horizon curriculum: training episodes first restart after this fraction of "
         "horizon, growing linearly to all of it over curriculum_fraction of the updates; 1 "
         "turns it off.",
         default=1.0,
+        form="share",
     )
-    curriculum_fraction: float = _opt(
-        "Share of the updates over which the curriculum's horizon grows to the full one.",
-        default=0.5,
-    )
+    curriculum_fraction: float = _shared("curriculum_fraction", 0.5)
     final_window: int = _opt(
         "Window curriculum: the last final_window_fraction of the updates use windows of this "
         "many steps, so that an action is credited with what it does over a longer stretch once "
@@ -283,7 +326,9 @@ class TrainConfig(_Config):
         low=0,
     )
     final_window_fraction: float = _opt(
-        "Share of the updates, at the end of the run, that use final_window.", default=0.25
+        "Share of the updates, at the end of the run, that use final_window.",
+        default=0.25,
+        form="share",
     )
     value_grid: int = _opt(
         "Terminal cost of every window: minus the value V_0 (the best return of a whole "
@@ -295,6 +340,7 @@ class TrainConfig(_Config):
         metavar="POINTS",
         low=0,
         high=MAX_VALUE_GRID,
+        must=_VALUE_GRID,
     )
     value_time: bool = _opt(
         "With value_grid: the value with the steps the training episode has left (V_t) instead "
@@ -304,43 +350,14 @@ class TrainConfig(_Config):
         default=False,
     )
 
-    def __post_init__(self) -> None:
-        grid = self.value_grid  # its range before the generic bound, which would name 1 and 2
-        if (
-            isinstance(grid, int)
-            and not isinstance(grid, bool)
-            and not (grid == 0 or 3 <= grid <= MAX_VALUE_GRID)
-        ):
-            raise ConfigError(
-                f"value_grid must be 0 (no terminal value) or 3 ... {MAX_VALUE_GRID} grid points "
-                f"per state axis, got {grid!r}"
-            )
-        self._check_types()
-        if math.isinf(self.target_return):
-            raise ConfigError(
-                f"target_return must be a finite return, or nan to never stop early, got "
-                f"{self.target_return!r}"
-            )
-        for name in ("batch", "window", "eval_episodes", "population"):
-            value = getattr(self, name)
-            if not isinstance(value, int) or isinstance(value, bool) or value <= 0:
-                raise ConfigError(f"{name} must be a positive integer, got {value!r}")
-        if not isinstance(self.horizon, int) or self.horizon < 0:
-            raise ConfigError(
-                f"horizon must be 0 (the task's) or a positive integer, got {self.horizon!r}"
-            )
-        _check_curriculum(self)
+    def _check(self) -> None:
+        if self.value_grid in (1, 2):
+            raise ConfigError(f"value_grid must be {_VALUE_GRID}, got {self.value_grid!r}")
         if self.value_time and not self.value_grid:
             raise ConfigError(
                 "value_time needs a value_grid: set one (--value-grid N, e.g. 101) or leave "
                 "value_time off"
             )
-        if not (0 < self.final_window_fraction <= 1):
-            raise ConfigError(
-                f"final_window_fraction must be a fraction in (0, 1], got "
-                f"{self.final_window_fraction!r}"
-            )
-        self._check_common()
 
     @property
     def final_window_start(self) -> int:
@@ -357,10 +374,6 @@ class TrainConfig(_Config):
         return self.batch * (short * self.window + (updates - short) * self.final_window)
 
 
-GRADIENT_METHODS = ("checkpoint", "backsolve", "forward")
-SOLVER_NAMES = ("tsit5", "dopri5", "dopri8", "bosh3", "kvaerno5")
-
-
 @dataclass(frozen=True)
 class ODETrainConfig(_Config):
     """Settings of one training run through a continuous-time closed loop (a neural ODE).
@@ -372,25 +385,31 @@ class ODETrainConfig(_Config):
     from different initial weights train side by side under ``vmap``; the best is returned.
     """
 
-    seed: int = _opt("PRNG seed: a run is a function of this seed.", default=0, low=0)
+    seed: int = _shared("seed", 0)
     updates: int = _opt("Number of gradient updates (one closed-loop solve each).", default=1000)
     horizon_s: float = _opt(
-        "Length of the closed-loop solve (s).", default=1.0, metavar="S", form="positive"
+        "Length of the closed-loop solve (s), at most 1e6 (the solve's times are float32).",
+        default=1.0,
+        metavar="S",
+        form="positive",
+        high=MAX_HORIZON_S,
     )
     saves: int = _opt(
         "Equally spaced saved points on [0, horizon_s] that the loss sees (both ends included).",
         default=50,
+        low=2,
     )
     solver: str = _opt(
         "Adaptive ODE solver: tsit5, dopri5, dopri8, bosh3 or kvaerno5 (implicit, for stiff "
         "loops).",
         default="tsit5",
+        choices=SOLVER_NAMES,
     )
     rtol: float = _opt(
-        "Relative tolerance of the adaptive step-size controller.", 1e-3, "TOL", form="positive"
+        "Relative tolerance of the adaptive step-size controller.", 1e-3, "TOL", form="tolerance"
     )
     atol: float = _opt(
-        "Absolute tolerance of the adaptive step-size controller.", 1e-6, "TOL", form="positive"
+        "Absolute tolerance of the adaptive step-size controller.", 1e-6, "TOL", form="tolerance"
     )
     max_steps: int = _opt(
         "Step budget of one solve; a solve that needs more fails (and is reported).",
@@ -403,90 +422,43 @@ class ODETrainConfig(_Config):
         "mode, one tangent per weight; cheapest for a few dozen weights).",
         default="checkpoint",
         metavar="METHOD",
+        choices=GRADIENT_METHODS,
     )
     starts: int = _opt(
         "Initial states per update, drawn from the task's reset distribution "
         "(ContinuousTask.reset; by default the one initial state); the loss is their mean and "
         "the evaluation uses as many fixed starts.",
         default=1,
+        high=MAX_WIDTH,
     )
     population: int = _opt(
         "Controllers from different initial weights trained side by side under vmap; the best "
         "is returned. Helps against local minima (a cart that never moves).",
         default=1,
+        high=MAX_WIDTH,
     )
     curriculum_start: float = _opt(
         "Growing-horizon curriculum: the first update sees this fraction of horizon_s, growing "
         "linearly to all of it over curriculum_fraction of the updates; 1 turns it off.",
         default=1.0,
+        form="share",
     )
-    curriculum_fraction: float = _opt(
-        "Share of the updates over which the curriculum's horizon grows to horizon_s.",
-        default=0.5,
-    )
-    learning_rate: float = _opt(
-        "Adam learning rate (peak value for schedules).", default=0.05, metavar="LR"
-    )
-    lr_schedule: str = _opt(
-        "Learning-rate schedule: constant, cosine (decay to lr_final_fraction), or "
-        "warmup_cosine (5% linear warm-up, then cosine).",
-        default="constant",
-    )
-    lr_final_fraction: float = _opt("Final learning rate as a fraction of the peak.", default=0.05)
-    grad_clip: float = _opt(
-        "Clip the gradient's global norm to this; 0 disables.", default=0.0, metavar="NORM"
-    )
-    hidden: tuple[int, ...] = _opt("Hidden layer widths of the MLP controller.", default=(8,))
-    activation: str = _opt("Hidden activation: tanh, relu, sigmoid or elu.", default="tanh")
-    head: str = _opt(
-        "Action head; empty means the task's (linear: an unbounded force).", default=""
-    )
-    loss: str = _opt("Training loss; empty means the task's default (see `list`).", default="")
-    eval_every: int = _opt(
-        "Updates between evaluation points; also the length of one compiled training chunk.",
-        default=50,
-    )
+    curriculum_fraction: float = _shared("curriculum_fraction", 0.5)
+    learning_rate: float = _shared("learning_rate", 0.05)
+    lr_schedule: str = _shared("lr_schedule", "constant")
+    lr_final_fraction: float = _shared("lr_final_fraction", 0.05)
+    grad_clip: float = _shared("grad_clip", 0.0)
+    hidden: tuple[int, ...] = _shared("hidden", (8,))
+    activation: str = _shared("activation", "tanh")
+    head: str = _head("Action head; empty means the task's (linear: an unbounded force).")
+    loss: str = _shared("loss", "")
+    eval_every: int = _shared("eval_every", 50)
     keep_best: bool = _opt(
         "Return the controller (and population member) with the lowest loss over the "
         "evaluation points, each a full-horizon solve, instead of the last one.",
         default=True,
     )
-    params: tuple[tuple[str, float], ...] = _opt(
-        "Overrides of the simulator's physical parameters, as (name, value) pairs.",
-        default=(),
-    )
-
-    def __post_init__(self) -> None:
-        self._check_types()
-        for name in ("saves", "max_steps", "population", "starts"):
-            value = getattr(self, name)
-            if not isinstance(value, int) or isinstance(value, bool) or value <= 0:
-                raise ConfigError(f"{name} must be a positive integer, got {value!r}")
-        if self.saves < 2:
-            raise ConfigError(
-                f"saves must be at least 2 (both ends of the horizon), got {self.saves}"
-            )
-        if not (math.isfinite(self.horizon_s) and 0 < self.horizon_s <= MAX_HORIZON_S):
-            raise ConfigError(
-                f"horizon_s must be a positive number of seconds up to {MAX_HORIZON_S:g} (the "
-                f"solve's times are float32), got {self.horizon_s!r}"
-            )
-        for name in ("rtol", "atol"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and 0 < value < 1):  # a tolerance of 100 % or more
-                raise ConfigError(  # lets the solver take any step: no solve at all
-                    f"{name} must be a tolerance in (0, 1) such as 1e-3 or 1e-6, got {value!r}"
-                )
-        if self.solver not in SOLVER_NAMES:
-            raise ConfigError(
-                f"solver must be one of {', '.join(SOLVER_NAMES)}, got {self.solver!r}"
-            )
-        if self.gradient not in GRADIENT_METHODS:
-            raise ConfigError(
-                f"gradient must be one of {', '.join(GRADIENT_METHODS)}, got {self.gradient!r}"
-            )
-        _check_curriculum(self)
-        self._check_common()
+    params: tuple[tuple[str, float], ...] = _shared("params", ())
 
     @property
     def target_return(self) -> float:

@@ -34,9 +34,11 @@ import numpy as np
 from jaxtyping import Array, Float, PRNGKeyArray
 
 from ._jax_setup import FAST_COMPILE, FastJit
+from .config import ACTIVATION_NAMES, HEADS
 
-ACTIVATIONS = {"tanh": jnp.tanh, "relu": jax.nn.relu, "sigmoid": jax.nn.sigmoid, "elu": jax.nn.elu}
-HEADS = ("linear", "tanh", "sigmoid", "sign", "argmax")
+_FUNCTIONS = {"tanh": jnp.tanh, "relu": jax.nn.relu, "sigmoid": jax.nn.sigmoid, "elu": jax.nn.elu}
+ACTIVATIONS = {name: _FUNCTIONS[name] for name in ACTIVATION_NAMES}
+"""The hidden activations by name (``config.ACTIVATION_NAMES``, which configurations check)."""
 ARGMAX_TEMPERATURE = 1.0
 """Temperature ``T`` of the softmax whose Jacobian is the ``"argmax"`` head's backward pass."""
 INITS = ("equinox", "glorot")

@@ -1,9 +1,9 @@
 """Settings of the work around training: a recording (``identify.record_data``), a model fit
 (``identify.fit_dir``), a loop on a real system (``runs.loop``), a comparison with RL
 (``compare.run_comparison``) and a planning controller (``runs.plan_run``).
-Frozen, typed dataclasses, as ``config`` holds the training ones: they validate on
-construction, and their fields are the command line's flags (``diffcontrol record/fit/loop/compare``:
-the name, the default, the bounds and the help).
+Configurations (``config._Config``), as the training ones are: frozen, typed dataclasses that
+validate on construction, whose fields are the command line's flags (``diffcontrol
+record/fit/loop/compare/plan``: the name, the default, the bounds and the help).
 
 Importing this module imports no JAX.
 """
@@ -11,12 +11,9 @@ Importing this module imports no JAX.
 from __future__ import annotations
 
 import dataclasses
-import math
 from dataclasses import dataclass
-from typing import Any
 
-from .config import MAX_COUNT, MAX_VALUE_GRID, MAX_WIDTH, _opt, layer_widths
-from .errors import ConfigError
+from .config import MAX_VALUE_GRID, MAX_WIDTH, _Config, _opt
 
 MODELS = ("params", "hybrid", "neural")
 """The models ``identify.fit`` learns: grey box, hybrid (physics plus a network), neural."""
@@ -28,44 +25,8 @@ CONTROLLERS = ("train", "plan")
 planner through it (``mpc._config.loop_planner``)."""
 
 
-class _Settings:
-    """What the settings share: every field is checked against its declared type and bounds."""
-
-    def __post_init__(self) -> None:
-        for f in dataclasses.fields(self):
-            value, meta, declared = getattr(self, f.name), f.metadata, str(f.type)
-            if value is None and declared.endswith("| None"):
-                continue
-            if declared.startswith("int"):
-                low, high = meta.get("low", 1), meta.get("high", MAX_COUNT)
-                if not isinstance(value, int) or isinstance(value, bool) or low > value:
-                    what = "a positive integer" if low == 1 else f"an integer >= {low}"
-                    raise ConfigError(f"{f.name} must be {what}, got {value!r}")
-                if value > high:
-                    raise ConfigError(f"{f.name} must be at most {high:,}, got {value!r}")
-            elif declared.startswith("float"):
-                low, high = 0.0, 1.0 if meta.get("form") == "fraction" else math.inf
-                if not isinstance(value, int | float) or not (low <= value <= high):
-                    raise ConfigError(f"{f.name} must be in [{low:g}, {high:g}], got {value!r}")
-            elif declared == "tuple[int, ...]":
-                object.__setattr__(self, f.name, layer_widths(f.name, value))
-            elif declared.startswith("tuple[str"):
-                if not isinstance(value, tuple | list) or not all(
-                    isinstance(v, str) for v in value
-                ):
-                    raise ConfigError(f"{f.name} must be names such as ('g',), got {value!r}")
-                object.__setattr__(self, f.name, tuple(value))
-            elif value not in meta.get("choices", (value,)):
-                choose = ", ".join(meta["choices"])
-                raise ConfigError(f"{f.name} must be one of {choose}, got {value!r}")
-
-    def replace(self, **changes: Any) -> Any:
-        """A copy with some fields changed (validated again)."""
-        return dataclasses.replace(self, **changes)
-
-
 @dataclass(frozen=True)
-class RecordConfig(_Settings):
+class RecordConfig(_Config):
     """Settings of ``identify.record_data``: episodes of a real system (or a task's own
     data), as a task's ``record_data`` hook takes them."""
 
@@ -93,7 +54,7 @@ class RecordConfig(_Settings):
 
 
 @dataclass(frozen=True)
-class FitConfig(_Settings):
+class FitConfig(_Config):
     """Settings of ``identify.fit_dir``: a model of a task's system fitted to recorded data
     (``identify.fit`` takes them as keywords; Adam's ``steps`` and ``learning_rate`` default
     to the task's route's for the model type)."""
@@ -136,7 +97,7 @@ class FitConfig(_Settings):
 
 
 @dataclass(frozen=True)
-class LoopConfig(_Settings):
+class LoopConfig(_Config):
     """Settings of ``runs.loop``: record -> fit -> train on a real system, a few rounds."""
 
     model: str = _opt("what to fit", "params", choices=MODELS)
@@ -204,7 +165,7 @@ class LoopConfig(_Settings):
 
 
 @dataclass(frozen=True)
-class CompareConfig(_Settings):
+class CompareConfig(_Config):
     """Settings of ``compare.run_comparison``: diffcontrol and the RL baselines on one task,
     trained on seeds ``0 ... seeds-1`` and evaluated alike; the ``--real`` fields are those of
     the comparison in the real system's steps (``run_comparison(real=True)``)."""
@@ -280,7 +241,7 @@ SOLVERS = ("ilqr", "shooting")
 
 
 @dataclass(frozen=True)
-class PlanConfig(_Settings):
+class PlanConfig(_Config):
     """Settings of a planning controller (``mpc.planner_from_config``, ``diffcontrol plan``):
     what ``model.json`` stores of a planner, with the model it plans through. Pendulum's best
     (docs/planning.md): ``PlanConfig(horizon=10, value_grid=401)``. A task's defaults are its
@@ -339,35 +300,7 @@ class PlanConfig(_Settings):
     )
     substeps: int = _opt("continuous-time tasks: RK4 steps per control period", 1, "N", high=1000)
 
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        if not isinstance(self.bound_starts, bool):
-            raise ConfigError(f"bound_starts must be true or false, got {self.bound_starts!r}")
-        for name in ("learning_rate", "terminal_weight"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not math.isfinite(value):
-                raise ConfigError(f"{name} must be a finite number, got {value!r}")
-        if not self.learning_rate > 0:
-            raise ConfigError(f"learning_rate must be > 0, got {self.learning_rate!r}")
-        for name in ("action_bound", "dt"):
-            value = getattr(self, name)
-            if value is not None and (isinstance(value, bool) or not 0 < value < math.inf):
-                raise ConfigError(f"{name} must be a finite number > 0, got {value!r}")
-
     @property
     def solver_iterations(self) -> int:
         """``iterations``, or the solver's default."""
         return self.iterations or (10 if self.solver == "ilqr" else 30)
-
-    def to_json(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
-
-    @classmethod
-    def from_json(cls, data: Any) -> PlanConfig:
-        """Inverse of ``to_json``; unknown keys or bad values are a ``ConfigError``."""
-        if not isinstance(data, dict):
-            raise ConfigError(f"planner settings must be an object, got {data!r}")
-        unknown = set(data) - {f.name for f in dataclasses.fields(cls)}
-        if unknown:
-            raise ConfigError(f"unknown planner settings {sorted(unknown)}")
-        return cls(**data)

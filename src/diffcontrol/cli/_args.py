@@ -13,7 +13,7 @@ import sys
 from collections.abc import Callable, Iterable
 from typing import Any, NoReturn
 
-from ..config import MAX_COUNT, MAX_WIDTH, int_bounds
+from ..config import FLOAT_FORMS, MAX_COUNT, MAX_WIDTH, int_bounds
 
 EXIT_USAGE = 2
 FLAG = "store_true"
@@ -54,7 +54,7 @@ def config_specs(cls: type, skip: Any = (), defaults: bool = True) -> list[tuple
         meta, declared = f.metadata, str(f.type).removesuffix(" | None")
         forms = {
             "int": (_integer(*int_bounds(f)), "N"),
-            "float": (_FLOATS.get(meta.get("form"), finite_float), "X"),
+            "float": (_float(meta.get("form", "finite"), meta.get("high", math.inf)), "X"),
             "str": (meta.get("choices", str), "NAME"),
             "bool": (yes_no, "yes|no"),
             "tuple[int, ...]": (widths, "W,W"),
@@ -121,8 +121,13 @@ seed = nonneg_int
 finite_float = _number(float, "a number", math.isfinite, "a finite number")
 positive_float = _number(float, "a number", lambda v: 0 < v < math.inf, "a finite positive number")
 nonneg_float = _number(float, "a number", lambda v: 0 <= v < math.inf, "a finite number >= 0")
-fraction = _number(float, "a number", lambda v: 0 <= v < 1, "a fraction in [0, 1)")
-_FLOATS = {"fraction": fraction, "positive": positive_float, "nonneg": nonneg_float, "any": float}
+
+
+def _float(form: str, high: float = math.inf) -> Callable[[str], float]:
+    """A config field's float, as its ``form`` (``config.FLOAT_FORMS``) and ``high`` take it."""
+    ok, must = FLOAT_FORMS[form]
+    upto = f" up to {high:g}" if high < math.inf else ""
+    return _number(float, "a number", lambda v: ok(v) and not v > high, must + upto)
 
 
 def widths(text: str) -> tuple[int, ...]:
