@@ -108,6 +108,27 @@ def test_too_little_data_and_bad_settings_are_refused(task, data):
         identify.fit_model(task, short, "hybrid", hidden=(0,))
 
 
+def test_the_model_kinds_are_one_registry_and_a_new_kind_is_one_class(task, data, monkeypatch):
+    """Every module asks a kind (``identify.kinds``): the registry is the command line's
+    choices, and a kind added to it is fitted with its own defaults, written and read back."""
+    from diffcontrol.identify import kinds
+    from diffcontrol.settings import MODELS
+
+    assert tuple(identify.KINDS) == MODELS
+    assert [k.network for k in identify.KINDS.values()] == [False, True, True]
+    assert [k.physics for k in identify.KINDS.values()] == [True, True, False]
+    with pytest.raises(ConfigError, match=r"unknown model kind 'grey'; choose one of \['params'"):
+        identify.kind("grey")
+
+    class QuickGreyBox(kinds.Params):
+        name, label, defaults = "quick", "quick grey box", (7, 0.05)
+
+    monkeypatch.setitem(kinds.KINDS, "quick", QuickGreyBox())
+    result = identify.fit(task, data[0], "quick", lm_steps=0)
+    assert result.model_type == "quick" and len(result.loss_history) == 7  # the kind's steps
+    assert result.loss < result.nominal_loss
+
+
 @pytest.mark.slow
 def test_a_diverging_fit_keeps_the_best_weights_and_no_nan(task, data):
     fit = identify.fit_model(task, data[0], "neural", steps=30, learning_rate=1e6, hidden=(8,))

@@ -16,10 +16,8 @@ from dataclasses import dataclass
 from .config import MAX_VALUE_GRID, MAX_WIDTH, _Config, _opt
 
 MODELS = ("params", "hybrid", "neural")
-"""The models ``identify.fit`` learns: grey box, hybrid (physics plus a network), neural."""
-MIN_TRANSITIONS = {"hybrid": 200, "neural": 1000}
-"""The fewest recorded transitions a network model is fitted to (a Pendulum-v1 episode has
-200): a hybrid model only learns what the physics misses, a black box learns everything."""
+"""The names of the model kinds ``identify.fit`` learns (``identify.kinds``, their registry):
+grey box, hybrid (physics plus a network), neural."""
 CONTROLLERS = ("train", "plan")
 """What acts on the real system in a loop: an MLP trained through the fitted model, or a
 planner through it (``mpc._config.loop_planner``)."""

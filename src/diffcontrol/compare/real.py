@@ -40,27 +40,25 @@ import numpy as np
 
 from .. import _gym, _run_dir, io
 from ..errors import ConfigError, RunDirectoryError
+from ..identify.kinds import KINDS, ModelKind
 from ..runs import loop
-from ..settings import CONTROLLERS, MIN_TRANSITIONS, LoopConfig
+from ..settings import CONTROLLERS, LoopConfig
 from ..tasks import Task, make, names, resolve
 from ..tasks._hooks import task_hook
 from .baselines import rl_setup
 from .report import machine, plot, summarize, table
 from .run import first_reached
 
-LABELS = {"params": "grey box", "hybrid": "hybrid", "neural": "neural"}
-"""The rows' names: ``diffcontrol (grey box)`` and so on."""
-
 
 @task_hook
-def real_steps_per_round(task: Task, model: str) -> int:
-    """The real environment steps a round of ``compare --real`` records to learn ``model``
-    (``params``, ``hybrid`` or ``neural``; episodes until the budget is spent, the last cut
+def real_steps_per_round(task: Task, model: ModelKind) -> int:
+    """The real environment steps a round of ``compare --real`` records to learn a model of
+    the kind ``model`` (``identify.kinds``; episodes until the budget is spent, the last cut
     short). Default: one standard episode (``episode_length``), and at least the transitions
-    a network is fitted to (``identify.MIN_TRANSITIONS``: 1,000 for a network alone), i.e.
+    the kind is fitted to (``min_transitions``: 1,000 for a network alone), i.e.
     200/200/1,000 on the Pendulum. A task whose episodes end early or run long chooses its
     own."""
-    return max(task.episode_length, MIN_TRANSITIONS.get(model, 0))
+    return max(task.episode_length, model.min_transitions)
 
 
 def real_start(task: Task) -> dict[str, float]:
@@ -133,16 +131,16 @@ def run_real_comparison(
             f"recorded episodes, not {task.name!r}; choose {' or '.join(can)}"
         )
     thresholds = rl_setup(task).thresholds
-    models = list(models or LABELS)
-    bad = [m for m in models if m not in LABELS]
+    models = list(models or KINDS)
+    bad = [m for m in models if m not in KINDS]
     if bad:
-        raise ConfigError(f"unknown model(s) {bad} for --real; choose among {list(LABELS)}")
+        raise ConfigError(f"unknown model(s) {bad} for --real; choose among {list(KINDS)}")
     controllers = list(dict.fromkeys(controllers))
     if not controllers or any(c not in CONTROLLERS for c in controllers):
         raise ConfigError(
             f"--controllers {','.join(controllers)}: choose among {','.join(CONTROLLERS)}"
         )
-    steps = {m: real_steps_per_round(task, m) for m in models} | (steps or {})
+    steps = {m: real_steps_per_round(task, KINDS[m]) for m in models} | (steps or {})
     start = real_start(task) if start is None else dict(start)
     target = max(thresholds)  # returns: the highest is the hardest
     rl = _rl_runs(rl_results, task.name, eval_seed) if rl_results else []
@@ -196,11 +194,11 @@ def run_real_comparison(
                     seed=seed,
                     eval_episodes=final_episodes,
                     eval_seed=eval_seed,
-                    start=start if model != "neural" else {},
+                    start=start if KINDS[model].physics else {},
                     explore_noise=explore_noise,
                     updates=updates,
                     fit_steps=fit_steps,
-                    members=members if model != "params" else 1,
+                    members=members if KINDS[model].network else 1,
                     controller=controller,
                 )
                 state = loop(
@@ -233,7 +231,7 @@ def _can_learn(task: Task) -> bool:
 
 def _label(model: str, controller: str) -> str:
     """A row's name without ``diffcontrol``: ``grey box``, ``grey box, planner``, ..."""
-    return LABELS[model] + (", planner" if controller == "plan" else "")
+    return KINDS[model].label + (", planner" if controller == "plan" else "")
 
 
 def _as_run(

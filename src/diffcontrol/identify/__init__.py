@@ -5,8 +5,9 @@
   one-step episode). ``record`` records any Gymnasium environment, as the real system of a
   task when ``task=`` is given (the columns are then the task's ``data_columns()``);
   ``record_data`` is a task's own recording (``record_task``).
-- **Models**: ``params`` (grey box: the task's physical parameters), ``hybrid`` (the physics
-  plus a ``Correction`` network) and ``neural`` (a network alone), of a discrete step
+- **Models**: the kinds of ``identify.kinds`` (``KINDS``, ``kind(name)``): ``params`` (grey
+  box: the task's physical parameters), ``hybrid`` (the physics plus a ``Correction``
+  network) and ``neural`` (a network alone), of a discrete step
   (``HybridModel``, ``NeuralModel``, ``model_task``; ``members=K`` makes the network an
   ``Ensemble`` of K, whose spread is the model's uncertainty) or of a vector field (the task's own
   model, ``identify.ode``).
@@ -22,7 +23,7 @@
 
 from . import data
 from ._fit import FitDir, fit, fit_dir, save_fit
-from ._shooting import HORIZONS, MODEL_TYPES, NETWORK_MODELS, FitResult
+from ._shooting import HORIZONS, FitResult
 from .data import TrajectoryData, concat, read_trajectories
 from .ensemble import Ensemble, mean_spread
 from .fitted import (
@@ -36,7 +37,8 @@ from .fitted import (
     real_params,
     real_system,
 )
-from .hybrid import MIN_TRANSITIONS, HybridModel, NeuralModel, fit_model, model_task
+from .hybrid import HybridModel, NeuralModel, model_task
+from .kinds import KINDS, MIN_TRANSITIONS, MODEL_TYPES, NETWORK_MODELS, ModelKind, fit_model, kind
 from .network import Correction, correction_from_dict, correction_to_dict
 from .recording import describe, record, record_data, record_task
 from .steps import fit_parameters, predict, prediction_errors
@@ -53,6 +55,8 @@ __all__ = [
     "FitDir",
     "FitResult",
     "HybridModel",
+    "KINDS",
+    "ModelKind",
     "NeuralModel",
     "TrajectoryData",
     "as_env",
@@ -67,6 +71,7 @@ __all__ = [
     "fit_parameters",
     "fitted_model",
     "fitted_physics",
+    "kind",
     "mean_spread",
     "model_task",
     "predict",

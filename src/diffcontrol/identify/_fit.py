@@ -19,9 +19,10 @@ from ..settings import FitConfig
 from ..tasks import as_task
 from ._progress import reporting
 from ._routes import model_route
-from ._shooting import MODEL_TYPES, FitResult
+from ._shooting import FitResult
 from .data import TrajectoryData
 from .fitted import FITTED_FILE, FITTED_FORMAT, check_real_env, checked_env, real_params
+from .kinds import kind
 
 
 def fit(task: Any, data: Any, model: str = "params", **settings: Any) -> FitResult:
@@ -49,8 +50,7 @@ def fit(task: Any, data: Any, model: str = "params", **settings: Any) -> FitResu
         ConfigError: an unknown model type or setting; DataFileError: data of another
         system; InsufficientDataError: too little data (the message says how much is needed).
     """
-    if model not in MODEL_TYPES:
-        raise ConfigError(f"unknown model kind {model!r}; choose one of {list(MODEL_TYPES)}")
+    kind(model)  # an unknown kind is refused before the data is read
     task = as_task(task, "fit()")
     route = model_route(task)
     if isinstance(data, str | os.PathLike):  # a recorded file: read (and checked) first
@@ -60,7 +60,7 @@ def fit(task: Any, data: Any, model: str = "params", **settings: Any) -> FitResu
             f"fit() takes recorded data (a TrajectoryData, or the path of a CSV or NPZ file "
             f"that diffcontrol record wrote), not {type(data).__name__}"
         )
-    steps, lr = route.defaults.get(model, (None, None))
+    steps, lr = route.defaults(model)
     settings = {"steps": steps, "learning_rate": lr, **settings}
     result = route.fit(task, data, model, **{k: v for k, v in settings.items() if v is not None})
     return _within_ranges(task, result)
@@ -77,7 +77,7 @@ def _within_ranges(task: Any, result: FitResult) -> FitResult:
         for n in result.names
         if n in getattr(task, "nonnegative_params", ()) and result.values.get(n, 0.0) < 0
     ]
-    if not below or result.model_type != "params":
+    if not below or kind(result.model_type).network:
         return result
     import equinox as eqx
     import numpy as np
@@ -167,7 +167,7 @@ def fit_dir(
     route = model_route(task)
     if hasattr(route, "check_model"):  # before anything is read or created
         route.check_model(task, model)
-    steps, lr = route.defaults.get(model, route.defaults["params"])
+    steps, lr = route.defaults(model)
     given = {k: v for k, v in dataclasses.asdict(config or FitConfig()).items() if v is not None}
     settings = {"steps": steps, "learning_rate": lr, **given, **start}
     holdout = settings["holdout"]

@@ -12,8 +12,8 @@ import numpy as np
 
 from ..errors import ConfigError
 from .ensemble import mean_spread
-from .fitted import fitted_model, fitted_physics
-from .hybrid import model_task
+from .fitted import fitted_model
+from .kinds import kind
 from .steps import prediction_errors
 
 
@@ -73,21 +73,13 @@ def parse_start(task: Any, start: dict[str, float] | None) -> dict[str, float]:
     return {n: float(v) for n, v in start.items()}
 
 
-def start_params(task: Any, start: dict[str, float]) -> Any:
-    """The task's nominal parameters with ``start`` in place of the given ones."""
-    return dataclasses.replace(task.default_params(), **start)
-
-
 def predictor_of(task: Any, fit_doc: dict | None, model: str, start: dict[str, float]):
     """``(task, params)`` that predicts as the model did before the new data: the fitted file
     ``fit_doc`` of the previous round, or for the first round the start physics (a grey box, or
     a hybrid whose correction is still zero); ``None`` for a black box that has no model yet."""
     if fit_doc is None:
-        return None if model == "neural" else (task, start_params(task, start))
-    if fit_doc["model"] == "params":
-        return task, fitted_physics(task, fit_doc)
-    m = fitted_model(task, fit_doc)
-    return model_task(task, m), m
+        return kind(model).first_predictor(task, start)
+    return kind(fit_doc["model"]).predictor(task, fitted_model(task, fit_doc))
 
 
 def model_error(predictor: Any, data: Any, horizons: tuple[int, ...] = (1, 10)) -> dict | None:

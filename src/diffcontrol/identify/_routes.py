@@ -7,8 +7,8 @@ with its own route, a ``TrajectoryRoute`` subclass in the system's files), so
 the same methods: ``read(path)``, ``count(data)``, ``split(data, n)``, ``announce(...)`` (the
 line said before fitting), ``fit(task, data, model_type, **settings)`` and ``outputs(...)``
 (the route's part of ``fitted.json``, the lines it reports and ``prediction.png``), its
-``unit`` (what ``count`` counts) and ``defaults`` (Adam's steps and learning rate by model
-type); optionally ``check_model(task, model_type)`` (before anything is read) and
+``unit`` (what ``count`` counts) and ``defaults(kind)`` (Adam's steps and learning rate for
+a model kind, ``identify.kinds``); optionally ``check_model(task, model_type)`` (before anything is read) and
 ``check_split(task, data, train, held_out, settings)`` (after the hold-out is split off).
 """
 
@@ -25,25 +25,16 @@ from ..tasks._hooks import task_hook
 from ._shooting import HORIZONS, FitResult
 from ._task import fit_parameter_names
 from .data import read_trajectories
-from .ensemble import Ensemble, ensemble_to_dict, mean_spread
-from .hybrid import fit_model, model_task
-from .network import correction_to_dict
+from .ensemble import mean_spread
+from .kinds import kind, parameters_doc
 from .ode import fit_vector_field, model_document, nominal_model
 from .ode import prediction_errors as ode_prediction_errors
-from .steps import fit_parameters, prediction_errors
+from .steps import prediction_errors
 
 
 def params_dict(params: Any) -> dict[str, float]:
     """Every field of a parameter PyTree as a plain float (fitted.json's ``all_parameters``)."""
     return {f.name: float(np.asarray(getattr(params, f.name))) for f in dataclasses.fields(params)}
-
-
-def parameters_doc(result: FitResult) -> dict:
-    """fitted.json's ``parameters``: per fitted name, its value, standard error and nominal."""
-    return {
-        n: {"value": v, "standard_error": result.standard_errors[n], "nominal": result.nominal[n]}
-        for n, v in result.values.items()
-    }
 
 
 def errors_doc(what: str, errors: dict | None) -> dict | None:
@@ -86,9 +77,14 @@ class TrajectoryRoute:
     def split(self, data: Any, n: int) -> tuple[Any, Any]:
         return data.split(n)
 
+    def defaults(self, model: Any) -> tuple[int, float]:
+        """Adam's steps and learning rate for the model kind ``model``: the kind's own."""
+        return kind(model).defaults
+
     def announce(self, task, model_type, train, held_out, data_file, settings) -> str:
         names = settings.get("names") or fit_parameter_names(task)
-        what = ", ".join(names) if model_type == "params" and names else f"a {model_type} model"
+        network = kind(model_type).network
+        what = ", ".join(names) if not network and names else f"a {model_type} model"
         return (
             f"fitting {what} of {task.name} to {train.num_episodes} episode(s) "
             f"({train.num_steps} transitions) of {data_file}, windows of "
@@ -99,28 +95,14 @@ class TrajectoryRoute:
 class StepRoute(TrajectoryRoute):
     """A discrete-time task: its step with fitted parameters, or a hybrid or neural model."""
 
-    defaults = {"params": (300, 0.02), "hybrid": (2000, 3e-3), "neural": (2000, 3e-3)}
-    """Adam steps and learning rate by model type."""
-
     def fit(self, task: Any, data: Any, model_type: str, **s: Any) -> FitResult:
-        if model_type == "params":
-            _one_network(s, "a grey box (--model params) has no network")
-
-            keys = ("window", "steps", "learning_rate", "lm_steps", "init")
-            return fit_parameters(
-                task, data, s.get("names"), **{k: s[k] for k in keys if s.get(k) is not None}
-            )
-        keys = ("params", "window", "steps", "learning_rate", "hidden", "seed", "members")
-        keys += ("bootstrap", "uncertainty_penalty")
-        return fit_model(task, data, model_type, **{k: s[k] for k in keys if s.get(k) is not None})
+        return kind(model_type).fit(task, data, **s)
 
     def predictor(self, task: Any, result: FitResult | None) -> tuple[Any, Any]:
         """``(task, params)`` to predict with: the nominal model for ``None``."""
         if result is None:
             return task, task.default_params()
-        if result.model_type == "params":
-            return task, result.params
-        return model_task(task, result.model), result.model
+        return kind(result.model_type).predictor(task, result.model)
 
     def outputs(self, task, result, data, train, held_out, data_file, settings, out):
         from .plot import prediction_plot, task_predictor  # matplotlib
@@ -132,35 +114,18 @@ class StepRoute(TrajectoryRoute):
                 "nominal": prediction_errors(*nominal, held_out),
                 "fitted": prediction_errors(*fitted, held_out),
             }
-        if result.model_type == "params":
-            model_doc = {"parameters": parameters_doc(result)}
-            model_doc["all_parameters"] = params_dict(result.params)
-        else:
-            c = result.model.correction
-            net = ensemble_to_dict(c) if isinstance(c, Ensemble) else correction_to_dict(c)
-            model_doc = {
-                "all_parameters": params_dict(result.model.params),
-                "network": {
-                    "what": "hybrid: next state = the task's step with all_parameters + network("
-                    "observation, action); neural: next state = state + network(observation, "
-                    "action); an ensemble's members each give a network, the model uses their "
-                    "mean, and training through it adds uncertainty_penalty times their spread "
-                    "to every step's loss",
-                    "inputs": "observation then action",
-                    "parameters": result.num_parameters,
-                    **net,
-                },
-            }
+        model_kind = kind(result.model_type)
+        own, own_fit = model_kind.save(result, settings)
+        parameters = {"parameters": own.pop("parameters")} if "parameters" in own else {}
+        model_doc = {**parameters, "all_parameters": params_dict(result.params), **own}
         fit_settings = dict(
             window_steps=result.window,
             windows=result.windows,
             adam_steps=settings["steps"],
             learning_rate=settings["learning_rate"],
+            **own_fit,
         )
-        if result.model_type == "params":
-            fit_settings["lm_steps"] = settings.get("lm_steps", 20)
-        else:
-            fit_settings.update(hidden=list(settings["hidden"]), seed=settings["seed"])
+        if model_kind.network:
             members = settings.get("members", 1)
             if members > 1:
                 spread = {"fit": mean_spread(task, result.model, train)}
@@ -194,11 +159,7 @@ class StepRoute(TrajectoryRoute):
             out / "prediction.png",
             title=_title(task, result.model_type, held_out),
         )
-        lines = []
-        if result.model_type != "params":
-            lines.append(
-                f"{result.model_type} model: {result.num_parameters} weights, {result.message}"
-            )
+        lines = model_kind.describe(result)
         if "mean_spread" in fit_settings:
             where = " / ".join(f"{v:.3g} ({k.replace('_', '-')})" for k, v in spread.items())
             lines.append(
@@ -217,8 +178,10 @@ class StepRoute(TrajectoryRoute):
 class ODERoute(TrajectoryRoute):
     """A continuous-time task: its vector field with fitted parameters, hybrid or neural."""
 
-    defaults = {"params": (300, 0.02), "hybrid": (500, 1e-2), "neural": (500, 1e-2)}
-    """Adam steps and learning rate by model type (``benchmarks/fit_swingup.py``)."""
+    def defaults(self, model: Any) -> tuple[int, float]:
+        """Adam's steps and learning rate for the model kind ``model``: a vector field's
+        network takes fewer steps at a larger rate (``benchmarks/fit_swingup.py``)."""
+        return (500, 1e-2) if kind(model).network else kind(model).defaults
 
     def announce(self, task, model_type, train, held_out, data_file, settings) -> str:
         return (
@@ -245,7 +208,7 @@ class ODERoute(TrajectoryRoute):
                 "nominal": ode_prediction_errors(task, nominal, held_out),
                 "fitted": ode_prediction_errors(task, result.model, held_out),
             }
-        network = result.model_type != "params"
+        network = kind(result.model_type).network
         body = {
             "parameters": parameters_doc(result),
             **model_document(task, result.model),

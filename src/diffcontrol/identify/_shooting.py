@@ -28,14 +28,6 @@ MIN_TRANSITIONS_PER_PARAMETER = 50
 HORIZONS = (1, 10, 50)
 """The prediction horizons (steps) of the held-out errors."""
 
-MODEL_TYPES = ("params", "hybrid", "neural")
-"""What ``identify.fit`` can fit: ``params`` (grey box: the task's physical parameters),
-``hybrid`` (the physics plus a network for what it leaves out) and ``neural`` (a network
-alone)."""
-
-NETWORK_MODELS = MODEL_TYPES[1:]
-"""The model types with a network (``hybrid``, ``neural``)."""
-
 
 @dataclasses.dataclass(frozen=True)
 class FitResult:

@@ -25,10 +25,8 @@ from ..errors import ConfigError, ModelFileError
 from ..io import read_json, scalar_arguments
 from ..tasks import Task, check_params
 from ..tasks._hooks import task_hook
-from ._shooting import MODEL_TYPES, NETWORK_MODELS
-from .ensemble import ensemble_from_dict
 from .hybrid import HybridModel, NeuralModel, model_task
-from .network import correction_from_dict
+from .kinds import KINDS, kind
 
 FITTED_FILE = "fitted.json"
 FITTED_FORMAT = "diffcontrol-fitted-model"
@@ -54,14 +52,14 @@ def read_fitted(path: str | os.PathLike) -> dict[str, Any]:
     if doc.get("version") != 1:
         raise ModelFileError(f"{path} has version {doc.get('version')!r}; this diffcontrol reads 1")
     model_type = doc.get("model")
-    if model_type not in MODEL_TYPES:
+    if not isinstance(model_type, str) or model_type not in KINDS:
         raise ModelFileError(f"{path}: unknown model kind {model_type!r}")
     values = doc.get("all_parameters")
     if not isinstance(values, dict) or not all(
         isinstance(v, int | float) and math.isfinite(v) for v in values.values()
     ):
         raise ModelFileError(f"{path}: 'all_parameters' must map names to finite numbers")
-    if model_type in NETWORK_MODELS and not isinstance(doc.get("network"), dict):
+    if kind(model_type).network and not isinstance(doc.get("network"), dict):
         raise ModelFileError(f"{path}: a {model_type} model needs its 'network'")
     doc["_path"] = str(path)
     return doc
@@ -100,16 +98,9 @@ def fitted_model(task: Any, doc: dict[str, Any]) -> HybridModel | NeuralModel | 
     Raises:
         ModelFileError: a malformed network or ensemble (one line naming it)."""
     physics = fitted_physics(task, doc)
-    if doc["model"] == "params":
-        return physics
-    where = doc.get("_path", "the fitted model")
-    sizes = network_sizes(task)
-    if "members" in doc["network"]:  # an ensemble
-        correction = ensemble_from_dict(doc["network"], where, sizes)
-    else:
-        correction = correction_from_dict(doc["network"], where, sizes)
-    cls = HybridModel if doc["model"] == "hybrid" else NeuralModel
-    return cls(physics, correction)
+    model_kind = kind(doc["model"])
+    sizes = network_sizes(task) if model_kind.network else None
+    return model_kind.load(doc, physics, sizes, doc.get("_path", "the fitted model"))
 
 
 def network_sizes(task: Any) -> tuple[int, int]:

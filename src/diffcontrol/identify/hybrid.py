@@ -1,7 +1,7 @@
 """Discrete-time hybrid and black-box (neural) models of a task's system, and their fit.
 
 ``HybridModel`` (the task's step plus a ``Correction``) and ``NeuralModel`` (a network alone)
-are fitted by ``fit_model`` with the grey box's multiple shooting (``identify.steps``);
+are fitted by ``fit_network`` (for the kinds ``identify.kinds.Hybrid`` and ``Neural``) with the grey box's multiple shooting (``identify.steps``);
 ``model_task`` makes a task that steps one, to train or predict through it.
 """
 
@@ -19,9 +19,8 @@ from jaxtyping import Array
 
 from .. import _gym
 from ..errors import ConfigError, InsufficientDataError
-from ..settings import MIN_TRANSITIONS
 from ..tasks._base import Task
-from ._shooting import NETWORK_MODELS, FitResult, adam_fit, check_settings
+from ._shooting import FitResult, adam_fit, check_settings
 from .ensemble import Ensemble, bootstrap_counts, check_members, make_ensemble
 from .network import Correction
 from .steps import _windows, check_data, masked_mean, predict, task_actions
@@ -113,10 +112,10 @@ def _spread(x: np.ndarray) -> np.ndarray:
     return np.maximum((hi - lo) / 2, 1e-6)
 
 
-def fit_model(
+def fit_network(
     task: Any,
     data: Any,
-    model_type: str = "hybrid",
+    kind: Any,
     *,
     params: Any = None,
     window: int = 10,
@@ -142,7 +141,9 @@ def fit_model(
     Args:
         task: a discrete-time task whose ``state_from_observation`` is implemented.
         data: recorded episodes of the task's system (``TrajectoryData``).
-        model_type: ``"hybrid"`` (physics plus correction) or ``"neural"`` (network only).
+        kind: the model kind (``identify.kinds``): its ``residual`` (the network learns what
+            the physics misses, a hybrid, or the whole state change), ``model_class``,
+            ``min_transitions`` and ``name``.
         params: the physics of a hybrid (default: the task's nominal parameters; e.g. a grey-box
             fit's ``FitResult.params``).
         window: the windows' length (steps predicted from every recorded state).
@@ -161,33 +162,29 @@ def fit_model(
     Raises:
         ConfigError: an unknown model type or a bad setting, or a task that cannot be fitted.
         DataFileError: data from another system.
-        InsufficientDataError: fewer transitions than ``MIN_TRANSITIONS[model_type]``, or no episode
+        InsufficientDataError: fewer transitions than ``kind.min_transitions``, or no episode
             longer than ``window``.
     """
-    if model_type not in NETWORK_MODELS:
-        raise ConfigError(
-            f"unknown model kind {model_type!r}; choose one of {list(NETWORK_MODELS)}"
-        )
     check_settings(window, steps, learning_rate)
     check_members(members, uncertainty_penalty)
     if not hidden or any(not isinstance(h, int) or h < 1 for h in hidden):
         raise ConfigError(f"hidden must be positive layer widths, got {list(hidden)!r}")
     check_data(task, data)
-    need = MIN_TRANSITIONS[model_type]
+    need = kind.min_transitions
     if data.num_steps < need:
         raise InsufficientDataError(
-            f"{data.num_steps} recorded transitions are too few for a {model_type} model: at least "
+            f"{data.num_steps} recorded transitions are too few for a {kind.name} model: at least "
             f"{need} are needed ({need // 200} Pendulum-v1 episodes of 200 steps); record more "
             "episodes, or fit the physical parameters (--model params) from less"
         )
     with jax.enable_x64(True):
-        return _fit_model(
-            task, data, model_type, params, window, steps, learning_rate, hidden, seed,
+        return _fit_network(
+            task, data, kind, params, window, steps, learning_rate, hidden, seed,
             (members, bool(bootstrap), float(uncertainty_penalty)),
         )  # fmt: skip
 
 
-def _fit_model(task, data, model_type, params, window, steps, learning_rate, hidden, seed, ens):
+def _fit_network(task, data, kind, params, window, steps, learning_rate, hidden, seed, ens):
     batch = _windows(task, data, window)
     if batch is None:
         longest = max(len(e.actions) for e in data.episodes())
@@ -201,7 +198,7 @@ def _fit_model(task, data, model_type, params, window, steps, learning_rate, hid
     actions = np.asarray(task_actions(task, actions), np.float64)  # a Discrete index: the task's
     to_state = jax.jit(jax.vmap(_gym.state_from_observation.bound(task)))
     states, next_states = np.asarray(to_state(obs)), np.asarray(to_state(next_obs))
-    if model_type == "hybrid":
+    if kind.residual:
         step = jax.jit(jax.vmap(lambda s, a: task.step(physics, s, a)[0]))
         target = next_states - np.asarray(step(states, actions))
     else:
@@ -211,7 +208,7 @@ def _fit_model(task, data, model_type, params, window, steps, learning_rate, hid
         in_offset=inputs.mean(axis=0),
         in_scale=1.0 / np.maximum(inputs.std(axis=0), 1e-6),
         out_scale=_spread(target),
-        zero_output=model_type == "hybrid",
+        zero_output=kind.residual,
     )
     members, bootstrap, penalty = ens
     key, sizes = jax.random.PRNGKey(seed), (inputs.shape[1], states.shape[1], tuple(hidden))
@@ -219,7 +216,7 @@ def _fit_model(task, data, model_type, params, window, steps, learning_rate, hid
         correction = Correction(key, *sizes, **scalings)
     else:
         correction = make_ensemble(key, members, *sizes, penalty=penalty, **scalings)
-    model_cls = HybridModel if model_type == "hybrid" else NeuralModel
+    model_cls = kind.model_class
     model = f64(model_cls(physics, correction))
     fitted_task = model_task(task, model)
     trainable, static = eqx.partition(model, eqx.is_inexact_array)
@@ -270,7 +267,7 @@ def _fit_model(task, data, model_type, params, window, steps, learning_rate, hid
     fitted = jax.tree.map(_to_f32, eqx.combine(best_w, rest, static))
     return FitResult(
         model=fitted,
-        model_type=model_type,
+        model_type=kind.name,
         params=fitted.params,
         loss=best_loss,
         nominal_loss=nominal_loss,

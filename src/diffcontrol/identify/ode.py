@@ -37,7 +37,6 @@ from ..tasks._hooks import task_hook
 from ._shooting import (
     HORIZONS,
     MIN_TRANSITIONS_PER_PARAMETER,
-    MODEL_TYPES,
     FitResult,
     adam_fit,
     check_settings,
@@ -46,6 +45,7 @@ from ._shooting import (
 )
 from ._task import data_columns, fit_parameter_names
 from .data import TrajectoryData, parse_column
+from .kinds import kind
 
 MIN_TRANSITIONS_NETWORK = 250
 """The fewest recorded transitions a hybrid or neural fit accepts (5 s of data at 50 Hz)."""
@@ -204,10 +204,7 @@ def fit_vector_field(
         InsufficientDataError: too few transitions (says how many are needed) or no
             episode longer than ``window``.
     """
-    if model_type not in MODEL_TYPES:
-        raise ConfigError(
-            f"unknown model kind {model_type!r}; choose one of {', '.join(MODEL_TYPES)}"
-        )
+    network = kind(model_type).network
     if not isinstance(substeps, int) or isinstance(substeps, bool) or substeps < 1:
         raise ConfigError(f"substeps must be a positive integer, got {substeps!r}")
     if not isinstance(window, int) or isinstance(window, bool) or window < 1:
@@ -217,11 +214,7 @@ def fit_vector_field(
         raise ConfigError(f"weight_decay must be >= 0, got {weight_decay!r}")
     dt = check_data(task, data)
     names = fit_parameter_names(task)
-    need = (
-        MIN_TRANSITIONS_PER_PARAMETER * len(names)
-        if model_type == "params"
-        else MIN_TRANSITIONS_NETWORK
-    )
+    need = MIN_TRANSITIONS_NETWORK if network else MIN_TRANSITIONS_PER_PARAMETER * len(names)
     if data.num_steps < need:
         raise InsufficientDataError(
             f"{data.num_steps} recorded transitions are too few for a {model_type} model: at "
@@ -231,13 +224,13 @@ def fit_vector_field(
     params = task.default_params() if params is None else params
     with jax.enable_x64(True):
         return _fit(
-            task, data, model_type, params, names, window, steps, learning_rate, tuple(hidden),
+            task, data, model_type, network, params, names, window, steps, learning_rate, tuple(hidden),
             weight_decay, substeps, lm_steps, seed, dt,
         )  # fmt: skip
 
 
 def _fit(
-    task, data, model_type, params, names, window, steps, lr, hidden, weight_decay, substeps, lm_steps,
+    task, data, model_type, network, params, names, window, steps, lr, hidden, weight_decay, substeps, lm_steps,
     seed, dt,
 ) -> FitResult:  # fmt: skip
     physics = _f64(nominal_model(task, jax.tree.map(lambda x: jnp.asarray(x, jnp.float64), params)))
@@ -252,7 +245,7 @@ def _fit(
     model0 = _f64(
         initial_model(task, model_type, nominal, data, dt, hidden, jax.random.PRNGKey(seed))
     )
-    if model_type == "params":
+    if not network:
         where = lambda m: tuple(getattr(m.params, n) for n in names)  # noqa: E731
         theta0 = jnp.stack([jnp.asarray(v, jnp.float64) for v in where(model0)])
     else:
@@ -261,7 +254,7 @@ def _fit(
     inv_std = jnp.asarray(1 / np.maximum(np.std(data.observations, axis=0), 1e-6))
 
     def build(theta):
-        if model_type == "params":
+        if not network:
             return eqx.tree_at(where, model0, tuple(theta[i] for i in range(len(names))))
         return eqx.tree_at(where, model0, theta)
 
@@ -272,7 +265,7 @@ def _fit(
         return (state_error(task, pred, targets) * inv_std).reshape(-1)
 
     def penalty(theta):
-        if model_type == "params" or weight_decay == 0:
+        if not network or weight_decay == 0:
             return 0.0
         leaves = [l.weight for l in theta]
         return weight_decay * sum(jnp.sum(w**2) for w in leaves) / sum(w.size for w in leaves)
@@ -280,7 +273,7 @@ def _fit(
     def loss(theta, batch):
         return jnp.mean(residuals(theta, batch) ** 2) + penalty(theta)
 
-    if model_type == "params":
+    if not network:
         optimiser = optax.adam(lr)
     else:
         optimiser = optax.adam(optax.cosine_decay_schedule(lr, max(steps, 1), alpha=0.05))
@@ -289,11 +282,11 @@ def _fit(
     best, best_loss, history, diverged, message = adam_fit(
         loss, theta0, optimiser, steps, batch, "model"
     )
-    if model_type == "params" and lm_steps and not diverged:
+    if not network and lm_steps and not diverged:
         best, best_loss, _ = lm_refine(residuals, loss, best, best_loss, batch, lm_steps)
     model = build(best)
     values, errors = {}, {}
-    if model_type == "params":
+    if not network:
         se = standard_errors(lambda v: residuals(v, batch), best) * math.sqrt(window)
         values = dict(zip(names, np.asarray(best).tolist()))
         errors = dict(zip(names, np.asarray(se).tolist()))
@@ -303,7 +296,7 @@ def _fit(
         model=model,
         model_type=model_type,
         params=model.params,
-        names=names if model_type == "params" else (),
+        names=() if network else names,
         values=values,
         nominal=dict.fromkeys(values, 0.0),
         standard_errors=errors,
@@ -317,7 +310,7 @@ def _fit(
         transitions=data.num_steps,
         dt_s=dt,
         substeps=substeps,
-        num_parameters=len(names) if model_type == "params" else model.correction.num_parameters,
+        num_parameters=model.correction.num_parameters if network else len(names),
     )
 
 

@@ -8,6 +8,7 @@ from typing import Any
 
 from ..errors import ConfigError, ModelFileError
 from ..identify.fitted import fitted_physics, fitted_task
+from ..identify.kinds import kind
 from ..settings import PlanConfig
 from ..tasks import AnyTask, task_params
 from ._config import planner_from_config
@@ -92,9 +93,10 @@ def planning_model(task: AnyTask, model: dict, where: str = "model.json") -> tup
         raise ModelFileError(f"{where}: the planner's model is neither the simulator nor fitted")
     try:
         fitted_physics(task, doc)  # refuses a model of another task
+        network = kind(doc.get("model")).network
     except ConfigError as e:
         raise ModelFileError(f"{where}: {e}") from None
-    if doc.get("model") == "params":
+    if not network:
         return task, task_params(task, tuple(sorted(doc["all_parameters"].items())))
     fitted = fitted_task(task, doc)  # its default parameters are the model
     return fitted, fitted.default_params()

@@ -32,8 +32,9 @@ from ..envs import env_id as own_id
 from ..errors import ConfigError, RunDirectoryError
 from ..evaluation import evaluate
 from ..identify import fit_dir
-from ..identify._rounds import NoisyPolicy, model_error, parse_start, predictor_of, start_params
+from ..identify._rounds import NoisyPolicy, model_error, parse_start, predictor_of
 from ..identify.data import concat, read_trajectories, write_trajectories
+from ..identify.kinds import kind
 from ..identify.recording import check_spaces, make_env, record, record_task
 from ..io import now_iso, read_json, write_figure, write_json
 from ..mpc._config import loop_planner
@@ -176,8 +177,7 @@ def _loop(
         "seed": seed,
     }
     ensemble = {"members": c.members, "uncertainty_penalty": c.uncertainty_penalty}
-    if c.members > 1 and model == "params":
-        raise ConfigError(f"--members {c.members}: a grey box has no network; drop --members")
+    kind(model).check_members(c.members)
     # new settings only where set, so a loop written before them still resumes
     settings.update({k: v for k, v in [("start", start), ("explore_noise", explore_noise),
                                        ("eval_seed", eval_seed), ("steps_per_round", steps),
@@ -188,7 +188,7 @@ def _loop(
         settings.update(ensemble)
     log = open_log(log_dir)  # before the directory is claimed: a missing tensorboardX
     state = _start(out, settings, resume)
-    state["start"] = _start_doc(task, model, start)
+    state["start"] = kind(model).start_doc(task, start)
     say = progress or (lambda line: None)
     # the reset seeds the controllers are judged on (save_run's own, 0..., by default): no
     # round records from them, so a model is never fitted to the starts it is judged on
@@ -258,7 +258,7 @@ def _loop(
             fit_config = FitConfig(names=names, holdout=0.0, steps=c.fit_steps, **ensemble)
             fitted = fit_dir(
                 task, out / "data.csv", model, here / "fit", fit_config,
-                progress=progress, **_start_settings(task, model, start),
+                progress=progress, **kind(model).start_settings(task, start),
             )  # fmt: skip
             for line in fitted.lines:
                 say(line)
@@ -355,28 +355,6 @@ def _loop(
         f"{out / f'round_{rounds}' / 'run' / 'model.json'}"
     )
     return state
-
-
-def _start_doc(task: Any, model: str, start: dict[str, float]) -> dict:
-    """What the model starts from, for loop.json: the physics (stated) and whence."""
-    if model == "neural":
-        return {"physics": None, "note": "a network alone: no physics to start from"}
-    nominal = {n: float(getattr(task.default_params(), n)) for n in start}
-    note = f"{model}: the task's nominal parameters" + (
-        f", except {', '.join(f'{n} = {v:g} (nominal {nominal[n]:g})' for n, v in start.items())}"
-        if start
-        else ""
-    )
-    return {"physics": start, "nominal": nominal, "note": note}
-
-
-def _start_settings(task: Any, model: str, start: dict[str, float]) -> dict:
-    """``fit_dir``'s settings for the start: a grey box's initial values, a hybrid's physics."""
-    if not start or model == "neural":
-        return {}
-    if model == "params":
-        return {"init": start}
-    return {"params": start_params(task, start)}
 
 
 def _evaluate(

@@ -21,6 +21,7 @@ from .._shell import command as shell_command
 from ..envs import make_env
 from ..errors import ConfigError, Interrupted, RunDirectoryError, TrainingDiverged
 from ..identify.fitted import checked_env_id, fitted_physics, fitted_task, read_fitted, real_system
+from ..identify.kinds import kind
 from ..tasks import AnyTask, named_by_file, resolve
 from ..training import resolve_config, train
 from ..training._devices import is_writer, join_hosts
@@ -293,7 +294,7 @@ def fitted_training(
     if real and "env_id" in real:  # the final evaluation's environment, made before training
         make_env(real["env_id"], real["env_kwargs"]).close()
     info = {"dir": str(fit_dir), "kind": doc["model"], "real_system": real}
-    if doc["model"] == "params":
+    if not kind(doc["model"]).network:
         info["note"] = f"training through the fitted parameters in {fit_dir}"
         return task, tuple(sorted(doc["all_parameters"].items())), real, info
     if params:

@@ -8,7 +8,6 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..config import TrainConfig
-from ..settings import MIN_TRANSITIONS
 from ..systems import cartpole as cp
 from ._base import StepLoss, Task
 
@@ -65,16 +64,12 @@ class CartPole(Task):
     # compare --real's wrong start (CartPole-v1: gravity 9.8, half-length 0.5 m, push 10 N)
     real_start = (("gravity", 12.0), ("length", 0.8), ("force_mag", 7.0))
 
-    def real_steps_per_round(self, model: str) -> int:
+    def real_steps_per_round(self, model) -> int:
         # A random episode lasts ~20 steps, a good controller's 500: a round records real steps,
         # not episodes. 250 random steps (~12 episodes) determine the grey box's 3 parameters
         # and the hybrid's correction, so 2 rounds stay within a budget of 500 real steps; a
         # network alone needs its 1,000 transitions (2 rounds: 2,000).
-        return (
-            250
-            if model in ("params", "hybrid")
-            else max(self.episode_length, MIN_TRANSITIONS.get(model, 0))
-        )
+        return 250 if model.physics else max(self.episode_length, model.min_transitions)
 
     def data_columns(self):
         return ("obs.x [m]", "obs.x_dot [m/s]", "obs.theta [rad]", "obs.theta_dot [rad/s]"), (

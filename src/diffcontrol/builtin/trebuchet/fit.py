@@ -45,9 +45,10 @@ import numpy as np
 import optax
 
 from ...errors import ConfigError, InsufficientDataError
-from ...identify._routes import TrajectoryRoute, parameters_doc
+from ...identify._routes import TrajectoryRoute
 from ...identify._shooting import FitResult, check_settings, set_params, standard_errors
 from ...identify.data import TrajectoryData
+from ...identify.kinds import kind, parameters_doc
 from ...io import write_figure
 from . import system as tb
 from .record import as64, padded_rows, parameter_names, params_dict, predict_distances
@@ -304,8 +305,6 @@ class ThrowRoute(TrajectoryRoute):
     recorded throws (one-step episodes), judged by the held-out distance errors."""
 
     unit = "throw"
-    defaults = {"params": (300, 0.02)}
-    """Adam steps and learning rate (only the grey box)."""
 
     def read(self, path: Any) -> TrajectoryData:
         return read_throws(path)
@@ -332,7 +331,7 @@ class ThrowRoute(TrajectoryRoute):
 
     def check_model(self, task: Any, model_type: str) -> None:
         """Refuse a network model: a throw has no trajectory to learn a correction from."""
-        if model_type != "params":
+        if kind(model_type).network:
             raise ConfigError(
                 f"--model {model_type} is not supported for aiming tasks such as {task.name!r} "
                 "(a throw has no trajectory to learn a correction from); use --model params to "
