@@ -165,6 +165,8 @@ def save_run(
             where = " on the real system" if real else ""
             say(f"final evaluation{where}: {ev.summary()}")
             run.metrics["headline"] = ev.headline()
+            if getattr(ev, "warnings", None):  # what the evaluation says went wrong
+                metrics["warnings"] = [*metrics.get("warnings", []), *ev.warnings]
     with _timing.phase(timings, "write"):
         from . import plots  # matplotlib, when pictures are drawn
 

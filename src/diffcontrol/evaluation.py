@@ -157,8 +157,15 @@ def evaluate_run(task: Any, run: Any, episodes: int | None = None, seed: int = 0
 
 
 @evaluate_run.register(ContinuousTask)
-def _no_evaluation(task: Any, run: Any, episodes: int | None = None, seed: int = 0) -> None:
-    return None
+def _closed_loop(task: Any, run: Any, episodes: int | None = None, seed: int = 0) -> Any:
+    """A continuous-time task: float64 reference solves of the run's closed loop with the
+    task's own vector field (``evaluate_closed_loop``), from ``episodes`` starts of its reset
+    distribution (default ``EVAL_STARTS``; 1 where the task has the one initial state)."""
+    if episodes is None:
+        episodes = EVAL_STARTS if type(task).reset is not ContinuousTask.reset else 1
+    return evaluate_closed_loop(
+        task, run.feedback, run.params, config=run.config, starts=episodes, seed=seed
+    )
 
 
 def _one_by_one(policy: Any, env: Any, episodes: int, seed: int) -> tuple[np.ndarray, ...]:
@@ -371,6 +378,163 @@ class ContinuousRecording:
             "impulse": self.y[:, 4].tolist(),
             "dissipated_energy": self.y[:, 5].tolist(),
         }
+
+
+EVAL_STARTS = 20
+"""Starts of a continuous-time task's closed-loop evaluation where it has a reset distribution."""
+
+
+@dataclasses.dataclass
+class ClosedLoopResult:
+    """A continuous-time controller judged by float64 reference solves of its closed loop
+    (``evaluate_closed_loop``): the loss of each start's trajectory and its final state."""
+
+    task: str
+    loss_name: str
+    seed: int
+    horizon_s: float
+    losses: np.ndarray
+    final_states: np.ndarray
+    state_names: tuple[str, ...]
+    warnings: list[str] = dataclasses.field(default_factory=list)
+    key = "closed_loop"
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "what": (
+                "float64 dopri8 solves of the closed loop (rtol = atol = 1e-9) with the task's "
+                "vector field over horizon_s, start i drawn from the task's reset distribution "
+                "with PRNGKey(seed + i)"
+            ),
+            "task": self.task,
+            "starts": int(self.losses.size),
+            "seed": self.seed,
+            "horizon_s": self.horizon_s,
+            "loss": self.loss_name,
+            "mean_loss": float(np.mean(self.losses)),
+            "std_loss": float(np.std(self.losses)),
+            "losses": self.losses.tolist(),
+            "final_states": [dict(zip(self.state_names, s.tolist())) for s in self.final_states],
+            "warnings": self.warnings,
+        }
+
+    def headline(self) -> str:
+        """A few words for the end of ``diffcontrol train``'s last line."""
+        return f"loss {np.mean(self.losses):.4g} ± {np.std(self.losses):.2g} ({self.losses.size} starts)"
+
+    def summary(self) -> str:
+        mean = np.mean(self.final_states, axis=0)
+        final = ", ".join(f"{n} {v:.3g}" for n, v in zip(self.state_names, mean))
+        warned = "".join(f"\nwarning: {w}" for w in self.warnings)
+        return (
+            f"loss ({self.loss_name}) {np.mean(self.losses):.4g} ± {np.std(self.losses):.2g} over "
+            f"{self.losses.size} start(s) (seed {self.seed}; float64 reference solves of "
+            f"{self.horizon_s:g} s); final state, mean over the starts: {final}{warned}"
+        )
+
+
+def evaluate_closed_loop(
+    task: Any,
+    controller: Any,
+    params: Any = None,
+    *,
+    config: Any = None,
+    starts: int = 1,
+    seed: int = 0,
+) -> ClosedLoopResult:
+    """Judge a continuous-time controller by float64 reference solves of its closed loop.
+
+    Start ``i`` is ``task.reset(PRNGKey(seed + i), params)`` (the one ``initial_state`` for a
+    task without a reset distribution); each is solved with the task's ``vector_field`` over
+    ``config.horizon_s`` (``dopri8`` at ``REFERENCE_RTOL``/``REFERENCE_ATOL``), and its
+    trajectory on ``config.saves`` points is judged by ``config``'s loss (the task's first
+    when empty), as in training. A state-feedback controller whose closed loop ends where one
+    that does nothing ends (its last layer zero) gets a warning in the result: it may be
+    untrained, or the task infeasible within its bounds.
+
+    Args:
+        controller: an ``MLPController`` (state feedback inside the ODE), or a sampled-data
+            controller with ``closed_loop`` (``simulate_continuous``).
+        config: an ``ODETrainConfig`` (default: the task's).
+
+    Raises:
+        ValueError: a solve failed (the closed loop explodes).
+    """
+    import equinox as eqx
+    import jax
+    import jax.numpy as jnp
+
+    config = config or task.default_config()
+    params = task.default_params() if params is None else params
+    loss_name = config.loss or task.losses[0]
+    warnings: list[str] = []
+    loss_fn = task.trajectory_loss(loss_name)
+    # The starts drawn as training draws them (outside float64 mode, where a task's own
+    # jax.random draws would give others), then widened.
+    keys = jnp.stack([jax.random.PRNGKey(seed + i) for i in range(starts)])
+    y0s = np.asarray(jax.jit(jax.vmap(task.reset, in_axes=(0, None)))(keys, params), np.float64)
+    with jax.enable_x64(True):
+        p64 = jax.tree.map(lambda x: jax.device_put(np.asarray(x, np.float64)), params)
+        ts = jnp.linspace(0.0, float(config.horizon_s), config.saves)
+        y0s = jax.device_put(y0s)
+        if hasattr(controller, "closed_loop"):  # sampled data: its own solve, start by start
+            out = []
+            for y0 in y0s:
+                ys, us, ok = controller.closed_loop(task, p64, y0, np.asarray(ts))
+                tr = task.trajectory(p64, controller, ts, ys)
+                out.append((float(loss_fn(tr)), np.asarray(ys)[-1], bool(ok)))
+            losses, finals, ok = (np.asarray(x) for x in zip(*out))
+        else:
+
+            @jax.jit
+            def solve(ctrl, p, y0s):
+                def one(y0):
+                    sol = solve_closed_loop(
+                        task.vector_field,
+                        y0,
+                        ts,
+                        (p, force_fn(task, ctrl)),
+                        solver="dopri8",
+                        rtol=REFERENCE_RTOL,
+                        atol=REFERENCE_ATOL,
+                        max_steps=100_000,
+                    )
+                    return loss_fn(task.trajectory(p, ctrl, ts, sol.ys)), sol.ys[-1], sol.ok
+
+                return jax.vmap(one)(y0s)
+
+            losses, finals, ok = (np.asarray(x) for x in solve(controller, p64, y0s))
+            # the same starts under a controller that does nothing (its last layer zero: the
+            # head's neutral action), through the same program
+            neutral = eqx.tree_at(
+                lambda c: (c.layers[-1].weight, c.layers[-1].bias),
+                controller,
+                replace_fn=jnp.zeros_like,
+            )
+            _, still, still_ok = solve(neutral, p64, y0s)
+            observe = jax.vmap(task.observe)
+            if np.all(still_ok) and _same_ends(observe(finals), observe(still)):
+                warnings.append(
+                    f"the controller ends where a controller that does nothing ends (from each "
+                    f"of the {starts} start(s), its final observation within 5 % of the "
+                    "neutral action's): it may be untrained (train longer, at another learning "
+                    "rate, or with --population N), or the task infeasible within its action "
+                    "bounds; `diffcontrol plan` from the same starts is a reference"
+                )
+    if not np.all(ok) or not np.all(np.isfinite(losses)):
+        raise ValueError("the reference solve failed: the closed loop explodes")
+    names = tuple(task.state_names)
+    return ClosedLoopResult(
+        task.name, loss_name, seed, float(config.horizon_s), losses, finals[:, : len(names)], names,
+        warnings,
+    )  # fmt: skip
+
+
+def _same_ends(a: Any, b: Any) -> bool:
+    """Whether the observations ``a`` and ``b`` (``[starts, obs]``) are within 5 % of ``b``
+    (at least 0.05) everywhere."""
+    a, b = np.asarray(a), np.asarray(b)
+    return bool(np.all(np.abs(a - b) <= 0.05 * np.maximum(1.0, np.abs(b))))
 
 
 def simulate_continuous(

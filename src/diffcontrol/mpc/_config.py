@@ -29,6 +29,14 @@ def default_plan_config(task: Any) -> PlanConfig:
     return PlanConfig()
 
 
+@default_plan_config.register(ContinuousTask)
+def _sampled_data(task: Any) -> PlanConfig:
+    """A continuous-time task's control period ``dt``: the interval between the saved points
+    of its training configuration (``horizon_s / (saves - 1)``), the grid its loss sees."""
+    config = task.default_config()
+    return PlanConfig(dt=config.horizon_s / (config.saves - 1))
+
+
 @task_hook
 def loop_planner(task: Any) -> PlanConfig:
     """The planner that acts through a fitted model in ``loop --controller plan`` and in

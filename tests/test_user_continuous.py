@@ -1,0 +1,172 @@
+"""A user's own continuous-time task, in a file of theirs: trained from the command line,
+judged by reference solves of its closed loop (checked against SciPy's DOP853), and planned
+at its own control period."""
+
+from __future__ import annotations
+
+import json
+import textwrap
+
+import numpy as np
+import pytest
+
+import diffcontrol
+from diffcontrol.cli import main
+
+USER_FILE = """
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+import diffcontrol
+
+
+class Params(eqx.Module):
+    g: float = 9.81
+    b: float = 0.1
+
+
+class Swing(eqx.Module):
+    phi: jax.Array
+    phidot: jax.Array
+
+
+class DampedPendulum(diffcontrol.ContinuousTask):
+    name = "user-damped-pendulum"
+    summary = "swing a damped pendulum up (phi = 0 upright) with |u| <= 3"
+    observation_size = 3
+    action_size = 1
+    action_head = "tanh"
+    action_low, action_high = (-3.0,), (3.0,)
+    losses = ("upright",)
+    state_names = ("phi", "phidot")
+    feature_names = ("cos(phi)", "sin(phi)", "phidot")
+
+    def default_params(self):
+        return Params()
+
+    def default_config(self):
+        return diffcontrol.ODETrainConfig(horizon_s=8, saves=81, starts=16, updates=500)
+
+    def initial_state(self, params):
+        return jnp.array([jnp.pi, 0.0])
+
+    def reset(self, key, params):
+        k1, k2 = jax.random.split(key)
+        return jnp.array([jnp.pi + jax.random.uniform(k1, minval=-0.3, maxval=0.3),
+                          jax.random.uniform(k2, minval=-0.2, maxval=0.2)])
+
+    def vector_field(self, t, y, args):
+        p, force_fn = args
+        phi, phidot = y
+        u = force_fn(t, y)
+        return jnp.stack([phidot, p.g * jnp.sin(phi) - p.b * phidot + u])
+
+    def observe(self, state):
+        return jnp.stack([jnp.cos(state[0]), jnp.sin(state[0]), state[1]])
+
+    def trajectory(self, params, controller, ts, ys):
+        return Swing(phi=ys[:, 0], phidot=ys[:, 1])
+
+    def trajectory_loss(self, name):
+        def loss(tr):
+            c = 1 - jnp.cos(tr.phi) + 0.01 * tr.phidot**2
+            return jnp.mean(c) + 5 * c[-1]
+        return loss
+"""
+
+SPEC = "my_pendulum:DampedPendulum"
+TINY = ["--updates", "4", "--eval-every", "2", "--starts", "2", "--horizon-s", "1"]
+TINY += ["--saves", "11", "--hidden", "4"]
+
+
+@pytest.fixture(scope="module")
+def user_dir(tmp_path_factory):
+    d = tmp_path_factory.mktemp("user-continuous")
+    (d / "my_pendulum.py").write_text(textwrap.dedent(USER_FILE))
+    return d
+
+
+@pytest.mark.slow
+def test_train_and_evaluate_without_an_environment(user_dir, monkeypatch, capsys):
+    """No Gymnasium environment: the final evaluation and ``evaluate`` solve the closed loop
+    with the task's own vector field from held-out starts of its reset distribution, and
+    report the loss and where each start ends, as SciPy's DOP853 integrates it."""
+    from scipy.integrate import solve_ivp
+
+    monkeypatch.chdir(user_dir)
+    out = user_dir / "run"
+    assert main(["train", SPEC, "--out", str(out), "--quiet", *TINY, "--final-eval", "3"]) == 0
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["final_evaluation"] == "closed_loop"
+    assert metrics["closed_loop"]["starts"] == 3 and metrics["closed_loop"]["horizon_s"] == 1.0
+
+    capsys.readouterr()
+    assert main(["evaluate", str(out), "--task", SPEC, "--episodes", "2", "--json"]) == 0
+    ev = json.loads(capsys.readouterr().out)
+    assert ev["starts"] == 2 and ev["loss"] == "upright"
+    assert main(["evaluate", str(out), "--task", SPEC, "--episodes", "2"]) == 0
+    assert "final state, mean over the starts: phi" in capsys.readouterr().out
+
+    # the same closed loop, integrated by SciPy with the NumPy policy that `load` gives
+    task = diffcontrol.tasks.resolve(SPEC)
+    policy = diffcontrol.load(out)
+    import jax
+
+    for i, final in enumerate(ev["final_states"]):
+        y0 = np.asarray(task.reset(jax.random.PRNGKey(i), task.default_params()), np.float64)
+
+        def f(t, y):
+            u = float(policy(y))  # a StatePolicy: the state in, the force out
+            return [y[1], 9.81 * np.sin(y[0]) - 0.1 * y[1] + u]
+
+        sol = solve_ivp(f, (0.0, 1.0), y0, method="DOP853", rtol=1e-10, atol=1e-10)
+        np.testing.assert_allclose(
+            [final["phi"], final["phidot"]], sol.y[:, -1], rtol=1e-4, atol=1e-5
+        )
+
+
+def test_a_continuous_task_plans_at_its_own_control_period(user_dir, monkeypatch):
+    """``plan`` needs no ``--dt``: a continuous task's control period is the interval between
+    the saved points of its training configuration."""
+    from diffcontrol.mpc._config import default_plan_config, for_task
+    from diffcontrol.settings import PlanConfig
+
+    monkeypatch.chdir(user_dir)
+    task = diffcontrol.tasks.resolve(SPEC)
+    assert default_plan_config(task).dt == pytest.approx(8 / 80)
+    assert for_task(PlanConfig(), task).dt == pytest.approx(0.1)
+    assert for_task(PlanConfig(dt=0.02), task).dt == 0.02  # one given wins
+
+
+@pytest.mark.slow
+def test_a_controller_that_ends_where_doing_nothing_ends_is_warned_of(user_dir, monkeypatch):
+    """The closed-loop evaluation says when the controller's loop ends where a controller
+    that does nothing ends (a pendulum left hanging), and not when it moves the system."""
+    import equinox as eqx
+    import jax
+    import jax.numpy as jnp
+
+    from diffcontrol.controllers import MLPController
+    from diffcontrol.evaluation import evaluate_closed_loop
+
+    monkeypatch.chdir(user_dir)
+    task = diffcontrol.tasks.resolve(SPEC)
+    config = task.default_config().replace(horizon_s=1.0, saves=11, hidden=(4,))
+    ctrl = MLPController(
+        jax.random.PRNGKey(0),
+        3,
+        1,
+        hidden=(4,),
+        head="tanh",
+        action_low=(-3.0,),
+        action_high=(3.0,),
+    )
+    idle = eqx.tree_at(lambda c: c.layers[-1].bias, ctrl, replace_fn=jnp.zeros_like)
+    idle = eqx.tree_at(lambda c: c.layers[-1].weight, idle, replace_fn=jnp.zeros_like)
+    pushing = eqx.tree_at(lambda c: c.layers[-1].bias, idle, jnp.full((1,), 5.0))
+    hanging = evaluate_closed_loop(task, idle, config=config, starts=2)
+    assert len(hanging.warnings) == 1 and "does nothing" in hanging.warnings[0]
+    assert "warning: the controller ends where" in hanging.summary()
+    moved = evaluate_closed_loop(task, pushing, config=config, starts=2)
+    assert moved.warnings == [] and moved.to_json()["warnings"] == []
