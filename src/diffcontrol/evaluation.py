@@ -489,16 +489,7 @@ def evaluate_closed_loop(
             @jax.jit
             def solve(ctrl, p, y0s):
                 def one(y0):
-                    sol = solve_closed_loop(
-                        task.vector_field,
-                        y0,
-                        ts,
-                        (p, force_fn(task, ctrl)),
-                        solver="dopri8",
-                        rtol=REFERENCE_RTOL,
-                        atol=REFERENCE_ATOL,
-                        max_steps=100_000,
-                    )
+                    sol = _reference(task, ctrl, p, y0, ts)
                     return loss_fn(task.trajectory(p, ctrl, ts, sol.ys)), sol.ys[-1], sol.ok
 
                 return jax.vmap(one)(y0s)
@@ -528,6 +519,21 @@ def evaluate_closed_loop(
         task.name, loss_name, seed, float(config.horizon_s), losses, finals[:, : len(names)], names,
         warnings,
     )  # fmt: skip
+
+
+def _reference(task: Any, ctrl: Any, p: Any, y0: Any, ts: Any) -> Any:
+    """The reference solve of the closed loop from ``y0``, saved at ``ts``: ``dopri8`` at
+    ``REFERENCE_RTOL``/``REFERENCE_ATOL`` (float64 inside ``jax.enable_x64``)."""
+    return solve_closed_loop(
+        task.vector_field,
+        y0,
+        ts,
+        (p, force_fn(task, ctrl)),
+        solver="dopri8",
+        rtol=REFERENCE_RTOL,
+        atol=REFERENCE_ATOL,
+        max_steps=100_000,
+    )
 
 
 def _same_ends(a: Any, b: Any) -> bool:
@@ -581,16 +587,7 @@ def simulate_continuous(
         def run(ctrl, p, ts, at_loss):
             """The solve, its forces and the loss on its saves ``at_loss`` (one program, not
             the loss op by op)."""
-            sol = solve_closed_loop(
-                task.vector_field,
-                task.initial_state(p),
-                ts,
-                (p, force_fn(task, ctrl)),
-                solver="dopri8",
-                rtol=REFERENCE_RTOL,
-                atol=REFERENCE_ATOL,
-                max_steps=100_000,
-            )
+            sol = _reference(task, ctrl, p, task.initial_state(p), ts)
             force = jax.vmap(lambda y: ctrl(task.observe(y[:4]))[0])(sol.ys)
             loss = loss_fn(task.trajectory(p, ctrl, ts_loss, sol.ys[at_loss]))
             return sol.ys, force, loss, sol.ok
