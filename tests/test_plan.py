@@ -178,3 +178,21 @@ def test_a_recorder_asking_for_action_and_gym_action_solves_once(planner_run):
     assert np.asarray(policy(obs)) == pytest.approx(u) and len(policy.reports) == 1
     policy(obs), policy(obs)  # plain calls always solve, even on an unchanged observation
     assert len(policy.reports) == 3
+
+
+@pytest.mark.slow
+def test_a_three_way_choice_is_planned_relaxed_and_acted_on_as_its_heaviest_choice(tmp_path):
+    """The Acrobot's argmax head: the planner plans each torque's weight in [0, 1] (the
+    one-hot choice relaxed, as CartPole's sign is planned in [-1, 1]) and Gymnasium gets the
+    heaviest choice; ``plan acrobot`` needs no bounds."""
+    out = tmp_path / "acrobot"
+    small = PlanConfig(horizon=4, iterations=2)
+    runs.plan_run(out, "acrobot", small, final_eval=1, animation=False)
+    assert json.loads((out / "metrics.json").read_text())["gym_eval"]["env_id"] == "Acrobot-v1"
+    policy = diffcontrol.load(out)
+    env = gymnasium.make("Acrobot-v1")
+    obs, _ = env.reset(seed=0)
+    relaxed = np.asarray(policy.action(obs)).reshape(-1)
+    assert relaxed.shape == (3,) and np.all((relaxed >= 0) & (relaxed <= 1))
+    assert policy(obs) == int(np.argmax(relaxed)) and env.action_space.contains(policy(obs))
+    env.close()

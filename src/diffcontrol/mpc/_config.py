@@ -17,7 +17,7 @@ from ..tasks._base import ContinuousTask
 from ..tasks._hooks import task_hook
 from ._discretise import DiscretisedTask, discretise
 from ._ilqr import ILQR
-from ._planner import Planner, make_planner
+from ._planner import RELAXATIONS, Planner, make_planner
 from ._shooting import Shooting
 
 
@@ -108,7 +108,7 @@ def planner_from_config(
             (-config.action_bound,) * task.action_size,
             (config.action_bound,) * task.action_size,
         )
-    elif task.action_low is None and task.action_head != "sign":
+    elif task.action_low is None and task.action_head not in RELAXATIONS:
         raise ConfigError(
             f"task {task.name!r} has no action bounds; a planner needs them: pass "
             "--action-bound B (PlanConfig(action_bound=B)), the actions then within +-B"

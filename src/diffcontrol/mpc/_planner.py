@@ -19,6 +19,9 @@ from ._problem import Problem, SolveInfo, as_terminal_cost, stop_gradient
 from ._shooting import Shooting
 
 GRADIENTS = ("unroll", "implicit")
+RELAXATIONS = {"sign": ((-1.0,), (1.0,)), "argmax": ((0.0,), (1.0,))}
+"""The relaxed actions a planner plans for a head that makes a discrete action, per action
+dimension: the push's sign in [-1, 1], an N-way choice's weights in [0, 1]."""
 """How a plan is differentiated (``make_planner(gradient=...)``)."""
 
 
@@ -191,9 +194,11 @@ def make_planner(
             iterations) or ``"implicit"`` (at the optimum, by the implicit function theorem).
         bounds: ``(low, high)`` of the planned actions, default the task's ``action_low`` and
             ``action_high``. A task whose head makes a discrete action has none: the planner
-            then plans the relaxed action within the bounds given, by default [-1, 1] for a
-            ``sign`` head (the CartPole's push, the force ``u * force_mag``), and Gymnasium
-            gets ``gym_action`` of it (the push's sign).
+            then plans the relaxed action within the bounds given, by default ``RELAXATIONS``:
+            [-1, 1] for a ``sign`` head (the CartPole's push, the force ``u * force_mag``),
+            [0, 1] per choice for an ``argmax`` head (the Acrobot's weights of its three
+            torques), and Gymnasium gets ``gym_action`` of it (the push's sign, the heaviest
+            choice).
         warm_policy: a controller ``observation -> action`` whose H-step rollout through the
             model is one more start of every solve (see ``Planner``), or ``None``.
 
@@ -220,8 +225,8 @@ def make_planner(
     if not hasattr(solver, "solve"):
         raise ConfigError(f"solver={solver!r} is not a solver; use mpc.ILQR() or mpc.Shooting()")
     low, high = (task.action_low, task.action_high) if bounds is None else bounds
-    if bounds is None and low is None and task.action_head == "sign":
-        low, high = (-1.0,) * task.action_size, (1.0,) * task.action_size  # sign's relaxation
+    if bounds is None and low is None and task.action_head in RELAXATIONS:
+        low, high = (RELAXATIONS[task.action_head][i] * task.action_size for i in (0, 1))
     if low is None or high is None:
         raise ConfigError(
             f"task {task.name!r} has no action bounds; a planner needs them: pass "
