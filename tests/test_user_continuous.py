@@ -96,10 +96,11 @@ def test_train_and_evaluate_without_an_environment(user_dir, monkeypatch, capsys
 
     monkeypatch.chdir(user_dir)
     out = user_dir / "run"
-    assert main(["train", SPEC, "--out", str(out), "--quiet", *TINY, "--final-eval", "3"]) == 0
+    # 2 starts everywhere: one compiled evaluation, shared with the test below
+    assert main(["train", SPEC, "--out", str(out), "--quiet", *TINY, "--final-eval", "2"]) == 0
     metrics = json.loads((out / "metrics.json").read_text())
     assert metrics["final_evaluation"] == "closed_loop"
-    assert metrics["closed_loop"]["starts"] == 3 and metrics["closed_loop"]["horizon_s"] == 1.0
+    assert metrics["closed_loop"]["starts"] == 2 and metrics["closed_loop"]["horizon_s"] == 1.0
 
     capsys.readouterr()
     assert main(["evaluate", str(out), "--task", SPEC, "--episodes", "2", "--json"]) == 0
@@ -170,3 +171,31 @@ def test_a_controller_that_ends_where_doing_nothing_ends_is_warned_of(user_dir, 
     assert "warning: the controller ends where" in hanging.summary()
     moved = evaluate_closed_loop(task, pushing, config=config, starts=2)
     assert moved.warnings == [] and moved.to_json()["warnings"] == []
+
+
+def test_a_vector_field_that_misreads_the_action_is_one_line_naming_its_shape(
+    user_dir, monkeypatch
+):
+    """``force_fn(t, y)`` gives a one-action task's action as a scalar; a vector field that
+    indexes it, or returns the wrong shape, is refused before training, saying so."""
+    import jax.numpy as jnp
+
+    monkeypatch.chdir(user_dir)
+    base = type(diffcontrol.tasks.resolve(SPEC))
+
+    class Indexing(base):
+        def vector_field(self, t, y, args):
+            p, force_fn = args
+            u = force_fn(t, y)[0]  # as if it were controller(obs), shape (1,)
+            return jnp.stack([y[1], p.g * jnp.sin(y[0]) + u])
+
+    class Flat(base):
+        def vector_field(self, t, y, args):
+            return jnp.zeros(3)
+
+    config = base().default_config().replace(updates=1, eval_every=1, horizon_s=1.0, saves=11)
+    with pytest.raises(diffcontrol.ConfigError, match=r"force_fn\(t, y\) gives a scalar") as e:
+        diffcontrol.train(Indexing(), config)
+    assert "\n" not in str(e.value) and "state of shape (2,)" in str(e.value)
+    with pytest.raises(diffcontrol.ConfigError, match=r"of shape \(3,\) for a state of shape"):
+        diffcontrol.train(Flat(), config)

@@ -23,7 +23,7 @@ SCHEDULES = ("constant", "cosine", "warmup_cosine")
 ACTIVATION_NAMES = ("tanh", "relu", "sigmoid", "elu")
 """The controllers' hidden activations (``controllers.ACTIVATIONS``)."""
 HEADS = ("linear", "tanh", "sigmoid", "sign", "argmax")
-"""The controllers' action heads (``controllers.head_fn``)."""
+"""The controllers' action heads (``controllers.apply_head``)."""
 GRADIENT_METHODS = ("checkpoint", "backsolve", "forward")
 SOLVER_NAMES = ("tsit5", "dopri5", "dopri8", "bosh3", "kvaerno5")
 

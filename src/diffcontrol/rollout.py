@@ -133,13 +133,15 @@ and no command's start-up waits for it."""
 
 
 class StateFeedback(eqx.Module):
-    """``force_fn(t, state) = controller(observe(state))[0]``, the weights as PyTree leaves."""
+    """``force_fn(t, state) = controller(observe(state))``, the weights as PyTree leaves: the
+    action vector, or for a task with one action that action as a scalar (the force)."""
 
     controller: Any
     observe: Any = eqx.field(static=True)
 
     def __call__(self, t: Array, state: Array) -> Array:
-        return self.controller(self.observe(state))[0]
+        action = self.controller(self.observe(state))
+        return action[0] if action.shape == (1,) else action
 
 
 def force_fn(task: ContinuousTask, controller: Any) -> StateFeedback:

@@ -120,13 +120,18 @@ def _continuous_shapes(task: ContinuousTask, params: PyTree) -> jax.ShapeDtypeSt
         return task.vector_field(t, y, (params, force_fn(task, controller)))
 
     t = jax.ShapeDtypeStruct((), y0.dtype)
-    inputs = f"t, a state of shape {y0.shape} and args (params, force_fn)"
+    # force_fn gives the action as controller(obs) does, a one-action task's as a scalar
+    gives = "a scalar (the one action)" if task.action_size == 1 else f"shape ({task.action_size},)"
+    inputs = (
+        f"t, a state of shape {y0.shape} and args (params, force_fn), whose force_fn(t, y) "
+        f"gives {gives}"
+    )
     dy = trace(f"{name}.vector_field", inputs, field, t, y0, params)
     dy = _array(f"{name}.vector_field", "dy/dt", dy)
     if dy.shape != y0.shape:
         fail(
             f"{name}.vector_field returned dy/dt of shape {dy.shape} for a state of shape "
-            f"{y0.shape}"
+            f"{y0.shape} (force_fn(t, y) gives {gives})"
         )
     if dy.dtype != y0.dtype:
         fail(

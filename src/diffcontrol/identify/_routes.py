@@ -8,8 +8,9 @@ the same methods: ``read(path)``, ``count(data)``, ``split(data, n)``, ``announc
 line said before fitting), ``fit(task, data, model_type, **settings)`` and ``outputs(...)``
 (the route's part of ``fitted.json``, the lines it reports and ``prediction.png``), its
 ``unit`` (what ``count`` counts) and ``defaults(kind)`` (Adam's steps and learning rate for
-a model kind, ``identify.kinds``); optionally ``check_model(task, model_type)`` (before anything is read) and
-``check_split(task, data, train, held_out, settings)`` (after the hold-out is split off).
+a model kind, ``identify.kinds``); optionally ``check_model(task, model_type)`` (before
+anything is read) and ``check_split(task, data, train, held_out, settings)`` (after the
+hold-out is split off).
 """
 
 from __future__ import annotations

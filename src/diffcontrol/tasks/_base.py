@@ -179,7 +179,8 @@ class ContinuousTask(_TaskBase):
 
     @abc.abstractmethod
     def vector_field(self, t: Array, y: Array, args: tuple[PyTree, Any]) -> Array:
-        """``dy/dt`` with ``args = (params, force_fn)``; ``force_fn(t, state)`` is the action."""
+        """``dy/dt`` with ``args = (params, force_fn)``; ``force_fn(t, state)`` is the action
+        (a scalar for a task with one action, as the force of ``examples/continuous_task.py``)."""
 
     @abc.abstractmethod
     def observe(self, state: Array) -> Array:
