@@ -15,9 +15,8 @@ if "DIFFCONTROL_CACHE_DIR" not in os.environ:
     _OWN_CACHE = tempfile.mkdtemp(prefix="diffcontrol-test-cache-")
     os.environ["DIFFCONTROL_CACHE_DIR"] = _OWN_CACHE
 # XLA's CPU compiler, for the tests' programs, which are small and most run a few steps: its
-# older fusion emitters at backend optimisation level 1 compile them fastest (paired on the
-# 2-core AMD EPYC: the whole suite 9 min 18 s -> 7 min 20 s, the fast tier on one core 85 ->
-# 66 s; docs/development.md). They compute what XLA's defaults compute up to rounding, which
+# older fusion emitters at backend optimisation level 1 compile them fastest
+# (docs/development.md has the paired timings). They compute what XLA's defaults compute up to rounding, which
 # the tests' tolerances are for (tests/test_compile_flags.py checks it); not at level 0, where
 # a swing-up population's gradients became NaN. The library's own programs keep XLA's
 # defaults; the tests that compare the bits of two compilations name their options

@@ -19,7 +19,7 @@ def _runs() -> dict:
 
     ``keep_best=False``: which evaluation point is best could hinge on a tie. The swing-up's
     population under the horizon curriculum is where the older emitters at level 0 gave
-    non-finite gradients (docs/development.md)."""
+    non-finite gradients, which is why conftest.py does not use level 0."""
     import equinox as eqx
     import jax
 
