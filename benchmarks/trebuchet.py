@@ -1,5 +1,9 @@
 """Benchmark of the trebuchet demo: aiming accuracy, training time, network vs direct aiming.
 
+The controller is the network's aim refined at act time by two Gauss-Newton steps through the
+simulator (``task.REFINEMENT``); its misses are also reported for the network alone (the
+NumPy-only form), and its throws simulated again in float64.
+
 Each training run is the real command line, `diffcontrol train trebuchet --out DIR --seed S`,
 in a fresh process pinned to one core (`taskset -c 0`) with the persistent compilation cache
 off, so `train_seconds` includes compiling everything. Each trained network then aims at the
@@ -33,17 +37,53 @@ from _common import machine, train_cli  # noqa: E402
 
 
 def run_train(seed: int, workdir: Path, extra: list[str]) -> dict:
+    """One training run by the command line; its final evaluation (the controller: the
+    network's aim refined through the simulator), and the same 1,000 targets aimed by the
+    network alone and judged again in float64."""
     out = workdir / f"trebuchet-{seed}"
-    m, _ = train_cli("trebuchet", seed, out, ["--no-animation", "--final-eval", "1000", *extra])
-    return {
+    m, process = train_cli(
+        "trebuchet", seed, out, ["--no-animation", "--final-eval", "1000", *extra]
+    )
+    row = {
         "seed": seed,
         "run_dir": str(out),
         "simulated_throws": m["simulated_episodes"],
         "updates": m["updates"],
+        "process_seconds": process,
         "train_seconds": m["train_seconds"],
         "compile_seconds": m["compile_seconds"],
         **{k: m["aim_eval"][k] for k in m["aim_eval"] if k not in ("task", "seed")},
     }
+    row["network_alone"], row["float64_judge"] = judged_again(out)
+    return row
+
+
+class _NetworkAlone:
+    """A refined policy's network without the refinement (what NumPy readers run)."""
+
+    def __init__(self, policy):
+        self.action = policy.network_action
+
+
+def judged_again(run_dir: Path) -> tuple[dict, dict]:
+    """The run's network alone on the evaluation's targets, and the controller's throws
+    simulated again in float64 (the trebuchet trains and aims in float32)."""
+    import jax
+
+    import diffcontrol
+    from diffcontrol.builtin.trebuchet import system as tb
+    from diffcontrol.builtin.trebuchet import task as aim
+    from diffcontrol.builtin.trebuchet.judge import evaluate_aiming
+
+    task, policy = diffcontrol.make("trebuchet"), diffcontrol.load(run_dir)
+    alone = evaluate_aiming(_NetworkAlone(policy), task, targets=1000).stats
+    ev = evaluate_aiming(policy, task, targets=1000)
+    with jax.enable_x64(True):
+        distances = np.asarray(
+            jax.jit(jax.vmap(tb.shoot, (0, 0, 0, None)))(ev.winds, ev.angles, ev.weights, None)
+        )
+    wide = aim.miss_statistics(distances - ev.targets, ev.reachable)
+    return alone, wide
 
 
 def time_per_call(fn, args_list, repeat: int = 1) -> float:
@@ -67,12 +107,18 @@ def aiming_speed(run_dir: str, n_direct: int) -> dict:
     targets = rng.uniform(30, 90, size=1000)
     winds = rng.normal(0, 3, size=1000)
     pairs = list(zip(targets.tolist(), winds.tolist()))
+    obs = [np.array(p) for p in pairs]
 
-    net_single = time_per_call(policy, pairs)
+    net_single = time_per_call(lambda o: policy.network_action(o), [(o,) for o in obs])
     t0 = time.perf_counter()
     for _ in range(20):
-        policy(targets, winds)
+        policy.network_action(np.stack([targets, winds], -1))
     net_batched = (time.perf_counter() - t0) / (20 * len(targets))
+    refined_single = time_per_call(policy, pairs[:20])
+    t0 = time.perf_counter()
+    for _ in range(5):
+        policy(targets, winds)
+    refined_batched = (time.perf_counter() - t0) / (5 * len(targets))
 
     direct = jax.jit(aim.aim_directly)
     results = []
@@ -88,6 +134,8 @@ def aiming_speed(run_dir: str, n_direct: int) -> dict:
     return {
         "network_seconds_per_target_single_call": net_single,
         "network_seconds_per_target_batched_1000": net_batched,
+        "refined_seconds_per_target_single_call": refined_single,
+        "refined_seconds_per_target_batched_1000": refined_batched,
         "direct_seconds_per_target": direct_single,
         "direct_targets": n_direct,
         "direct_reachable_targets": int(reach.sum()),
@@ -108,8 +156,9 @@ def main() -> None:
     args = parser.parse_args()
 
     header = (
-        f"{'seed':>4} {'throws':>8} {'wall s':>7} {'compile s':>9} {'reachable':>9} "
-        f"{'mean m':>7} {'median m':>8} {'p95 m':>7} {'worst m':>8}"
+        f"{'seed':>4} {'throws':>8} {'process s':>9} {'train s':>7} {'reachable':>9} "
+        f"{'mean m':>8} {'median m':>8} {'p95 m':>7} {'worst m':>8} {'f64 mean':>8} "
+        f"{'net mean':>8}"
     )
     print(header)
     print("-" * len(header))
@@ -119,10 +168,11 @@ def main() -> None:
             r = run_train(seed, Path(tmp), args.extra)
             rows.append(r)
             print(
-                f"{seed:>4} {r['simulated_throws']:>8.0f} {r['train_seconds']:>7.1f} "
-                f"{r['compile_seconds']:>9.1f} {r['reachable']:>5}/{r['targets']:<4}"
-                f"{r['mean_miss_m']:>7.3f} {r['median_miss_m']:>8.3f} {r['p95_miss_m']:>7.3f} "
-                f"{r['worst_miss_m']:>8.3f}",
+                f"{seed:>4} {r['simulated_throws']:>8.0f} {r['process_seconds']:>9.1f} "
+                f"{r['train_seconds']:>7.1f} {r['reachable']:>5}/{r['targets']:<4}"
+                f"{r['mean_miss_m']:>8.5f} {r['median_miss_m']:>8.5f} {r['p95_miss_m']:>7.4f} "
+                f"{r['worst_miss_m']:>8.3f} {r['float64_judge']['mean_miss_m']:>8.5f} "
+                f"{r['network_alone']['mean_miss_m']:>8.3f}",
                 flush=True,
             )
         speed = aiming_speed(rows[0]["run_dir"], args.direct_targets)
@@ -130,6 +180,11 @@ def main() -> None:
     print(
         f"network, one NumPy call per target: {speed['network_seconds_per_target_single_call'] * 1e6:.1f} us"
         f"; batched (1000 per call): {speed['network_seconds_per_target_batched_1000'] * 1e6:.2f} us"
+    )
+    print(
+        f"controller (network + refinement, JAX): "
+        f"{speed['refined_seconds_per_target_single_call'] * 1e3:.1f} ms per single call; "
+        f"batched (1000 per call): {speed['refined_seconds_per_target_batched_1000'] * 1e6:.1f} us"
     )
     print(
         f"direct Gauss-Newton aiming (jitted, 1 target per call): "
@@ -147,13 +202,22 @@ def main() -> None:
         "seeds": len(rows),
         "median_mean_miss_m": statistics.median(r["mean_miss_m"] for r in rows),
         "worst_mean_miss_m": max(r["mean_miss_m"] for r in rows),
+        "median_network_alone_mean_miss_m": statistics.median(
+            r["network_alone"]["mean_miss_m"] for r in rows
+        ),
+        "worst_float64_mean_miss_m": max(r["float64_judge"]["mean_miss_m"] for r in rows),
+        "median_process_seconds": statistics.median(r["process_seconds"] for r in rows),
+        "max_process_seconds": max(r["process_seconds"] for r in rows),
         "median_train_seconds": statistics.median(r["train_seconds"] for r in rows),
         "max_train_seconds": max(r["train_seconds"] for r in rows),
     }
     print(
-        f"\nmean |miss| over seeds: median {summary['median_mean_miss_m']:.3f} m, worst "
-        f"{summary['worst_mean_miss_m']:.3f} m; training {summary['median_train_seconds']:.1f} s "
-        f"(max {summary['max_train_seconds']:.1f} s)"
+        f"\nmean |miss| over seeds: median {summary['median_mean_miss_m']:.5f} m, worst "
+        f"{summary['worst_mean_miss_m']:.5f} m (float64 judge: worst "
+        f"{summary['worst_float64_mean_miss_m']:.5f} m; the network alone: median "
+        f"{summary['median_network_alone_mean_miss_m']:.3f} m); the command "
+        f"{summary['median_process_seconds']:.1f} s (max {summary['max_process_seconds']:.1f} s), "
+        f"training {summary['median_train_seconds']:.1f} s (max {summary['max_train_seconds']:.1f} s)"
     )
     for r in rows:
         r.pop("run_dir")

@@ -13,7 +13,9 @@ from diffcontrol import policies
 from diffcontrol.builtin.trebuchet import system as tb
 from diffcontrol.builtin.trebuchet import task as aim
 from diffcontrol.builtin.trebuchet.judge import evaluate_aiming
+from diffcontrol.builtin.trebuchet.task import RefinedAimingPolicy, shoot_in_chunks
 from diffcontrol.cli import main
+from diffcontrol.errors import ModelFileError
 from diffcontrol.training import resolve_config, train
 
 shoot = jax.jit(tb.shoot)
@@ -124,11 +126,14 @@ def test_cli_train_writes_everything_and_load_aims(trebuchet_run):
     angles, weights = policy(np.array([30.0, 60.0, 90.0]), np.array([0.0, 2.0, -2.0]))
     assert angles.shape == weights.shape == (3,)
     assert (angles[1], weights[1]) == pytest.approx(policy(60.0, 2.0))
-    # The NumPy policy is the JAX controller.
+    # The network (NumPy) is the JAX controller; the policy refines its aim through the
+    # simulator (two Gauss-Newton steps), which lands the throw closer than the network's aim
+    assert isinstance(policy, RefinedAimingPolicy) and policy.iterations == 2
+    network = policy.network_action(np.array([80.0, -3.0]))
     controller = policies.controller_from_dict(policies.read_model(trebuchet_run))
-    np.testing.assert_allclose(
-        np.asarray(controller(np.array([80.0, -3.0]))), [angle, weight], rtol=1e-5
-    )
+    np.testing.assert_allclose(np.asarray(controller(np.array([80.0, -3.0]))), network, rtol=1e-5)
+    miss = lambda aim: abs(float(shoot_in_chunks(-3.0, *aim)) - 80.0)  # noqa: E731
+    assert miss((angle, weight)) < min(0.05, miss(network)), (miss((angle, weight)), network)
 
 
 @pytest.mark.slow
@@ -190,3 +195,21 @@ def test_cli_aim_bad_targets(trebuchet_run, capsys, argv, needle):
 def test_cli_aim_needs_an_aiming_run(cartpole_run, capsys):
     assert main(["aim", str(cartpole_run), "--target", "50"]) == 2
     assert "needs an aiming task" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    "refine",
+    [{"method": "newton", "iterations": 2}, {"method": "gauss-newton", "iterations": 99}, 2],
+)
+def test_a_bad_refinement_in_the_file_is_refused_by_name(trebuchet_run, tmp_path, refine):
+    doc = json.loads((trebuchet_run / "model.json").read_text())
+    (tmp_path / "model.json").write_text(json.dumps({**doc, "refine": refine}))
+    with pytest.raises(ModelFileError, match="refine .* is not Gauss-Newton with 0-50 iterations"):
+        diffcontrol.load(tmp_path)
+
+
+def test_the_export_is_the_network_and_says_the_refinement_is_left_out(
+    trebuchet_run, tmp_path, capsys
+):
+    assert main(["export", str(trebuchet_run), "--out", str(tmp_path / "aim.onnx")]) == 0
+    assert "the network alone: its refinement through the simulator" in capsys.readouterr().out

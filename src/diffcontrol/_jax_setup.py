@@ -132,9 +132,9 @@ youngest objects every 10,000 net allocations instead of Python's 700 (3.11, 3.1
 thousands of objects, and at Python's thresholds the collector runs hundreds of times while
 a program is traced, the full collections among them walking everything JAX has made; here
 it runs a twentieth as often, and a full collection still comes every million or so net
-allocations, so a long command's cyclic garbage is freed as it runs (figures in
-docs/benchmarks.md, "Fewer garbage collections"). Not set by the library itself: a Python
-caller's collector is its own."""
+allocations, so a long command's cyclic garbage is freed as it runs (measured by
+``benchmarks/gc_tracing.py``: ``benchmarks/results/gc_tracing*.json``). Not set by the library
+itself: a Python caller's collector is its own."""
 
 
 FAST_COMPILE = {"xla_backend_optimization_level": 1, "xla_cpu_use_fusion_emitters": False}

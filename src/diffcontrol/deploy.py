@@ -12,7 +12,8 @@ right; an N-way choice: the argmax, the first on a tie). The graph computes in f
 ``load`` does, so that a discrete choice never flips on a near-tie, and casts at the end. A
 continuous-time task's controller takes the observation built from the state (the
 ``features`` of ``observation_space`` in the metadata: each a name of its ``state``,
-``cos(name)`` or ``sin(name)``).
+``cos(name)`` or ``sin(name)``). A controller that refines the network's action through its
+model at act time (``model.json``'s ``refine``: the trebuchet) is exported as its network alone.
 
 The model's metadata (``metadata_props``) says what it is: ``task``, ``observation_space`` and
 ``action_space`` (JSON), ``gym_id``, ``diffcontrol_version``, ``opset``. It is built with the ``onnx``

@@ -34,6 +34,12 @@ holds ``"state"`` (the state's names, e.g. ``["x", "x_dot", "theta", "theta_dot"
 ``"features"`` (how the observation is computed from it, each a state name, ``cos(name)`` or
 ``sin(name)``, e.g. ``["cos(theta)", "sin(theta)", "theta_dot"]``); see ``StatePolicy``.
 Readers that ignore the two keys still run the network on observations.
+
+A task may refine the network's action through its model at act time (the trebuchet:
+Gauss-Newton steps on the miss through its simulator); its ``model.json`` then also holds
+``"refine"`` (the task's ``act_refinement``, e.g. ``{"method": "gauss-newton",
+"iterations": 2}``), which the task's own policy runs with JAX. Readers that ignore the key run
+the network alone: the NumPy-only (and exported) form of the same controller.
 """
 
 from __future__ import annotations
@@ -96,7 +102,7 @@ def model_document(task: Any, controller: MLPController, config: Any, metrics: d
     metadata records the version, the seed, the training time and the settings."""
 
     source = getattr(task, "source", None)  # the import path of a user's task
-    return controller_to_dict(
+    doc = controller_to_dict(
         controller,
         task,
         {
@@ -108,6 +114,10 @@ def model_document(task: Any, controller: MLPController, config: Any, metrics: d
             **({"task_source": source} if isinstance(source, str) else {}),
         },
     )
+    refine = getattr(task, "act_refinement", None)  # the module docstring's "refine"
+    if refine:
+        doc["refine"] = dict(refine)
+    return doc
 
 
 def is_planner(doc: dict) -> bool:

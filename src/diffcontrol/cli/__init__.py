@@ -108,7 +108,7 @@ def run() -> int:
 
     After a JAX run the interpreter's shutdown spent most of its time in its last full
     collections, each walking every object that JAX, Equinox and the run had made (measured
-    in ``docs/benchmarks.md``, "A shorter exit"). Frozen (``gc.freeze``), they are skipped;
+    in ``benchmarks/results/startup-exit-*.json``). Frozen (``gc.freeze``), they are skipped;
     everything else a normal exit does still happens (threads joined, ``atexit`` functions,
     modules torn down, files flushed and closed, a failed write of the output reported). Only
     objects in reference cycles are no longer collected at the very end, which Python never

@@ -39,9 +39,12 @@ def cmd_export(args: argparse.Namespace) -> int:
     from ..policies import read_model
 
     path = export(args.run_dir, args.out, overwrite=args.force)
-    meta = metadata(read_model(args.run_dir))
+    doc = read_model(args.run_dir)
+    meta = metadata(doc)
+    # the file holds the network; a refinement through the task's model stays with JAX
+    left_out = {"refine_left_out": doc["refine"]} if "refine" in doc else {}
     if args.json:
-        print(json.dumps({"path": str(path), **meta}))
+        print(json.dumps({"path": str(path), **meta, **left_out}))
         return 0
     obs, act = json.loads(meta["observation_space"]), json.loads(meta["action_space"])
     if act["kind"] == "box":
@@ -53,4 +56,9 @@ def cmd_export(args: argparse.Namespace) -> int:
         f"wrote {path}: the {meta['task']} controller, observation float32 "
         f"[batch, {obs['shape'][0]}] -> {out} (ONNX opset {meta['opset']})"
     )
+    if left_out:
+        print(
+            "the network alone: its refinement through the simulator at act time "
+            f"({json.dumps(doc['refine'])}) runs with JAX in diffcontrol.load, not in the file"
+        )
     return 0

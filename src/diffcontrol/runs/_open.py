@@ -31,7 +31,10 @@ def load(run_dir: str | os.PathLike, task: AnyTask | str | None = None) -> Any:
     The policy is the task's (its ``load_policy`` hook): by default a ``NumpyPolicy``,
     ``policy(obs)`` -> a valid Gymnasium action, which drops into a plain
     ``gymnasium.make(...)`` loop; an ``AimingPolicy`` for the trebuchet
-    (``policy(target_m, wind_mps) -> (angle_deg, weight_lb)``); a ``StatePolicy`` for a
+    (``policy(target_m, wind_mps) -> (angle_deg, weight_lb)``; a run trained since the aim is
+    refined at act time loads as a ``RefinedAimingPolicy``, which runs that refinement through
+    the simulator with JAX, and whose ``network_action`` is the NumPy-only network); a
+    ``StatePolicy`` for a
     continuous-time task (``policy(state) -> action`` on the physical state). A planner
     (written by ``diffcontrol plan``) loads as an ``mpc.PlannerPolicy``, ``policy(obs)`` ->
     Gymnasium action like the others, but it imports JAX and runs one compiled solve per

@@ -48,15 +48,15 @@ class AimResult:
         if not s["reachable"]:
             return head + f"none of the {s['targets']} targets was reachable"
         return head + (
-            f"|miss| over {s['reachable']} reachable targets: mean {s['mean_miss_m']:.3f} m, "
-            f"median {s['median_miss_m']:.3f} m, 95th percentile {s['p95_miss_m']:.3f} m, "
-            f"worst {s['worst_miss_m']:.3f} m ({s['unreachable']} of {s['targets']} unreachable)"
+            f"|miss| over {s['reachable']} reachable targets: mean {s['mean_miss_m']:.3g} m, "
+            f"median {s['median_miss_m']:.3g} m, 95th percentile {s['p95_miss_m']:.3g} m, "
+            f"worst {s['worst_miss_m']:.3g} m ({s['unreachable']} of {s['targets']} unreachable)"
         )
 
     def headline(self) -> str:
         """A few words for the end of ``diffcontrol train``'s last line."""
         s = self.stats
-        return f"mean |miss| {s['mean_miss_m']:.3f} m" if s["reachable"] else "no reachable target"
+        return f"mean |miss| {s['mean_miss_m']:.3g} m" if s["reachable"] else "no reachable target"
 
 
 def evaluate_aiming(

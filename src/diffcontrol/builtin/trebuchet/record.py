@@ -20,7 +20,7 @@ import numpy as np
 from ...errors import ConfigError
 from ...identify.data import TrajectoryData
 from ...io import now_iso
-from ...policies import AimingPolicy, read_model
+from ...policies import read_model
 from ...tasks import check_params, make
 from . import system as tb
 from .task import TARGET_RANGE_M
@@ -186,7 +186,7 @@ def record_data(task: Any, episodes: int, *, env_id=None, env_kwargs=None, contr
     params = trebuchet_params(list((env_kwargs or {}).items()))
     policy = None
     if controller:
-        policy = AimingPolicy(read_model(controller))
+        policy = task.load_policy(read_model(controller))
         if policy.task != task.name:
             raise ConfigError(
                 f"--controller {controller} was trained for task {policy.task!r}, not "

@@ -22,10 +22,10 @@ import diffcontrol.builtin.trebuchet.system as tb
 
 from ..._jax_setup import FastJit
 from ...config import TrainConfig
-from ...errors import ConfigError
+from ...errors import ConfigError, ModelFileError
 from ...policies import AimingPolicy
 from ...systems import draws
-from ...tasks import StepLoss, Task
+from ...tasks import StepLoss, Task, task_params
 
 TARGET_RANGE_M = (20.0, 100.0)
 """Targets are drawn uniformly from this range (m), as in the original."""
@@ -45,6 +45,12 @@ THROW_COLUMNS = (
 )
 """The columns of recorded throws (``data_columns()``): the wind and distance of the task's
 state ``(target, wind, distance)``, and the aim."""
+REFINEMENT = {"method": "gauss-newton", "iterations": 2}
+"""How a trained network's aim is refined at act time (``model.json``'s ``refine``): two
+Gauss-Newton steps of ``aim_directly`` from the network's angle and weight, through the
+trebuchet the network was trained on. One step leaves a few millimetres on average, two a
+fraction of one (``docs/benchmarks.md``, "Trebuchet aiming")."""
+MAX_REFINE_ITERATIONS = 50
 
 
 class TrebuchetAiming(Task):
@@ -81,6 +87,7 @@ class TrebuchetAiming(Task):
     obs_offset = (60.0, 0.0)
     obs_scale = (1.0 / 40.0, 1.0 / WIND_STD_MPS)
     reward_threshold = None
+    act_refinement = REFINEMENT
     losses = ("squared_miss", "abs_miss", "huber_miss")
     state_labels = ("target (m)", "wind (m/s)", "distance (m)")
     action_labels = ("release angle (deg)", "counterweight (lb)")
@@ -163,8 +170,9 @@ class TrebuchetAiming(Task):
         return None  # one step is one throw
 
     def load_policy(self, doc: dict):
-        """An ``AimingPolicy``: ``policy(target_m, wind_mps) -> (angle_deg, weight_lb)``."""
-        return AimingPolicy(doc)
+        """An ``AimingPolicy``: ``policy(target_m, wind_mps) -> (angle_deg, weight_lb)``; a
+        ``RefinedAimingPolicy`` (JAX at act time) where ``model.json`` holds ``refine``."""
+        return RefinedAimingPolicy(doc) if "refine" in doc else AimingPolicy(doc)
 
     def throw(self, run, target_m: float, wind_mps: float):
         """Simulate the throw that the run's controller aims at one target."""
@@ -180,23 +188,33 @@ class TrebuchetAiming(Task):
         import time
 
         check_target(target_m, wind_mps)
+        obs = np.array([target_m, wind_mps], np.float64)
+        refined = getattr(run.policy, "network_action", None)
         t0 = time.perf_counter()
-        angle, weight = run.policy(target_m, wind_mps)
+        angle, weight = (float(x) for x in (refined or run.policy.action)(obs))
         net_seconds = time.perf_counter() - t0
         distance = float(shoot_in_chunks(wind_mps, angle, weight))
-        result = {
-            "target_m": target_m,
-            "wind_mps": wind_mps,
-            "angle_deg": angle,
-            "weight_lb": weight,
-            "distance_m": distance,
-            "miss_m": distance - target_m,
-            "network_seconds": net_seconds,
-        }
         lines = [
             f"network: angle {angle:.2f} deg, weight {weight:.1f} lb -> {distance:.2f} m "
             f"(miss {distance - target_m:+.3f} m; {net_seconds * 1e6:.0f} us)"
         ]
+        result = {"target_m": target_m, "wind_mps": wind_mps, "network_seconds": net_seconds}
+        if refined:  # the controller: the network's aim refined through the simulator
+            result["network"] = {"angle_deg": angle, "weight_lb": weight, "distance_m": distance}
+            run.policy.action(obs)  # compile first
+            t0 = time.perf_counter()
+            angle, weight = (float(x) for x in run.policy.action(obs))
+            seconds = time.perf_counter() - t0
+            distance = float(shoot_in_chunks(wind_mps, angle, weight))
+            result["refine_seconds"] = seconds
+            lines.append(
+                f"refined ({run.policy.iterations} Gauss-Newton steps through the simulator): "
+                f"angle {angle:.2f} deg, weight {weight:.1f} lb -> {distance:.2f} m "
+                f"(miss {distance - target_m:+.4f} m; {seconds * 1e3:.0f} ms)"
+            )
+        result.update(
+            angle_deg=angle, weight_lb=weight, distance_m=distance, miss_m=distance - target_m
+        )
         if direct:
             solve = jax.jit(aim_directly)
             jax.block_until_ready(solve(target_m, wind_mps))  # compile first
@@ -387,6 +405,82 @@ def aim_directly(
     shape = z0.shape[:-1]
     out, r = jax.vmap(one)(target[..., 0].reshape(-1), wind[..., 0].reshape(-1), z0.reshape(-1, 2))
     return out[:, 0].reshape(shape), out[:, 1].reshape(shape), r.reshape(shape)
+
+
+_REFINE = FastJit(aim_directly, "xla_cpu_use_fusion_emitters", static_argnames=("iterations",))
+"""``RefinedAimingPolicy``'s program, ``REFINE_CHUNK`` aims a call. It is compiled once a run,
+so with the older CPU emitters (about half the time to compile; the aims move by float32
+rounding)."""
+REFINE_CHUNK = 16
+"""Aims per call of ``_REFINE``: a single aim takes about 4 ms (with 1,000 a call, 100 ms), and
+1,000 aims 0.25 s (0.1 s)."""
+_AIM_PADDING = (60.0, 0.0, 45.0, 200.0)
+"""The target, wind, angle and weight of the padding aims."""
+
+
+class RefinedAimingPolicy(AimingPolicy):
+    """An ``AimingPolicy`` whose network's aim is refined through the simulator at act time:
+    ``model.json``'s ``refine`` (``REFINEMENT``) Gauss-Newton steps of ``aim_directly`` from the
+    network's angle and weight, on the trebuchet the network was trained on (the run's
+    ``params`` overrides included). It needs JAX; ``network_action`` is the network alone, the
+    controller's NumPy-only form (what NumPy readers of ``model.json`` and the ONNX export run).
+    """
+
+    needs_jax = True
+
+    def __init__(self, doc: dict):
+        super().__init__(doc)
+        refine = doc["refine"]
+        steps = refine.get("iterations") if isinstance(refine, dict) else None
+        if (
+            not isinstance(refine, dict)
+            or refine.get("method") != REFINEMENT["method"]
+            or not isinstance(steps, int)
+            or isinstance(steps, bool)
+            or not 0 <= steps <= MAX_REFINE_ITERATIONS
+        ):
+            raise ModelFileError(
+                f"refine {refine!r} is not Gauss-Newton with 0-{MAX_REFINE_ITERATIONS} "
+                "iterations; re-create the model with `diffcontrol train`"
+            )
+        self.iterations = steps
+        config = (doc.get("metadata") or {}).get("config") or {}
+        overrides = tuple((str(n), float(v)) for n, v in config.get("params") or ())
+        self.params = task_params(TrebuchetAiming(), overrides) if overrides else None
+
+    def network_action(self, obs: np.ndarray) -> np.ndarray:
+        """The network's aim alone (``AimingPolicy.action``)."""
+        return super().action(obs)
+
+    def action(self, obs: np.ndarray) -> np.ndarray:
+        """The network's aim at observations ``(target_m, wind_mps)`` refined by the
+        simulator, in calls of ``REFINE_CHUNK`` aims to one compiled program."""
+        obs = np.asarray(obs, np.float64)
+        first = super().action(obs)
+        if not self.iterations:
+            return first
+        columns = [
+            *np.moveaxis(obs.reshape(-1, 2), -1, 0),
+            *np.moveaxis(first.reshape(-1, 2), -1, 0),
+        ]
+        n = columns[0].size
+        size = -(-max(n, 1) // REFINE_CHUNK) * REFINE_CHUNK
+        flat = [
+            np.concatenate([c, np.full(size - n, pad)]).astype(np.float32)
+            for c, pad in zip(columns, _AIM_PADDING)
+        ]
+        parts = [
+            np.stack(
+                _REFINE(
+                    *(c[i : i + REFINE_CHUNK] for c in flat),
+                    iterations=self.iterations,
+                    params=self.params,
+                )[:2],
+                -1,
+            )
+            for i in range(0, size, REFINE_CHUNK)
+        ]
+        return np.concatenate(parts)[:n].astype(np.float64).reshape(first.shape)
 
 
 def miss_statistics(misses: np.ndarray, reachable: np.ndarray) -> dict[str, Any]:
