@@ -206,6 +206,10 @@ def test_a_bad_refinement_in_the_file_is_refused_by_name(trebuchet_run, tmp_path
     (tmp_path / "model.json").write_text(json.dumps({**doc, "refine": refine}))
     with pytest.raises(ModelFileError, match="refine .* is not Gauss-Newton with 0-50 iterations"):
         diffcontrol.load(tmp_path)
+    doc["metadata"]["config"]["params"] = [["drag_coefficient", "much"]]
+    (tmp_path / "model.json").write_text(json.dumps(doc))
+    with pytest.raises(ModelFileError, match="training params .* not \\(name, number\\) pairs"):
+        diffcontrol.load(tmp_path)
 
 
 def test_the_export_is_the_network_and_says_the_refinement_is_left_out(

@@ -189,9 +189,9 @@ class TrebuchetAiming(Task):
 
         check_target(target_m, wind_mps)
         obs = np.array([target_m, wind_mps], np.float64)
-        refined = getattr(run.policy, "network_action", None)
+        network = getattr(run.policy, "network_action", None)  # a refined policy's network
         t0 = time.perf_counter()
-        angle, weight = (float(x) for x in (refined or run.policy.action)(obs))
+        angle, weight = (float(x) for x in (network or run.policy.action)(obs))
         net_seconds = time.perf_counter() - t0
         distance = float(shoot_in_chunks(wind_mps, angle, weight))
         lines = [
@@ -199,7 +199,7 @@ class TrebuchetAiming(Task):
             f"(miss {distance - target_m:+.3f} m; {net_seconds * 1e6:.0f} us)"
         ]
         result = {"target_m": target_m, "wind_mps": wind_mps, "network_seconds": net_seconds}
-        if refined:  # the controller: the network's aim refined through the simulator
+        if network:  # the controller: the network's aim refined through the simulator
             result["network"] = {"angle_deg": angle, "weight_lb": weight, "distance_m": distance}
             run.policy.action(obs)  # compile first
             t0 = time.perf_counter()
@@ -444,8 +444,15 @@ class RefinedAimingPolicy(AimingPolicy):
                 "iterations; re-create the model with `diffcontrol train`"
             )
         self.iterations = steps
-        config = (doc.get("metadata") or {}).get("config") or {}
-        overrides = tuple((str(n), float(v)) for n, v in config.get("params") or ())
+        pairs = None
+        try:  # the params the network was trained with (its run's config)
+            pairs = ((doc.get("metadata") or {}).get("config") or {}).get("params") or ()
+            overrides = tuple((str(n), float(v)) for n, v in pairs)
+        except (AttributeError, TypeError, ValueError):
+            raise ModelFileError(
+                f"the training params {pairs!r} are not (name, number) pairs; re-create the "
+                "model with `diffcontrol train`"
+            ) from None
         self.params = task_params(TrebuchetAiming(), overrides) if overrides else None
 
     def network_action(self, obs: np.ndarray) -> np.ndarray:
