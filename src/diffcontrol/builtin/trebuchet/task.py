@@ -284,16 +284,25 @@ def shoot_in_chunks(wind_mps, angle_deg, weight_lb, params: tb.TrebuchetParams |
     inputs = np.broadcast_arrays(
         *(np.asarray(v, np.float64) for v in (wind_mps, angle_deg, weight_lb))
     )
-    shape, n = inputs[0].shape, inputs[0].size
-    size = -(-max(n, 1) // SHOOT_CHUNK) * SHOOT_CHUNK
+    flat = [v.reshape(-1) for v in inputs]
+    shoot = lambda *chunk: _SHOOT(*chunk, params)  # noqa: E731
+    return _in_chunks(shoot, flat, _PADDING, SHOOT_CHUNK, np.float64).reshape(inputs[0].shape)
+
+
+def _in_chunks(fn, columns, padding, chunk: int, dtype) -> np.ndarray:
+    """``fn`` over the rows of equal-length 1-D NumPy ``columns`` (cast to ``dtype``), in calls
+    of ``chunk`` rows, the last padded with the values ``padding``: one compiled program for
+    any number of rows. Returns ``fn``'s rows as float64, the padding's dropped."""
+    n = columns[0].size
+    size = -(-max(n, 1) // chunk) * chunk
     flat = [
-        np.concatenate([v.reshape(-1), np.full(size - n, pad)]) for v, pad in zip(inputs, _PADDING)
+        np.concatenate([c, np.full(size - n, pad)]).astype(dtype)
+        for c, pad in zip(columns, padding)
     ]
     parts = [
-        np.asarray(_SHOOT(*(v[i : i + SHOOT_CHUNK] for v in flat), params), np.float64)
-        for i in range(0, size, SHOOT_CHUNK)
+        np.asarray(fn(*(c[i : i + chunk] for c in flat)), np.float64) for i in range(0, size, chunk)
     ]
-    return np.concatenate(parts)[:n].reshape(shape)
+    return np.concatenate(parts)[:n]
 
 
 GOLDEN_ITERATIONS = 14
@@ -470,24 +479,14 @@ class RefinedAimingPolicy(AimingPolicy):
             *np.moveaxis(obs.reshape(-1, 2), -1, 0),
             *np.moveaxis(first.reshape(-1, 2), -1, 0),
         ]
-        n = columns[0].size
-        size = -(-max(n, 1) // REFINE_CHUNK) * REFINE_CHUNK
-        flat = [
-            np.concatenate([c, np.full(size - n, pad)]).astype(np.float32)
-            for c, pad in zip(columns, _AIM_PADDING)
-        ]
-        parts = [
-            np.stack(
-                _REFINE(
-                    *(c[i : i + REFINE_CHUNK] for c in flat),
-                    iterations=self.iterations,
-                    params=self.params,
-                )[:2],
-                -1,
-            )
-            for i in range(0, size, REFINE_CHUNK)
-        ]
-        return np.concatenate(parts)[:n].astype(np.float64).reshape(first.shape)
+
+        def refine(*chunk):
+            aims = _REFINE(*chunk, iterations=self.iterations, params=self.params)
+            return np.stack(aims[:2], -1)
+
+        return _in_chunks(refine, columns, _AIM_PADDING, REFINE_CHUNK, np.float32).reshape(
+            first.shape
+        )
 
 
 def miss_statistics(misses: np.ndarray, reachable: np.ndarray) -> dict[str, Any]:
