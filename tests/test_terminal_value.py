@@ -72,7 +72,7 @@ def test_a_value_grid_the_task_cannot_have_is_refused_in_one_line(task, grid, ne
         train(task, task.default_config().replace(updates=1, eval_every=1, value_grid=grid))
     assert needle in str(exc.value) and "\n" not in str(exc.value)
     if grid > 2 and grid < 1002:
-        assert "leave out --value-grid" in str(exc.value)
+        assert "--value-grid 0" in str(exc.value)
 
 
 def test_tables_too_large_to_solve_or_hold_are_refused():
@@ -112,7 +112,7 @@ def test_a_sweep_sets_value_time_against_the_recipes_grid(capsys, tmp_path):
 
 def test_value_time_needs_a_grid():
     with pytest.raises(dc.ConfigError, match="value_time needs a value_grid"):
-        PENDULUM.default_config().replace(value_time=True)
+        PENDULUM.default_config().replace(value_grid=0, value_time=True)
 
 
 @pytest.mark.slow
@@ -163,7 +163,7 @@ def test_too_many_grid_points_over_more_axes_are_refused_before_anything_is_solv
 
 def test_a_run_stored_before_the_setting_existed_is_still_the_same_run(tmp_path):
 
-    config = PENDULUM.default_config().to_json()
+    config = PENDULUM.default_config().replace(value_grid=0).to_json()
     old = {"task": "pendulum", "config": {k: v for k, v in config.items() if k != "value_grid"}}
     _run_dir.check_same_run(tmp_path, old, {"task": "pendulum", "config": config})  # no error
     changed = {"task": "pendulum", "config": {**config, "value_grid": 11}}
@@ -219,14 +219,14 @@ def test_the_command_line_refuses_it_before_writing_anything(capsys, tmp_path):
 
 @pytest.mark.slow
 def test_short_windows_learn_the_swing_up_only_with_the_value():
-    """10-step windows alone are too myopic for the swing-up (the default's 20 were chosen for
-    that); with the grid's value at their end the same budget swings up and holds."""
+    """10-step windows alone are too myopic for the swing-up (the windows recipe's 20 were
+    chosen for that); with the grid's value at their end the same budget swings up and holds."""
     cfg = PENDULUM.default_config().replace(
         updates=1500, batch=16, window=10, learning_rate=5e-3, eval_every=500, eval_episodes=64,
         target_return=NAN, keep_best=False,
     )  # fmt: skip
     with_value = train(PENDULUM, cfg.replace(value_grid=51)).curve[-1]["eval_return"]
-    plain = train(PENDULUM, cfg).curve[-1]["eval_return"]
+    plain = train(PENDULUM, cfg.replace(value_grid=0)).curve[-1]["eval_return"]
     assert with_value > -300 and plain < -500, (with_value, plain)
 
 
@@ -252,3 +252,37 @@ def _weights(controller):
     import equinox as eqx
 
     return [np.asarray(x) for x in jax.tree.leaves(eqx.filter(controller, eqx.is_inexact_array))]
+
+
+def test_the_value_is_solved_once_per_task_grid_and_physics(monkeypatch):
+    """Training the same task on the same physics again reuses the solved value; other
+    physics, another grid or ``clear_compiled`` solve anew."""
+    from diffcontrol.training import clear_compiled, resolve_config
+
+    clear_compiled()
+    solved = []
+    real = optimal.solve
+    monkeypatch.setattr(optimal, "solve", lambda *a, **k: solved.append(1) or real(*a, **k))
+    cfg = resolve_config(PENDULUM, **TINY, updates=2, eval_every=1, value_grid=11)
+    runs = [
+        cfg,
+        cfg.replace(updates=3),  # another trainer, the same value
+        cfg.replace(params=(("g", 9.0),)),
+        cfg.replace(value_grid=13),
+        cfg.replace(updates=4),  # the first value again
+    ]
+    counts = []
+    for c in runs:
+        train(PENDULUM, c)
+        counts.append(len(solved))
+    assert counts == [1, 1, 2, 3, 3]
+    clear_compiled()
+    train(PENDULUM, cfg.replace(updates=5))
+    assert len(solved) == 4
+
+
+def test_a_step_loss_of_ones_own_is_named_as_such_when_the_default_value_refuses_it():
+    cfg = PENDULUM.default_config().replace(**TINY, updates=1, eval_every=1)
+    with pytest.raises(dc.ConfigError) as exc:
+        train(PENDULUM, cfg, step_loss=lambda params, s, a, s2, reward: reward**2)
+    assert "the step_loss given is not" in str(exc.value) and "--value-grid 0" in str(exc.value)

@@ -132,7 +132,8 @@ def test_chunks_are_compiled_once():
 def test_divergence_is_reported_not_hidden():
     """A non-finite loss stops the run with a message naming the fix."""
     task = diffcontrol.make("pendulum")
-    cfg = resolve_config(task, updates=4, batch=2, window=3, eval_every=2, eval_episodes=2)
+    cfg = resolve_config(task, "windows", updates=4, batch=2, window=3, eval_every=2)
+    cfg = cfg.replace(eval_episodes=2)
 
     def nan_loss(params, state, action, next_state, reward):
         return jnp.sqrt(-1.0 - reward**2)  # nan

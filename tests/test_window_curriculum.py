@@ -8,10 +8,11 @@ import numpy as np
 import pytest
 
 import diffcontrol as dc
-from diffcontrol.training import make_trainer, train
+from diffcontrol.training import make_trainer, resolve_config, train
 from diffcontrol.training._driver import _start
 
 PENDULUM = dc.make("pendulum")
+WINDOWS = resolve_config(PENDULUM, "windows")  # the curriculum's base (long-windows), no value
 # 6 updates, the last half (from update 3, inside the second 2-update chunk) with 5-step windows
 TINY = dict(updates=6, eval_every=2, batch=2, window=2, eval_episodes=2, hidden=(8,))
 CURRICULUM = dict(final_window=5, final_window_fraction=0.5, target_return=float("nan"))
@@ -22,7 +23,7 @@ def _weights(controller):
 
 
 def test_the_stages_and_the_steps_they_simulate():
-    cfg = PENDULUM.default_config().replace(**TINY, **CURRICULUM)
+    cfg = WINDOWS.replace(**TINY, **CURRICULUM)
     assert cfg.final_window_start == 3
     assert cfg.simulated_steps(2) == 2 * 2 * 2
     assert cfg.simulated_steps(6) == 2 * (3 * 2 + 3 * 5)
@@ -41,7 +42,7 @@ def test_the_stages_and_the_steps_they_simulate():
 @pytest.mark.parametrize("fraction", [0.0, 1.5, float("nan")])
 def test_a_bad_fraction_is_refused(fraction):
     with pytest.raises(dc.ConfigError, match="final_window_fraction"):
-        PENDULUM.default_config().replace(final_window_fraction=fraction)
+        WINDOWS.replace(final_window_fraction=fraction)
 
 
 @pytest.mark.slow
@@ -50,7 +51,7 @@ def test_a_run_switches_to_the_final_window_and_resumes_across_the_switch(tmp_pa
     weights as those updates taken by hand, the switch an evaluation point of its own (a
     short chunk), the steps counted per stage; a run interrupted before the switch resumes
     through it to the same weights."""
-    cfg = PENDULUM.default_config().replace(**TINY, **CURRICULUM)
+    cfg = WINDOWS.replace(**TINY, **CURRICULUM)
     result = train(PENDULUM, cfg)
     assert [p["update"] for p in result.curve] == [0, 2, 3, 5, 6]
     assert [p["simulated_steps"] for p in result.curve] == [0, 8, 12, 32, 42]
@@ -88,7 +89,7 @@ def test_a_run_switches_to_the_final_window_and_resumes_across_the_switch(tmp_pa
 def test_a_sweep_member_is_the_run_train_would_make():
     from diffcontrol.training import grid, sweep
 
-    cfg = PENDULUM.default_config().replace(**TINY, **CURRICULUM)
+    cfg = WINDOWS.replace(**TINY, **CURRICULUM)
     configs = grid(cfg, [0, 1])
     result = sweep(PENDULUM, configs)
     for config, member in zip(configs, result.members, strict=True):

@@ -51,7 +51,7 @@ BUILTIN: tuple[Builtin, ...] = (
         "diffcontrol.tasks.pendulum:Pendulum",
         "Pendulum-v1 swing-up by BPTT through the exact Gymnasium dynamics (torque |u| <= 2)",
         ("cost", "squared_cost"),
-        ("original", "long-windows", "grid-value"),
+        ("original", "windows", "long-windows", "grid-value"),
         "Pendulum", "TaskEnv", 200, -200.0,
         "diffcontrol.builtin.zoo",
     ),

@@ -101,6 +101,15 @@ def model_task(task: Any, model: HybridModel | NeuralModel) -> Any:
         def state_grid(self, params):  # the physical part's (a planner's terminal value)
             return cls.state_grid(self, params.params)
 
+        def default_config(self):
+            # A grid value solved through the network misleads the training through it (far
+            # worse than none: docs/benchmarks.md), so the task's recipe without one.
+            config = cls.default_config(self)
+            if getattr(config, "value_grid", 0):
+                recipe = getattr(task, "model_recipe", None)
+                config = config.replace(**{"value_grid": 0, **(self.recipes()[recipe] if recipe else {})})
+            return config
+
     _ModelTask.__name__ = _ModelTask.__qualname__ = f"{type(model).__name__}{cls.__name__}"
     return _ModelTask()
 

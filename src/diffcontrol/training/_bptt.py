@@ -450,7 +450,7 @@ def check_value_grid(task: Any, config: TrainConfig, params: PyTree = None) -> N
     except ConfigError as e:
         raise ConfigError(
             f"value_grid={points} needs the task's grid optimum, but {e}; train without it "
-            "(value_grid=0: leave out --value-grid)"
+            "(value_grid=0, --value-grid 0)"
         ) from None
     total, most = math.prod(sizes), MAX_VALUE_GRID**2
     if total > most:
@@ -492,16 +492,39 @@ def terminal_value(
     check_value_grid(task, config, params)
     if step_loss is not None:
         check_reward_loss(task, config, params, step_loss)
+    horizon = config.horizon or task.episode_length
+    key = (id(task), config.value_grid, horizon, _physics_key(params))
+    if not config.value_time and key in SOLVED:
+        return SOLVED[key][1]
     if progress:
         progress(
             f"solving the windows' terminal value: the grid optimum of {config.value_grid} "
             "points per state axis"
         )
-    horizon = config.horizon or task.episode_length
     table = optimal.solve(task, config.value_grid, params=params, horizon=horizon)
-    if not config.value_time:
-        table = eqx.tree_at(lambda t: t.values, table, table.values[:1])
-    return Constant(table)
+    if config.value_time:
+        return Constant(table)
+    value = Constant(eqx.tree_at(lambda t: t.values, table, table.values[:1]))
+    while len(SOLVED) >= SOLVED_KEPT:
+        SOLVED.pop(next(iter(SOLVED)))
+    SOLVED[key] = (task, value)  # the task held, so that its id is not another's
+    return value
+
+
+SOLVED: dict[tuple, tuple[Any, Constant]] = {}
+"""The terminal values ``V_0`` solved in this process, by task, grid, horizon and physics:
+training the same task on the same physics again (a sweep's members, ``train`` called in a
+loop) does not solve it again. ``training.clear_compiled()`` lets them go."""
+SOLVED_KEPT = 4
+"""The most terminal values ``SOLVED`` keeps (the oldest goes first): Pendulum's 201 x 201 is
+160 kB."""
+
+
+def _physics_key(params: PyTree) -> tuple:
+    """``params`` as a hashable value: its structure and every leaf's dtype, shape and bytes."""
+    leaves, structure = jax.tree_util.tree_flatten(params)
+    arrays = [np.asarray(leaf) for leaf in leaves]
+    return str(structure), tuple((a.dtype.str, a.shape, a.tobytes()) for a in arrays)
 
 
 def check_reward_loss(task: Task, config: TrainConfig, params: PyTree, step_loss: StepLoss) -> None:
@@ -530,10 +553,11 @@ def check_reward_loss(task: Task, config: TrainConfig, params: PyTree, step_loss
     if not minus_reward(step_loss):
         fits = [n for n in getattr(task, "losses", ()) if minus_reward(task.step_loss(n))]
         fix = f"--loss {fits[0]}" if fits else "a loss that is minus the reward"
+        what = f"loss {config.loss!r}" if config.loss else "the step_loss given"
         raise ConfigError(
             f"value_grid={config.value_grid} adds the best return to come (in reward units) to "
-            f"each window, which needs a loss that is minus the reward; loss {config.loss!r} is "
-            f"not: choose {fix}, or leave out --value-grid"
+            f"each window, which needs a loss that is minus the reward; {what} is not: choose "
+            f"{fix}, or --value-grid 0"
         )
 
 

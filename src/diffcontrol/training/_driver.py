@@ -28,7 +28,7 @@ from ..checks import validate_task
 from ..controllers import MLPController
 from ..errors import ConfigError, ModelFileError, TrainingDiverged
 from ..tasks import AnyTask, ContinuousTask, StepLoss, TrajectoryLoss, as_task, task_params
-from ._bptt import make_trainer
+from ._bptt import SOLVED, make_trainer
 from ._checkpoint import load_checkpoint, save_checkpoint
 from ._devices import batch_placement, check_devices, divisible, gathered, is_writer, placer
 from ._diagnostics import Diagnostics
@@ -692,10 +692,11 @@ def compiled_once(lowered: jax.stages.Lowered, *options: str) -> jax.stages.Comp
 
 
 def clear_compiled() -> None:
-    """Let go of the programs ``compiled_once`` keeps and of the kept trainers
-    (``jax.clear_caches`` does not)."""
+    """Let go of the programs ``compiled_once`` keeps, of the kept trainers and of the
+    solved terminal values (``jax.clear_caches`` does not)."""
     _EXECUTABLES.clear()
     _TRAINERS.clear()
+    SOLVED.clear()
 
 
 def _outputs(shardings: Any) -> dict[str, Any]:
