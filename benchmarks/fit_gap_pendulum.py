@@ -50,6 +50,7 @@ from _common import machine  # noqa: E402
 import diffcontrol  # noqa: E402
 from diffcontrol import identify, policies  # noqa: E402
 from diffcontrol.evaluation import evaluate  # noqa: E402
+from diffcontrol.training import resolve_config  # noqa: E402
 
 REAL = ("diffcontrol/PendulumFriction-v0", {"g": 12.0, "friction": 0.1})
 NOISE = np.array([0.01, 0.01, 0.05])
@@ -124,7 +125,8 @@ def run(seed: int, restarts: int, kinds: tuple, ensemble: tuple, data_seeds: str
     task = diffcontrol.make("pendulum")
     first = DATA_SEEDS[data_seeds] + 100 * seed
     fitted, errors, extra = fit_all(task, seed, kinds, *ensemble, first)
-    config = task.default_config().replace(seed=seed)
+    # the windows recipe (the defaults until 2026-11-28): the figures of docs/benchmarks.md
+    config = resolve_config(task, "windows", seed=seed)
     plans = {label: (t, config) for label, (t, _) in fitted.items()}
     plans["true"] = (task, config.replace(params=tuple(REAL[1].items())))
     if "params" in fitted:

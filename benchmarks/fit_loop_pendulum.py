@@ -66,7 +66,7 @@ def main() -> None:
     extra = ["--rounds", str(args.rounds), "--episodes", str(args.episodes)]
     extra += ["--fit-steps", str(args.fit_steps)] if args.fit_steps else []
     extra += ["--members", str(args.members)] if args.members > 1 else []
-    extra += ["--controller", "plan"] if args.controller == "plan" else []
+    extra += ["--controller", args.controller]
     for flag in ("uncertainty_penalty", "explore_noise"):
         if getattr(args, flag) is not None:
             extra += ["--" + flag.replace("_", "-"), str(getattr(args, flag))]

@@ -57,6 +57,7 @@ import diffcontrol  # noqa: E402
 from diffcontrol import _gym, identify, mpc, policies  # noqa: E402
 from diffcontrol.evaluation import evaluate  # noqa: E402
 from diffcontrol.settings import PlanConfig  # noqa: E402
+from diffcontrol.training import resolve_config  # noqa: E402
 
 SEED_SETS = {"0-99": list(range(100)), "1000-1099": list(range(1000, 1100))}
 
@@ -131,7 +132,8 @@ def run_seed(task, seed: int, args, optima: dict, updates: int | None) -> dict:
         if args.no_mlp:
             continue
         t0 = time.perf_counter()
-        config = task.default_config().replace(seed=seed)
+        # the windows recipe (the defaults until 2026-11-28): the figures of docs/planning.md
+        config = resolve_config(task, "windows", seed=seed)
         config = config if updates is None else config.replace(updates=updates)
         trained = diffcontrol.train(model_task, config)
         policy = policies.NumpyPolicy(policies.controller_to_dict(trained.controller, task))

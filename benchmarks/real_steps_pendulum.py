@@ -11,6 +11,7 @@ past its own evaluation's 0-19 and judges on those).
 
     python benchmarks/real_steps_pendulum.py                    # data seeds 0-2, 50 episodes
     python benchmarks/real_steps_pendulum.py --seeds 1 --episodes 100
+    python benchmarks/real_steps_pendulum.py --controllers default  # no --controller at all
 
 Prints a table and writes benchmarks/results/real_steps_pendulum.json (machine, date, every
 figure).
@@ -46,14 +47,16 @@ def one(seed: int, controller: str, episodes: int, work: Path) -> dict:
     """The loop of one data seed with one controller, and its controller judged."""
     out = work / f"{controller}-{seed}"
     argv = ["loop", "pendulum", "--env", "Pendulum-v1", "--model", "neural", "--rounds", "1"]
-    argv += ["--episodes", "5", "--seed", str(seed), "--controller", controller, "--quiet"]
+    argv += ["--episodes", "5", "--seed", str(seed), "--quiet"]
+    argv += [] if controller == "default" else ["--controller", controller]
     env = dict(os.environ, DIFFCONTROL_NO_COMPILE_CACHE="1")
     t0 = time.perf_counter()
     subprocess.run(
         _command(*argv, "--out", str(out)), check=True, env=env, stdout=subprocess.DEVNULL
     )
     seconds = time.perf_counter() - t0
-    loop = json.loads((out / "loop.json").read_text())["rounds"][0]
+    doc = json.loads((out / "loop.json").read_text())
+    loop = doc["rounds"][0]
     judge = ["evaluate", str(out / "round_1" / "run"), "--env", "Pendulum-v1"]
     judge += ["--episodes", str(episodes), "--seed", "1000", "--json"]
     done = subprocess.run(_command(*judge), check=True, capture_output=True, text=True, env=env)
@@ -61,6 +64,7 @@ def one(seed: int, controller: str, episodes: int, work: Path) -> dict:
     return {
         "seed": seed,
         "controller": controller,
+        "acting": doc["settings"].get("controller", "train"),
         "real_steps": loop["real_steps"],
         "loop_seconds": seconds,
         "loop_return_seeds_0_19": loop["real_return"],
@@ -77,14 +81,20 @@ def main() -> None:
     )
     parser.add_argument("--seeds", type=int, default=3, help="data seeds 0..N-1 (default 3)")
     parser.add_argument("--episodes", type=int, default=50, help="unseen evaluation episodes")
+    parser.add_argument(
+        "--controllers", default="train,plan",
+        help="the loops' --controller, comma-separated; 'default' passes none, leaving the "
+        "choice to the loop (default train,plan)",
+    )  # fmt: skip
     parser.add_argument("--out", type=Path, default=HERE / "results" / "real_steps_pendulum.json")
     args = parser.parse_args()
+    controllers = args.controllers.split(",")
     header = f"{'controller':>10} {'seed':>4} {'real steps':>10} {'loop s':>7} {'seeds 0-19':>10} {'unseen':>16}"
     print(header)
     print("-" * len(header))
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
-        for controller in ("train", "plan"):
+        for controller in controllers:
             for seed in range(args.seeds):
                 r = one(seed, controller, args.episodes, Path(tmp))
                 rows.append(r)
@@ -95,7 +105,7 @@ def main() -> None:
                     flush=True,
                 )
     summary = {}
-    for controller in ("train", "plan"):
+    for controller in controllers:
         means = [r["unseen_mean_return"] for r in rows if r["controller"] == controller]
         summary[controller] = {
             "worst_unseen_mean_return": min(means),

@@ -103,11 +103,14 @@ def population_scaling(sizes=(1, 8, 64, 512), devices: int = 1) -> list[dict]:
     import jax.numpy as jnp
 
     import diffcontrol as dc
+    from diffcontrol.training import resolve_config
     from diffcontrol.training._bptt import Trainer, make_optimizer
     from diffcontrol.training._sweep import _placement
 
     task = dc.make("pendulum")
-    cfg = task.default_config().replace(eval_every=5)  # a short chunk: 512 members are slow
+    # the windows recipe (no terminal value: the trainer is built by hand); a short chunk,
+    # since 512 members are slow
+    cfg = resolve_config(task, "windows", eval_every=5)
     params = jax.tree.map(jnp.asarray, task.default_params())
     trainer = Trainer(task=task, config=cfg, step_loss=task.step_loss(task.losses[0]),
                       optimizer=make_optimizer(cfg), horizon=cfg.horizon)  # fmt: skip

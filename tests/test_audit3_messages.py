@@ -83,6 +83,7 @@ def test_an_out_that_is_a_dangling_link_is_named(capsys, tmp_path, monkeypatch, 
     (tmp_path / "lnk").symlink_to(target)
     budget = {"train": TINY, "sweep": [*TINY[:6], "--seeds", "0-1"]}
     budget["loop"] = ["--rounds", "1", "--episodes", "1", "--updates", "20"]
+    budget["loop"] += ["--controller", "train"]
     one_line(
         capsys,
         [command, "pendulum", "--out", "lnk", *budget[command]],
@@ -143,6 +144,7 @@ def test_ctrl_c_in_a_loops_first_round_names_what_was_kept(capsys, tmp_path, mon
     monkeypatch.setattr(runs._loop, "fit_dir", _interrupt)  # round 1's fit
     argv = ["loop", "pendulum", "--out", out, "--rounds", "2", "--episodes", "1"]
     argv += ["--updates", "20", "--fit-steps", "5", "--eval-episodes", "1", "--quiet"]
+    argv += ["--controller", "train"]  # the MLP's training, not the default planner
     line = _interrupted(capsys, argv, f"kept in {out}")
     assert shlex.split(line.split("--resume: ")[1]) == ["diffcontrol", *map(str, argv), "--resume"]
     assert (out / "data.csv").is_file() and (out / "round_0" / "recorded.csv").is_file()
@@ -257,6 +259,7 @@ def test_a_loop_cut_short_before_its_first_checkpoint_resumes(capsys, tmp_path, 
     monkeypatch.setattr(runs._loop, "train", train_then_interrupt)
     argv = ["loop", "pendulum", "--out", out, "--rounds", "1", "--episodes", "1"]
     argv += ["--updates", "4", "--fit-steps", "2", "--eval-episodes", "1", "--quiet"]
+    argv += ["--controller", "train"]  # the MLP's training, not the default planner
     line = _interrupted(capsys, argv, f"kept in {out}")
     assert (out / "round_1" / "run" / "run.json").exists()
     monkeypatch.undo()

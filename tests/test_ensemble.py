@@ -213,6 +213,7 @@ def test_the_loop_fits_ensembles_and_books_their_spread_on_the_new_data(tmp_path
     argv += ["--env-arg", "friction=0.1", "--rounds", "2", "--episodes", "1", "--updates", "4"]
     argv += ["--eval-episodes", "2", "--fit-steps", "30", "--out", str(out), "--quiet"]
     argv += ["--model", "hybrid"]
+    argv += ["--controller", "train"]  # the MLP's training, not the default planner
     assert _exit_code([*argv, "--members", "2", "--model", "params"]) == 2
     assert "grey box has no network" in capsys.readouterr().err
     assert not (out / "loop.json").exists()

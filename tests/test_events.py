@@ -84,6 +84,7 @@ def test_the_loop_logs_each_round(tmp_path):
     logs, out = tmp_path / "logs", tmp_path / "loop"
     argv = ["loop", "pendulum", "--rounds", "2", "--episodes", "1", "--updates", "3"]
     argv += ["--eval-episodes", "2", "--out", str(out), "--quiet", "--log-dir", str(logs)]
+    argv += ["--controller", "train"]  # the MLP's training, not the default planner
     assert main(argv) == 0
     rounds = json.loads((out / "loop.json").read_text())["rounds"]
     scalars = read_scalars(logs)

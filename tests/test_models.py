@@ -227,6 +227,7 @@ def test_loop_records_fits_trains_and_resumes(tmp_path, capsys):
     argv = ["loop", "pendulum", "--env", "diffcontrol/PendulumFriction-v0", "--env-arg", "g=12"]
     argv += ["--env-arg", "friction=0.1", "--rounds", "2", "--episodes", "1", "--updates", "4"]
     argv += ["--eval-episodes", "2", "--out", str(out), "--quiet"]
+    argv += ["--controller", "train"]  # the MLP's training, not the default planner
     assert main(argv) == 0
     doc = json.loads((out / "loop.json").read_text())
     assert [r["round"] for r in doc["rounds"]] == [1, 2]

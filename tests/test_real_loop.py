@@ -120,6 +120,7 @@ def test_loop_counts_real_steps_starts_wrong_and_resumes(tmp_path, capsys):
     argv = ["loop", "pendulum", "--rounds", "2", "--episodes", "1", "--updates", "2"]
     argv += ["--eval-episodes", "2", "--eval-seed", "1000", "--start", "g=8"]
     argv += ["--explore-noise", "0.1", "--out", str(out), "--quiet"]
+    argv += ["--controller", "train"]  # the MLP's training, not the default planner
     assert main(argv) == 0
     doc = json.loads((out / "loop.json").read_text())
     assert doc["settings"]["start"] == {"g": 8.0} and "g = 8 (nominal 10)" in doc["start"]["note"]
@@ -334,3 +335,56 @@ def test_evaluation_refuses_a_system_whose_rewards_are_not_numbers(pendulum_run)
     with pytest.raises(ConfigError, match="rewards are not finite numbers") as e:
         diffcontrol.evaluate(policy, task, episodes=2, real=real)
     assert "\n" not in str(e.value) and "episode 0 (reset seed 0)" in str(e.value)
+
+
+def test_the_pendulums_loop_plans_by_default_and_refuses_a_training_setting(tmp_path, capsys):
+    """Where the task's planner does best (the Pendulum) it acts in the loop unless the MLP is
+    asked for; ``--updates`` then does not apply, and says so. CartPole and the mountain car
+    keep the trained MLP."""
+    from diffcontrol.mpc._config import plans_best
+
+    assert [plans_best(diffcontrol.make(n)) for n in ("pendulum", "cartpole")] == [True, False]
+    assert not plans_best(diffcontrol.make("mountain-car-continuous"))
+    out = tmp_path / "loop"
+    argv = ["loop", "pendulum", "--rounds", "1", "--episodes", "1", "--eval-episodes", "2"]
+    argv += ["--fit-steps", "5", "--out", str(out), "--quiet"]
+    assert main([*argv, "--updates", "3"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.endswith("(--controller plan, the default for pendulum): add --controller train, "
+                        "or drop --updates") and "\n" not in err, err  # fmt: skip
+    assert not out.exists()
+    assert main(argv) == 0
+    assert json.loads((out / "loop.json").read_text())["settings"]["controller"] == "plan"
+    doc = json.loads((out / "round_1" / "run" / "model.json").read_text())
+    assert doc["controller"]["type"] == "planner"
+
+
+def test_a_loop_resumed_without_a_controller_keeps_its_own(tmp_path):
+    """A loop that does not name its controller was trained (the default before the planner);
+    resumed without --controller it stays so, and a new one plans (the Pendulum)."""
+    from diffcontrol.runs._loop import _controller
+    from diffcontrol.settings import LoopConfig
+
+    task, unset = diffcontrol.make("pendulum"), LoopConfig()
+    (tmp_path / "loop.json").write_text(json.dumps({"settings": {"task": "pendulum"}}))
+    assert _controller(task, unset, tmp_path, resume=True) == "train"
+    assert _controller(task, unset, tmp_path, resume=False) == "plan"
+    (tmp_path / "loop.json").write_text(json.dumps({"settings": {"controller": "plan"}}))
+    assert _controller(task, unset, tmp_path, resume=True) == "plan"
+    assert _controller(task, LoopConfig(controller="train"), tmp_path, resume=True) == "train"
+    (tmp_path / "loop.json").write_text("[1]")  # not a loop's: _start refuses it later
+    assert _controller(task, unset, tmp_path, resume=True) == "train"
+
+
+def test_train_names_the_planner_where_it_does_better(tmp_path):
+    """``train`` ends with the planning command where the task's planner beats its MLP (the
+    Pendulum), on the physics the MLP was trained for; nothing elsewhere."""
+    from diffcontrol.runs._train import _advice
+
+    out = tmp_path / "my run"
+    line = _advice(diffcontrol.make("pendulum"), out, ())
+    plan = f"diffcontrol plan pendulum --horizon 10 --value-grid 201 --out '{out}-plan'"
+    assert line.startswith("a planner does better on pendulum") and line.endswith(plan), line
+    assert _advice(diffcontrol.make("pendulum"), out, (("g", 9.0),)) == ""
+    for other in ("cartpole", "mountain-car-continuous", "cartpole-swingup"):
+        assert _advice(diffcontrol.make(other), out, ()) == "", other

@@ -154,10 +154,11 @@ class LoopConfig(_Config):
         "F",
         form="fraction",
     )
-    controller: str = _opt(
+    controller: str | None = _opt(
         "what acts each round: 'train' an MLP through the fitted model, or 'plan' through it "
-        "(MPC with the task's loop planner; needs JAX to act; docs/planning.md)",
-        "train",
+        "(MPC with the task's loop planner; needs JAX to act; docs/planning.md); default: "
+        "plan where the task's planner does best (the Pendulum), else train",
+        None,
         choices=CONTROLLERS,
     )
 

@@ -71,13 +71,13 @@ def add_parsers(sub: Any) -> None:
     )
     p = sub.add_parser(
         "loop",
-        help="alternate record -> fit -> train on a real system for a few rounds",
+        help="alternate record -> fit -> train (or plan) on a real system for a few rounds",
         description=(
             "Learn a controller for a system you can only run, in R rounds of: record N "
             "episodes of the real environment ENV_ID (random actions at first, then the last "
-            "controller's), fit a model of TASK's system to all data so far, train through "
-            "it, evaluate on the real environment. Writes DIR/data.csv, DIR/round_K/{fit,run}/, "
-            "DIR/loop.json and DIR/loop.png."
+            "controller's), fit a model of TASK's system to all data so far, train or plan "
+            "through it (--controller), evaluate on the real environment. Writes DIR/data.csv, "
+            "DIR/round_K/{fit,run}/, DIR/loop.json and DIR/loop.png."
         ),
     )
     add(p,

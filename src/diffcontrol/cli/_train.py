@@ -104,6 +104,8 @@ def cmd_train(args: argparse.Namespace) -> int:
         print(f"wrote {', '.join(str(Path(args.out) / f) for f in outcome.files)}")
     if outcome.timings:
         print(outcome.timings)
+    if outcome.advice:
+        print(outcome.advice)
     return 0
 
 

@@ -28,7 +28,7 @@ from .. import _gym, policies
 from ..errors import ConfigError
 from ..evaluation import evaluate
 from ..mpc import PlannerPolicy, distil, planner_from_config
-from ..mpc._config import loop_planner
+from ..mpc._config import plans_best
 from ..settings import PlanConfig
 from ..tasks import Task
 from .baselines import rl_setup
@@ -42,12 +42,8 @@ DISTIL: dict = {}
 
 
 def planning_methods(task: Task) -> list[str]:
-    """``PLANNING_METHODS`` where ``task`` can take them: action bounds, a state grid, and a
-    loop planner with a grid value (the task's choice: ``loop_planner``; the mountain
-    car, with a grid, declines it)."""
-    bounded = task.action_low is not None and task.action_high is not None
-    grid = task.state_grid(task.default_params()) and loop_planner(task).value_grid
-    return list(PLANNING_METHODS) if bounded and grid else []
+    """``PLANNING_METHODS`` where the task's planner does best (``mpc._config.plans_best``)."""
+    return list(PLANNING_METHODS) if plans_best(task) else []
 
 
 def run_planning(

@@ -196,7 +196,7 @@ def run_real_comparison(
                     eval_seed=eval_seed,
                     start=start if KINDS[model].physics else {},
                     explore_noise=explore_noise,
-                    updates=updates,
+                    updates=None if controller == "plan" else updates,  # a planner: none
                     fit_steps=fit_steps,
                     members=members if KINDS[model].network else 1,
                     controller=controller,

@@ -107,7 +107,8 @@ def model_task(task: Any, model: HybridModel | NeuralModel) -> Any:
             config = cls.default_config(self)
             if getattr(config, "value_grid", 0):
                 recipe = getattr(task, "model_recipe", None)
-                config = config.replace(**{"value_grid": 0, **(self.recipes()[recipe] if recipe else {})})
+                without = self.recipes()[recipe] if recipe else {}
+                config = config.replace(**{"value_grid": 0, **without})
             return config
 
     _ModelTask.__name__ = _ModelTask.__qualname__ = f"{type(model).__name__}{cls.__name__}"

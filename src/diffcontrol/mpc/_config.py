@@ -48,6 +48,16 @@ def loop_planner(task: Any) -> PlanConfig:
     return default_plan_config(task)
 
 
+def plans_best(task: Any) -> bool:
+    """Whether the task's best controller through a model is its planner: action bounds, a
+    state grid and a loop planner with a grid value (the Pendulum; the mountain car, with a
+    grid, declines one). ``loop`` acts with it by default, and ``compare`` adds its planning
+    rows."""
+    bounded = task.action_low is not None and task.action_high is not None
+    grid = task.state_grid(task.default_params())
+    return bool(bounded and grid and loop_planner(task).value_grid)
+
+
 def for_task(config: PlanConfig, task: Any) -> PlanConfig:
     """``config`` with what it leaves open (``dt``, ``action_bound``: ``None``) taken from
     the task's own planning defaults (``default_plan_config``): what ``diffcontrol plan``

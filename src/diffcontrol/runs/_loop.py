@@ -37,7 +37,7 @@ from ..identify.data import concat, read_trajectories, write_trajectories
 from ..identify.kinds import kind
 from ..identify.recording import check_spaces, make_env, record, record_task
 from ..io import now_iso, read_json, write_figure, write_json
-from ..mpc._config import loop_planner
+from ..mpc._config import loop_planner, plans_best
 from ..policies import read_model
 from ..settings import FitConfig, LoopConfig
 from ..tasks import Task
@@ -86,7 +86,8 @@ def loop(
             budget is spent, the last one cut short (``record``'s ``total_steps``);
             ``controller="plan"`` acts with a planner through each round's fitted model
             (``runs.plan_run`` with ``loop_planner``) instead of training an MLP
-            through it.
+            through it; by default where the task's planner does best (``plans_best``: the
+            Pendulum).
 
     Raises:
         ConfigError: a task that records no Gymnasium episodes, an environment whose spaces
@@ -146,6 +147,13 @@ def _loop(
             "observations: define its state_from_observation); e.g. pendulum"
         )
     c = config or LoopConfig()
+    controller = _controller(task, c, Path(out), resume)
+    if controller == "plan" and c.updates is not None:
+        which = "" if c.controller else f", the default for {task.name}"
+        raise ConfigError(
+            f"--updates sets the training of --controller train, and this loop plans "
+            f"(--controller plan{which}): add --controller train, or drop --updates"
+        )
     model, rounds, episodes, updates, seed = c.model, c.rounds, c.episodes, c.updates, c.seed
     steps = c.real_steps
     eval_episodes, eval_seed, explore_noise = c.eval_episodes, c.eval_seed, c.explore_noise
@@ -182,7 +190,7 @@ def _loop(
     settings.update({k: v for k, v in [("start", start), ("explore_noise", explore_noise),
                                        ("eval_seed", eval_seed), ("steps_per_round", steps),
                                        ("fit_steps", c.fit_steps),
-                                       ("controller", c.controller != "train" and c.controller)]
+                                       ("controller", controller != "train" and controller)]
                      if v})  # fmt: skip
     if c.members > 1:
         settings.update(ensemble)
@@ -267,7 +275,7 @@ def _loop(
         if not done:
             (here / "eval.json").unlink(missing_ok=True)  # it judged another controller
         own_eval = eval_episodes if not eval_seed else 0  # seeds 0...: save_run's own
-        if not done and c.controller == "plan":
+        if not done and controller == "plan":
             if (here / "run").exists():  # a planner cut short: nothing in it to continue
                 shutil.rmtree(here / "run")
             run, _ = plan_run(here / "run", task, loop_planner(task), model=here / "fit",
@@ -371,6 +379,20 @@ def _evaluate(
     doc = {**ev.to_json(), "seconds": time.perf_counter() - t0}
     write_json(path, doc)
     return doc
+
+
+def _controller(task: Any, c: LoopConfig, out: Path, resume: bool) -> str:
+    """What acts: ``c.controller`` where set; else, resuming a loop, the loop's own (one that
+    does not say trained: the default before ``plans_best``); else the planner where it does
+    best (``plans_best``: the Pendulum) and a trained MLP elsewhere."""
+    if c.controller:
+        return c.controller
+    path = out / LOOP_FILE
+    if resume and path.is_file():
+        doc = read_json(path, "loop file")  # _start refuses one that is not a loop's
+        settings = doc.get("settings") if isinstance(doc, dict) else None
+        return (settings.get("controller") if isinstance(settings, dict) else None) or "train"
+    return "plan" if plans_best(task) else "train"
 
 
 def _start(out: Path, settings: dict, resume: bool) -> dict:

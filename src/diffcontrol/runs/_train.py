@@ -22,6 +22,7 @@ from ..envs import make_env
 from ..errors import ConfigError, Interrupted, RunDirectoryError, TrainingDiverged
 from ..identify.fitted import checked_env_id, fitted_physics, fitted_task, read_fitted, real_system
 from ..identify.kinds import kind
+from ..mpc._config import loop_planner, plans_best
 from ..tasks import AnyTask, named_by_file, resolve
 from ..training import resolve_config, train
 from ..training._devices import is_writer, join_hosts
@@ -36,12 +37,14 @@ class RunInterrupted(Interrupted):
 class RunOutcome:
     """What ``train_run`` did: the run (``None`` if it was finished before), the files it
     wrote, the one-line summary of ``diffcontrol train`` and its last line, where the time
-    went (``metrics["timings"]``)."""
+    went (``metrics["timings"]``); ``advice``: the command of a better controller, where the
+    task's planner does better than its trained MLP (``mpc._config.plans_best``)."""
 
     run: Run | None
     files: list[str]
     summary: str
     timings: str = ""
+    advice: str = ""
 
 
 def train_run(
@@ -247,7 +250,21 @@ def train_run(
         f"{metrics['simulated_episodes']:.4g} simulated episodes ({metrics['simulated_steps']} "
         f"steps)" + (f"; {headline}" if headline else "") + (" on the real system" if real else "")
     )
-    return RunOutcome(run, files, summary, _timing.describe(run.metrics["timings"]))
+    timings = _timing.describe(run.metrics["timings"])
+    return RunOutcome(run, files, summary, timings, _advice(the_task, out, model or params))
+
+
+def _advice(task: AnyTask, out: Path, changed: Any) -> str:
+    """Where the task's planner does better than the MLP on its own physics (``plans_best``:
+    the Pendulum, docs/planning.md), the command that plans."""
+    if changed or not isinstance(task, tasks.Task) or not plans_best(task):
+        return ""
+    p = loop_planner(task)
+    plan = ["plan", task.name, "--horizon", str(p.horizon), "--value-grid", str(p.value_grid)]
+    return (
+        f"a planner does better on {task.name} than this MLP (docs/planning.md); it needs JAX "
+        f"to act: {shell_command(*plan, '--out', f'{out}-plan')}"
+    )
 
 
 def _builtin_names() -> set[str]:

@@ -151,8 +151,8 @@ class Pendulum(Task):
             # No terminal value: 20-step windows, shorter ones too myopic to learn the
             # swing-up, longer ones falling into the constant-torque local minimum; training
             # stops once an evaluation point reaches -145 (keep_best guards against a late
-            # drift into holding starts near the bottom at the side). About 2.4x faster than
-            # the defaults, and 9-11 below the grid optimum.
+            # drift into holding starts near the bottom at the side). Faster than the
+            # defaults, and further from the grid optimum (docs/benchmarks.md).
             "windows": dict(WINDOWS),
             # The window curriculum: 20-step windows alone level off below the optimum (they
             # cannot credit a push with a swing-up seconds later), so the last 2000 of 5000
