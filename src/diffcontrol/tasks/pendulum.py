@@ -44,6 +44,9 @@ class Pendulum(Task):
     fit_parameter_names = ("g", "friction")
     real_start = (("g", 8.0), ("friction", 0.1))  # Pendulum-v1: g = 10, no friction
     data_env_ids = ("diffcontrol/PendulumFriction-v0",)  # Pendulum-v1 with joint friction
+    model_recipe = "windows"
+    """The recipe of training through a fitted network model, whose grid value would be
+    solved through the network (``identify.model_task``)."""
 
     def data_columns(self):
         return ("obs.cos_theta [1]", "obs.sin_theta [1]", "obs.theta_dot [rad/s]"), (
@@ -97,10 +100,6 @@ class Pendulum(Task):
         if name == "squared_cost":
             return lambda params, state, action, next_state, reward: reward**2
         raise KeyError(name)
-
-    model_recipe = "windows"
-    """The recipe of training through a fitted network model, whose grid value would be
-    solved through the network (``identify.model_task``)."""
 
     def default_config(self) -> TrainConfig:
         # Truncated BPTT over 10-step windows, each ending on minus the value V_0 of the state
