@@ -14,6 +14,7 @@ from diffcontrol import identify
 from diffcontrol.cli import main
 from diffcontrol.errors import ConfigError, InsufficientDataError, ModelFileError
 from diffcontrol.identify.data import write_trajectories
+from diffcontrol.runs._loop import kept_round
 
 REAL = {"g": 12.0, "friction": 0.1}
 
@@ -235,6 +236,11 @@ def test_loop_records_fits_trains_and_resumes(tmp_path, capsys):
     for r in doc["rounds"]:  # the grey box finds the real g from one episode
         assert abs(r["fitted_parameters"]["g"] - 12.0) < 0.01
         assert np.isfinite(r["real_return"])
+    # each round kept by the rule (runs._loop.kept_round), the last kept one handed back
+    kept = [r["kept_round"] for r in doc["rounds"]]
+    assert kept == [1, kept_round(doc["rounds"][:1], doc["rounds"][1])]
+    assert doc["best_round"] == kept[1]
+    assert f"round_{kept[1]}/run/model.json" in capsys.readouterr().out
     sources = json.loads((out / "data.csv").read_text().splitlines()[0][2:])["metadata"]
     # the evaluation's reset seeds (0 and 1, the default) are not recorded from
     first = json.loads((out / "round_0" / "recorded.csv").read_text().splitlines()[0][2:])

@@ -388,3 +388,26 @@ def test_train_names_the_planner_where_it_does_better(tmp_path):
     assert _advice(diffcontrol.make("pendulum"), out, (("g", 9.0),)) == ""
     for other in ("cartpole", "mountain-car-continuous", "cartpole-swingup"):
         assert _advice(diffcontrol.make(other), out, ()) == "", other
+
+
+def test_a_round_worse_than_the_kept_one_by_more_than_a_standard_error_is_not_kept():
+    """The loop keeps the newer controller unless, on the same evaluation episodes, it does
+    worse than the one kept before by more than the standard error of the paired differences;
+    the next round is compared with the kept one, not the rejected one."""
+    from diffcontrol.runs._loop import kept_round
+
+    def row(k, returns, kept=None):
+        return {"round": k, "real_returns": returns, **({"kept_round": kept} if kept else {})}
+
+    first = row(1, [-150.0, -160.0, -140.0])
+    assert kept_round([], first) == 1
+    assert kept_round([first], row(2, [-151.0, -161.0, -139.0])) == 2  # within noise
+    assert kept_round([first], row(2, [-140.0, -150.0, -130.0])) == 2  # better
+    worse = row(2, [-250.0, -240.0, -260.0])
+    assert kept_round([first], worse) == 1
+    rejected = {**worse, "kept_round": 1}
+    assert kept_round([first, rejected], row(3, [-155.0, -159.0, -141.0])) == 3
+    assert kept_round([first, rejected], row(3, [-200.0, -200.0, -200.0])) == 1
+    assert kept_round([first], row(2, None)) == 2  # nothing to compare: the newer
+    assert kept_round([first], row(2, [-1.0])) == 2  # other episodes: the newer
+    assert kept_round([{"round": 1}], row(2, [-1.0])) == 2  # a row written before the rule

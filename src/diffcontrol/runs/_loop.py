@@ -24,6 +24,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from .. import _gym
 from .._run_dir import make_dir
 from .._run_files import read_run_file, release_claim, save_run
@@ -333,7 +335,10 @@ def _loop(
             "seconds": time.perf_counter() - t0,
             "work_seconds": spent,
         }
-        state["rounds"] = [r for r in state["rounds"] if r["round"] != k] + [row]
+        earlier = [r for r in state["rounds"] if r["round"] < k]
+        row["kept_round"] = kept_round(earlier, row)
+        state["rounds"] = earlier + [row]
+        state["best_round"] = row["kept_round"]
         write_json(out / LOOP_FILE, {**state, "updated": now_iso()})
         if log is not None:
             figures = {
@@ -347,22 +352,47 @@ def _loop(
         err = f"; model error on the new data {error['rmse_1']:.3g} (1 step)" if error else ""
         if error and error.get("spread") is not None:
             err += f", the members' spread there {error['spread']:.3g}"
+        kept = row["kept_round"]
+        rejected = f"; worse than round {kept}'s by more than a standard error: its controller kept"
         report(
             f"round {k}: {row['episodes']} episodes ({row['real_steps']} real steps)"
             + (f", {fitted_txt}" if fitted_txt else f", fit loss {row['fit_loss']:.3g}")
             + err
             + (f"; return on the real system {ret:.1f}" if ret is not None else "")
+            + (rejected if kept != k else "")
         )
         if k < rounds:
-            record_round(k, here / "run")
+            record_round(k, out / f"round_{kept}" / "run")
     _plot(state, out / "loop.png")
     if log is not None:
         log.close()
+    best = state.get("best_round", rounds)
     report(
         f"wrote {out / LOOP_FILE}, {out / 'loop.png'} and {out / 'data.csv'}; the controller: "
-        f"{out / f'round_{rounds}' / 'run' / 'model.json'}"
+        f"{out / f'round_{best}' / 'run' / 'model.json'}"
+        + (f" (round {best}'s, the best on the real system)" if best != rounds else "")
     )
     return state
+
+
+def kept_round(earlier: list[dict], row: dict) -> int:
+    """The round whose controller the loop keeps after ``row``'s round: that round, unless its
+    controller does worse on the same evaluation episodes than the one kept before it, by more
+    than the standard error of their paired differences (one per episode); then that one.
+
+    ``earlier``: the rows of the rounds before (a row written before this rule keeps its own
+    round). A round without per-episode returns is kept."""
+    if not earlier:
+        return row["round"]
+    last = max(earlier, key=lambda r: r["round"])
+    before = last.get("kept_round", last["round"])
+    old = next((r for r in earlier if r["round"] == before), last).get("real_returns")
+    new = row.get("real_returns")
+    if not old or not new or len(old) != len(new):
+        return row["round"]
+    diffs = np.asarray(new, float) - np.asarray(old, float)
+    se = float(np.std(diffs, ddof=1) / np.sqrt(len(diffs))) if len(diffs) > 1 else 0.0
+    return before if float(np.mean(diffs)) < -se else row["round"]
 
 
 def _evaluate(
