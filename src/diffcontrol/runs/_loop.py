@@ -337,7 +337,7 @@ def _loop(
         }
         earlier = [r for r in state["rounds"] if r["round"] < k]
         row["kept_round"] = kept_round(earlier, row)
-        state["rounds"] = earlier + [row]
+        state["rounds"] = earlier + [row] + [r for r in state["rounds"] if r["round"] > k]
         state["best_round"] = row["kept_round"]
         write_json(out / LOOP_FILE, {**state, "updated": now_iso()})
         if log is not None:
