@@ -125,9 +125,10 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
+# the windows recipe: no grid solve in each of the processes
 TINY_CLI = ["--updates", "20", "--eval-every", "10", "--batch", "8", "--window", "10",
             "--eval-episodes", "8", "--hidden", "16", "--final-eval", "2", "--no-animation",
-            "--quiet"]  # fmt: skip
+            "--quiet", "--recipe", "windows"]  # fmt: skip
 
 
 @pytest.mark.slow
