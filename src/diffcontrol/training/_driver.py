@@ -28,7 +28,7 @@ from ..checks import validate_task
 from ..controllers import MLPController
 from ..errors import ConfigError, ModelFileError, TrainingDiverged
 from ..tasks import AnyTask, ContinuousTask, StepLoss, TrajectoryLoss, as_task, task_params
-from ._bptt import SOLVED, make_trainer
+from ._bptt import SOLVED, _fingerprint, _hashable, make_trainer
 from ._checkpoint import load_checkpoint, save_checkpoint
 from ._devices import batch_placement, check_devices, divisible, gathered, is_writer, placer
 from ._diagnostics import Diagnostics
@@ -473,51 +473,6 @@ class _KeptTrainer:
 _TRAINERS: collections.OrderedDict[Any, _KeptTrainer] = collections.OrderedDict()
 TRAINERS_KEPT = 8
 """Trainers kept in the process by ``_kept_trainer`` (the most recently used)."""
-_PLAIN = (bool, int, float, complex, str, bytes, type(None))
-
-
-def _fingerprint(task: Any, covered: tuple[str, ...] = ()) -> tuple | None:
-    """What the task's programs could depend on beyond its code: its own attributes (but
-    ``covered``, which the caller keys otherwise) and the plain-valued attributes of its
-    classes (arrays by their bytes). ``None`` (keep nothing) if an attribute is neither plain,
-    a tuple of plain values nor an array."""
-
-    def frozen(value: Any) -> Any:
-        if isinstance(value, _PLAIN):
-            return value
-        if isinstance(value, tuple) and all(isinstance(v, _PLAIN) for v in value):
-            return value
-        if isinstance(value, np.ndarray | jax.Array):
-            a = np.asarray(value)
-            return ("array", a.dtype.str, a.shape, a.tobytes())
-        raise TypeError
-
-    try:
-        own = tuple(sorted((k, frozen(v)) for k, v in vars(task).items() if k not in covered))
-    except (TypeError, ValueError):
-        return None
-    return own, _class_fingerprint(task)
-
-
-def _class_fingerprint(task: Any) -> tuple:
-    """The plain-valued attributes of the task's classes, and the identity of their methods
-    (a method replaced changes it)."""
-    return tuple(
-        (k, v if isinstance(v, _PLAIN + (tuple,)) else id(v))
-        for cls in type(task).__mro__
-        for k, v in sorted(vars(cls).items())
-        if not k.startswith("__")
-        and (isinstance(v, _PLAIN + (tuple,)) and _hashable(v) or callable(v))
-    )
-
-
-def _hashable(value: Any) -> bool:
-    """Whether ``value`` can be hashed (a tuple of lists cannot)."""
-    try:
-        hash(value)
-    except TypeError:
-        return False
-    return True
 
 
 def _kept_trainer(
