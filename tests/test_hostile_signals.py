@@ -91,6 +91,32 @@ def test_sigterm_at_each_phase_then_resume(tmp_path, reference, phase, after_lin
     assert json.loads((out / "run.json").read_text())["complete"] is True
 
 
+@pytest.mark.parametrize("write", ["write_json", "write_json_new"])
+def test_an_interrupt_just_after_the_temporary_file_is_created_removes_it(
+    tmp_path, monkeypatch, write
+):
+    """The instant the SIGTERM test above hit at random: the temporary file exists, and the
+    call that created it has not returned."""
+    from diffcontrol import io
+
+    real_open = os.open
+
+    def interrupted(path, flags, mode=0o777, **kw):
+        os.close(real_open(path, flags, mode, **kw))
+        raise KeyboardInterrupt
+
+    target = tmp_path / "run.json"
+    if write == "write_json":
+        target.write_text("{}")
+    monkeypatch.setattr(io.os, "open", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        getattr(io, write)(target, {"a": 1})
+    monkeypatch.undo()
+    assert [p.name for p in tmp_path.iterdir()] == (["run.json"] if write == "write_json" else [])
+    if write == "write_json":
+        assert target.read_text() == "{}"
+
+
 def _tmpfs(path: Path, size: str) -> bool:
     if os.geteuid() != 0 or shutil.which("mount") is None:
         return False

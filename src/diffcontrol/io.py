@@ -16,7 +16,6 @@ import io as _io
 import json
 import math
 import os
-import tempfile
 import uuid
 from collections.abc import Iterator
 from pathlib import Path
@@ -33,18 +32,26 @@ MAX_JSON_BYTES = 256 * 2**20
 # atomic writes
 
 
-_UMASK = os.umask(0)
-os.umask(_UMASK)
+def _temporary(path: Path) -> Path:
+    """A new temporary file's name beside ``path``. The name is chosen before the file is
+    created, so that a ``try`` entered first removes it whatever instant an interrupt
+    (Ctrl-C, SIGTERM) lands at, even between its creation and the return of the call."""
+    return path.with_name(f".{path.name}.{uuid.uuid4().hex[:12]}.tmp")
+
+
+def _create(tmp: Path, path: Path) -> int:
+    """Create ``tmp`` exclusively with the usual mode (0666 less the umask), its errors naming
+    ``path``."""
+    with named_errors(path):
+        return os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
 
 
 @contextlib.contextmanager
 def _atomic(path: Path, mode: str) -> Iterator[Any]:
     path = Path(path)
-    with named_errors(path):
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    tmp = _temporary(path)
     try:
-        os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp makes 0600; give the file the usual mode
-        with os.fdopen(fd, mode) as f:
+        with os.fdopen(_create(tmp, path), mode) as f:
             yield f
             f.flush()
             os.fsync(f.fileno())
@@ -88,10 +95,9 @@ def write_json_new(path: str | os.PathLike, obj: Any) -> None:
     """
     path = Path(path)
     text = json.dumps(_finite(obj), indent=1, allow_nan=False)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    tmp = _temporary(path)
     try:
-        os.chmod(tmp, 0o666 & ~_UMASK)
-        with os.fdopen(fd, "w") as f:
+        with os.fdopen(_create(tmp, path), "w") as f:
             f.write(text + "\n")
             f.flush()
             os.fsync(f.fileno())
