@@ -261,7 +261,7 @@ def test_a_loop_cut_short_before_its_first_checkpoint_resumes(capsys, tmp_path, 
     argv += ["--updates", "4", "--fit-steps", "2", "--eval-episodes", "1", "--quiet"]
     argv += ["--controller", "train"]  # the MLP's training, not the default planner
     line = _interrupted(capsys, argv, f"kept in {out}")
-    assert (out / "round_1" / "run" / "run.json").exists()
+    assert (out / "round_0" / "run" / "run.json").exists()  # the nominal controller's training
     monkeypatch.undo()
     assert main(shlex.split(line.split("--resume: ")[1])[1:]) == 0
     assert (out / "loop.json").exists()

@@ -86,9 +86,10 @@ def test_the_loop_logs_each_round(tmp_path):
     argv += ["--eval-episodes", "2", "--out", str(out), "--quiet", "--log-dir", str(logs)]
     argv += ["--controller", "train"]  # the MLP's training, not the default planner
     assert main(argv) == 0
-    rounds = json.loads((out / "loop.json").read_text())["rounds"]
+    doc = json.loads((out / "loop.json").read_text())
+    rounds = [doc["nominal"], *doc["rounds"]]  # round 0: the nominal controller's
     scalars = read_scalars(logs)
-    assert sorted(scalars["loop/real_return"]) == [1, 2]
+    assert sorted(scalars["loop/real_return"]) == [0, 1, 2]
     for row in rounds:
         assert scalars["loop/real_return"][row["round"]] == pytest.approx(row["real_return"])
         assert scalars["loop/real_steps"][row["round"]] == row["real_steps"]

@@ -237,8 +237,12 @@ def test_loop_records_fits_trains_and_resumes(tmp_path, capsys):
         assert abs(r["fitted_parameters"]["g"] - 12.0) < 0.01
         assert np.isfinite(r["real_return"])
     # each round kept by the rule (runs._loop.kept_round), the last kept one handed back
+    # (round 1 against round 0's: the nominal controller, judged on the same episodes)
+    nominal = doc["nominal"]
+    assert nominal["round"] == 0 and len(nominal["real_returns"]) == 2
     kept = [r["kept_round"] for r in doc["rounds"]]
-    assert kept == [1, kept_round(doc["rounds"][:1], doc["rounds"][1])]
+    assert kept[0] == kept_round([nominal], doc["rounds"][0])
+    assert kept[1] == kept_round([nominal, doc["rounds"][0]], doc["rounds"][1])
     assert doc["best_round"] == kept[1]
     assert f"round_{kept[1]}/run/model.json" in capsys.readouterr().out
     sources = json.loads((out / "data.csv").read_text().splitlines()[0][2:])["metadata"]
@@ -246,7 +250,7 @@ def test_loop_records_fits_trains_and_resumes(tmp_path, capsys):
     first = json.loads((out / "round_0" / "recorded.csv").read_text().splitlines()[0][2:])
     assert first["metadata"]["skipped_seeds"] == [0, 2]
     assert sources["sources"][0] == "random actions"  # round 1 records with its controller:
-    assert sources["sources"][1] == "round 1 controller"
+    assert sources["sources"][1] == f"round {kept[0]} controller"  # or the one kept before
     assert (out / "round_2" / "run" / "model.json").exists() and (out / "loop.png").exists()
     capsys.readouterr()
     assert main(argv) == 2 and "pass --resume" in capsys.readouterr().err

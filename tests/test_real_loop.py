@@ -134,7 +134,8 @@ def test_loop_counts_real_steps_starts_wrong_and_resumes(tmp_path, capsys):
         evaluated["seeds"] == [1000, 1001] and rounds[0]["real_return"] == evaluated["mean_return"]
     )
     sources = json.loads((out / "data.csv").read_text().splitlines()[0][2:])["metadata"]["sources"]
-    assert sources == ["random actions", "round 1 controller with action noise 0.1"]
+    kept = rounds[0]["kept_round"]  # round 1's, or the nominal one (round 0) if it did better
+    assert sources == ["random actions", f"round {kept} controller with action noise 0.1"]
     before = (out / "round_1" / "recorded.csv").read_bytes()
     (out / "round_2" / "run" / "model.json").unlink()  # as if interrupted in round 2's training
     assert main([*argv, "--resume"]) == 0
@@ -319,7 +320,8 @@ def test_compare_real_runs_a_planner_through_the_fitted_model_as_its_own_row(tmp
         assert doc_k["controller"]["model"]["kind"] == "fitted"  # through the round's fit
         assert doc_k["controller"]["settings"]["horizon"] == 4  # the task's loop planner
     recorded = identify.read_trajectories(where / "round_1" / "recorded.csv")
-    assert recorded.metadata["source"].startswith("round 1 controller")  # the planner recorded
+    kept = min(loop["rounds"], key=lambda r: r["round"])["kept_round"]  # 1, or 0: nominal
+    assert recorded.metadata["source"].startswith(f"round {kept} controller")  # a planner
     rounds = sorted(loop["rounds"], key=lambda r: r["round"])
     assert [r["real_steps"] for r in rounds] == [100, 200]
     assert all(len(r["real_returns"]) == 2 for r in rounds)  # judged on the real system

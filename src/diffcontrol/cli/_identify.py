@@ -74,10 +74,12 @@ def add_parsers(sub: Any) -> None:
         help="alternate record -> fit -> train (or plan) on a real system for a few rounds",
         description=(
             "Learn a controller for a system you can only run, in R rounds of: record N "
-            "episodes of the real environment ENV_ID (random actions at first, then the last "
+            "episodes of the real environment ENV_ID (random actions at first, then the kept "
             "controller's), fit a model of TASK's system to all data so far, train or plan "
-            "through it (--controller), evaluate on the real environment. Writes DIR/data.csv, "
-            "DIR/round_K/{fit,run}/, DIR/loop.json and DIR/loop.png."
+            "through it (--controller), evaluate on the real environment; a round's controller "
+            "is kept unless it does worse there than the one kept before (round 0: the nominal "
+            "controller, of TASK's own physics). Writes DIR/data.csv, DIR/round_K/{fit,run}/, "
+            "DIR/loop.json and DIR/loop.png."
         ),
     )
     add(p,

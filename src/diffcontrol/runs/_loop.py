@@ -7,7 +7,9 @@ episodes by default; ``identify.fit_dir``, ``train`` through the fitted model,
 (``resume``): a round's data, fitted model, controller and evaluation are each kept once
 written, so nothing is recorded twice.
 
-The bookkeeping is in the open (``loop.json``, one row per round): the real environment steps
+Round 0 is the nominal controller (the task's own physics, no real steps), judged on the real
+system as every round's is: round 1 must beat it, and it is handed back if none does. The
+bookkeeping is in the open (``loop.json``, one row per round): the real environment steps
 used so far (every recorded transition, exploration and the controllers' episodes; the
 evaluation episodes are not counted, as for RL in ``diffcontrol compare``), the model's error
 on the round's new data *before* it is fitted to it (how wrong the model was where the
@@ -210,15 +212,16 @@ def _loop(
             policies[run_dir] = load_policy(task, read_model(run_dir))  # checked as load does
         return policies[run_dir]
 
-    def record_round(k: int, controller: Path | None) -> None:
-        """Record the episodes of round k (random for k = 0, else with round k's controller
-        in ``controller``) and append them to data.csv."""
+    def record_round(k: int, acting: int | None) -> None:
+        """Record the episodes of round k (random for k = 0, else with the controller of round
+        ``acting``: the one kept after round k) and append them to data.csv."""
+        controller = None if acting is None else out / f"round_{acting}" / "run"
         part = out / f"round_{k}" / "recorded.csv"
         if not part.exists():
             t0 = time.perf_counter()
             if episodes_of_env:
                 policy = None if controller is None else policy_of(controller)
-                source = "random actions" if policy is None else f"round {k} controller"
+                source = "random actions" if policy is None else f"round {acting} controller"
                 if policy is not None and explore_noise:
                     policy = NoisyPolicy(
                         policy, _gym.action_space(task), explore_noise, seed + 1000 * k
@@ -250,7 +253,72 @@ def _loop(
         parts = [read_trajectories(out / f"round_{j}" / "recorded.csv") for j in range(k + 1)]
         write_trajectories(out / "data.csv", concat(parts))
 
+    own_eval = eval_episodes if not eval_seed else 0  # seeds 0...: save_run's own
+
+    def act(k: int, fit: Path | None) -> None:
+        """Make round k's controller in round_k/run, planned or trained (``controller``)
+        through the model fitted in ``fit``, or through the task's own physics where ``fit``
+        is None (round 0's, the nominal controller: judged on the real system by
+        ``_evaluate``). A finished one is kept; a planner cut short starts again, a training
+        continues from its checkpoint."""
+        here = out / f"round_{k}"
+        _check_own_round(here / "run", k)
+        if (here / "run" / "metrics.json").exists():  # save_run writes it last
+            return
+        (here / "eval.json").unlink(missing_ok=True)  # it judged another controller
+        final_eval = own_eval if fit is not None else 0
+        if controller == "plan":
+            if (here / "run").exists():  # a planner cut short: nothing in it to continue
+                shutil.rmtree(here / "run")
+            run, _ = plan_run(here / "run", task, loop_planner(task), model=fit,
+                              env_id=env_id if fit is not None else None,
+                              final_eval=final_eval, animation=False,
+                              progress=say, invocation={"loop_round": k})  # fmt: skip
+            policies[here / "run"] = run.policy
+            return
+        if fit is None:
+            trained, params, real, info = task, (), None, {"kind": "simulator"}
+        else:
+            trained, params, real, info = fitted_training(task, fit, None)
+            say(info.pop("note"))
+        # A parameter that must be >= 0 (the Pendulum's friction) fitted a hair below 0
+        # where the real one is 0 (Pendulum-v1: -7e-10): trained at 0, its bound.
+        floor = set(getattr(task, "nonnegative_params", ()))
+        params = tuple((n, max(v, 0.0) if n in floor else v) for n, v in params)
+        overrides = {"seed": seed, "updates": updates, "params": params or None}
+        config = resolve_config(trained, None, **{k: v for k, v in overrides.items() if v})
+        resumed = (here / "run" / "checkpoint.npz").exists()
+        if not resumed:  # claimed, then cut short before its first checkpoint: start again
+            release_claim(here / "run")
+        logs = {"log_dir": Path(log_dir) / f"round_{k}" if log_dir else None}
+        result = train(
+            trained, config, out_dir=here / "run", resume=resumed, progress=say,
+            invocation={"loop_round": k}, **logs,
+        )  # fmt: skip
+        result.metrics["model"] = info
+        save_run(result, here / "run", final_eval=final_eval, animation=False, real=real,
+                 overwrite=True)  # fmt: skip
+
     record_round(0, None)
+    if episodes_of_env:  # round 0: the nominal controller, judged as every round's is
+        t0 = time.perf_counter()
+        say(f"round 0: {'planning' if controller == 'plan' else 'training'} through "
+            f"{task.name}'s own physics (the nominal controller)")  # fmt: skip
+        act(0, None)
+        judged = _evaluate(task, out / "round_0", eval_episodes, eval_seed, (env_id, env_kwargs),
+                           policy_of)  # fmt: skip
+        state["nominal"] = {
+            "round": 0, "episodes": 0, "transitions": 0, "real_steps": 0,
+            "real_return": judged.get("mean_return"),
+            "real_return_std": judged.get("std_return"),
+            "real_returns": judged.get("returns"),
+            "eval_episodes": eval_episodes, "eval_seed": eval_seed,
+            "seconds": time.perf_counter() - t0,
+        }  # fmt: skip
+        if log is not None:
+            log.scalars({"loop/real_steps": 0, "loop/real_return": judged.get("mean_return")}, 0)
+        report(f"round 0: the nominal controller (no real steps); return on the real system "
+               f"{state['nominal']['real_return']:.1f}")  # fmt: skip
     for k in range(1, rounds + 1):
         t0 = time.perf_counter()
         here = out / f"round_{k}"
@@ -272,38 +340,7 @@ def _loop(
             )  # fmt: skip
             for line in fitted.lines:
                 say(line)
-        _check_own_round(here / "run", k)
-        done = (here / "run" / "metrics.json").exists()  # save_run writes it last
-        if not done:
-            (here / "eval.json").unlink(missing_ok=True)  # it judged another controller
-        own_eval = eval_episodes if not eval_seed else 0  # seeds 0...: save_run's own
-        if not done and controller == "plan":
-            if (here / "run").exists():  # a planner cut short: nothing in it to continue
-                shutil.rmtree(here / "run")
-            run, _ = plan_run(here / "run", task, loop_planner(task), model=here / "fit",
-                              env_id=env_id, final_eval=own_eval, animation=False,
-                              progress=say, invocation={"loop_round": k})  # fmt: skip
-            policies[here / "run"] = run.policy
-        elif not done:
-            trained, params, real, info = fitted_training(task, here / "fit", None)
-            say(info.pop("note"))
-            # A parameter that must be >= 0 (the Pendulum's friction) fitted a hair below 0
-            # where the real one is 0 (Pendulum-v1: -7e-10): trained at 0, its bound.
-            floor = set(getattr(task, "nonnegative_params", ()))
-            params = tuple((n, max(v, 0.0) if n in floor else v) for n, v in params)
-            overrides = {"seed": seed, "updates": updates, "params": params or None}
-            config = resolve_config(trained, None, **{k: v for k, v in overrides.items() if v})
-            resumed = (here / "run" / "checkpoint.npz").exists()
-            if not resumed:  # claimed, then cut short before its first checkpoint: start again
-                release_claim(here / "run")
-            logs = {"log_dir": Path(log_dir) / f"round_{k}" if log_dir else None}
-            result = train(
-                trained, config, out_dir=here / "run", resume=resumed, progress=say,
-                invocation={"loop_round": k}, **logs,
-            )  # fmt: skip
-            result.metrics["model"] = info
-            save_run(result, here / "run", final_eval=own_eval, animation=False, real=real,
-                     overwrite=True)  # fmt: skip
+        act(k, here / "fit")
         metrics = read_json(here / "run" / "metrics.json", "metrics")
         fitted_doc = read_json(here / "fit" / "fitted.json", "fitted model")
         judged = metrics.get("gym_eval", {})
@@ -336,7 +373,7 @@ def _loop(
             "work_seconds": spent,
         }
         earlier = [r for r in state["rounds"] if r["round"] < k]
-        row["kept_round"] = kept_round(earlier, row)
+        row["kept_round"] = kept_round([*filter(None, [state.get("nominal")]), *earlier], row)
         state["rounds"] = earlier + [row] + [r for r in state["rounds"] if r["round"] > k]
         state["best_round"] = row["kept_round"]
         write_json(out / LOOP_FILE, {**state, "updated": now_iso()})
@@ -362,7 +399,7 @@ def _loop(
             + (rejected if kept != k else "")
         )
         if k < rounds:
-            record_round(k, out / f"round_{kept}" / "run")
+            record_round(k, kept)
     _plot(state, out / "loop.png")
     if log is not None:
         log.close()
@@ -370,7 +407,12 @@ def _loop(
     report(
         f"wrote {out / LOOP_FILE}, {out / 'loop.png'} and {out / 'data.csv'}; the controller: "
         f"{out / f'round_{best}' / 'run' / 'model.json'}"
-        + (f" (round {best}'s, the best on the real system)" if best != rounds else "")
+        + (f" (round {best}'s, the best on the real system)" if 0 < best < rounds else "")
+        + (
+            " (round 0's: the nominal controller, no round did better on the real system)"
+            if best == 0
+            else ""
+        )
     )
     return state
 
@@ -473,7 +515,7 @@ def _plot(state: dict, path: Path) -> None:
     import matplotlib.pyplot as plt
 
     rows = sorted(state["rounds"], key=lambda r: r["round"])
-    rows = [r for r in rows if r["real_return"] is not None]
+    rows = [r for r in [state.get("nominal"), *rows] if r and r["real_return"] is not None]
     fig, ax = plt.subplots(figsize=(5.5, 3.5))
     if rows:
         ax.errorbar(
@@ -485,7 +527,8 @@ def _plot(state: dict, path: Path) -> None:
         )
     s = state["settings"]
     for r in rows:
-        ax.annotate(f"round {r['round']}", (r.get("real_steps", r["transitions"]), r["real_return"]),
+        label = f"round {r['round']}" + (" (nominal)" if r["round"] == 0 else "")
+        ax.annotate(label, (r.get("real_steps", r["transitions"]), r["real_return"]),
                     textcoords="offset points", xytext=(4, -10), fontsize=7)  # fmt: skip
     ax.set_xlabel("real environment steps used (evaluation episodes not counted)")
     ax.set_ylabel("return on the real system")
