@@ -71,3 +71,57 @@ def test_bad_friction_and_env_are_refused():
         PendulumFriction(gymnasium.make("Pendulum-v1"), friction=-0.1)
     with pytest.raises(ValueError, match="wraps Gymnasium's Pendulum-v1"):
         PendulumFriction(gymnasium.make("CartPole-v1"), friction=0.1)
+
+
+def _worn_step(state, command, g, gain, deadband, coulomb):
+    """``WornPendulum``'s step written out (float64): Gymnasium's semi-implicit Euler with the
+    delivered torque ``gain (u - clip(u, -deadband, deadband)) - coulomb sign(theta_dot)``."""
+    theta, speed = state
+    u = np.clip(command, -2.0, 2.0)
+    torque = gain * (u - np.clip(u, -deadband, deadband)) - coulomb * np.sign(speed)
+    speed_next = np.clip(speed + (3 * g / 2 * np.sin(theta) + 3.0 * torque) * 0.05, -8.0, 8.0)
+    cost = ((theta + np.pi) % (2 * np.pi) - np.pi) ** 2 + 0.1 * speed**2 + 0.001 * u**2
+    return np.array([theta + speed_next * 0.05, speed_next]), -cost
+
+
+@pytest.mark.parametrize(
+    "worn", [{"gain": 0.8, "deadband": 0.3, "coulomb": 0.2, "g": 11.0}, {"gain": 0.5}]
+)
+def test_worn_pendulum_delivers_less_with_a_dead_band_and_dry_friction(worn):
+    from diffcontrol.wrappers import WORN_PENDULUM_ID
+
+    env = gymnasium.make(WORN_PENDULUM_ID, **worn)
+    env.reset(seed=0)
+    full = {"g": 10.0, "gain": 1.0, "deadband": 0.0, "coulomb": 0.0, **worn}
+    states, torques = _cases()
+    torques[3:6] = [0.1, -0.25, 0.35]  # inside and just past a dead band
+    for state, torque in zip(states, torques):
+        env.unwrapped.state = state.copy()
+        _, reward, *_ = env.step(np.array([torque]))
+        want, want_reward = _worn_step(state, torque, **full)
+        np.testing.assert_allclose(env.unwrapped.state, want, rtol=0, atol=ATOL)
+        assert abs(reward - want_reward) < ATOL
+    env.close()
+
+
+def test_an_unworn_pendulum_is_gymnasiums_and_bad_wear_is_refused():
+    from diffcontrol.wrappers import WornPendulum
+
+    plain = gymnasium.make("Pendulum-v1").unwrapped
+    unworn = WornPendulum(gymnasium.make("Pendulum-v1"))
+    states, torques = _cases(50)
+    for state, torque in zip(states, torques):
+        rewards = []
+        for env in (plain, unworn):
+            env.reset(seed=0)
+            env.unwrapped.state = state.copy()
+            rewards.append(env.step(np.array([torque]))[1])
+        np.testing.assert_array_equal(unworn.unwrapped.state, plain.state)
+        assert rewards[0] == pytest.approx(rewards[1], abs=1e-12)
+    for bad, match in (({"gain": 0.0}, "gain must be in"), ({"gain": 1.5}, "gain must be in"),
+                       ({"deadband": -1.0}, "deadband must be in"),
+                       ({"coulomb": float("nan")}, "coulomb must be finite")):  # fmt: skip
+        with pytest.raises(ValueError, match=match):
+            WornPendulum(gymnasium.make("Pendulum-v1"), **bad)
+    with pytest.raises(ValueError, match="wraps Gymnasium's Pendulum-v1"):
+        WornPendulum(gymnasium.make("CartPole-v1"))

@@ -115,6 +115,39 @@ def test_model_error_before_the_fit_is_that_of_the_start_physics():
 
 
 @pytest.mark.slow
+def test_the_nominal_controller_is_handed_back_when_no_round_beats_it(
+    tmp_path, capsys, monkeypatch
+):
+    """Round 0 (the task's own physics) against rounds that do worse on the real system: both
+    rounds keep it, round 2 records with it, and the loop hands it back."""
+    from diffcontrol.runs import _loop
+
+    real_evaluate = _loop._evaluate
+
+    def judged(task, here, episodes, seed, real, policy_of):
+        doc = real_evaluate(task, here, episodes, seed, real, policy_of)
+        if here.name != "round_0":  # every later round 50 worse on each episode
+            doc = {**doc, "returns": [r - 50.0 for r in doc["returns"]]}
+            doc["mean_return"] = float(np.mean(doc["returns"]))
+        return doc
+
+    monkeypatch.setattr(_loop, "_evaluate", judged)
+    out = tmp_path / "loop"
+    argv = ["loop", "cartpole", "--rounds", "2", "--real-steps", "200", "--updates", "2"]
+    argv += ["--eval-episodes", "2", "--eval-seed", "1000", "--out", str(out), "--quiet"]
+    assert main(argv) == 0  # CartPole: a trained MLP (no planner does better there)
+    doc = json.loads((out / "loop.json").read_text())
+    assert doc["nominal"]["real_returns"] and doc["nominal"]["real_steps"] == 0
+    assert [r["kept_round"] for r in doc["rounds"]] == [0, 0] and doc["best_round"] == 0
+    printed = capsys.readouterr().out
+    assert "round 0: the nominal controller" in printed
+    assert "round_0/run/model.json (round 0's: the nominal controller" in printed
+    recorded = identify.read_trajectories(out / "round_1" / "recorded.csv")
+    assert recorded.metadata["source"] == "round 0 controller"
+    assert (out / "round_0" / "run" / "model.json").exists()
+
+
+@pytest.mark.slow
 def test_loop_counts_real_steps_starts_wrong_and_resumes(tmp_path, capsys):
     out = tmp_path / "loop"
     argv = ["loop", "pendulum", "--rounds", "2", "--episodes", "1", "--updates", "2"]

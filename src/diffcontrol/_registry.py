@@ -129,6 +129,7 @@ BUILTIN: tuple[Builtin, ...] = (
 OTHER_ENVS: tuple[tuple[str, str, int], ...] = (
     # (id, entry point, max_episode_steps): environments that are not a task's
     ("diffcontrol/PendulumFriction-v0", "diffcontrol.wrappers:make_pendulum_friction", 200),
+    ("diffcontrol/WornPendulum-v0", "diffcontrol.wrappers:make_worn_pendulum", 200),
 )
 
 
