@@ -44,7 +44,7 @@ def _interrupt(*args, **kwargs):
 @pytest.mark.parametrize(
     "argv, needle",
     [  # the audit's cases: a lower bound other than 1, a width's and a seed list's size
-        (["plan", "pendulum", "--value-grid", "2"], "must be an integer >= 3"),
+        (["plan", "pendulum", "--value-grid", "-1"], "must be an integer >= 0"),
         (["plan", "pendulum", "--value-levels", "1"], "must be an integer >= 2"),
         (["train", "pendulum", "--hidden", "10000000000000"], "at most 1,048,576"),
         (["sweep", "pendulum", "--seeds", "0-2147483647"], "more than 65,536 seeds"),
@@ -62,6 +62,15 @@ def test_an_integer_is_refused_by_the_rule_it_breaks(capsys, tmp_path, argv, nee
     out = tmp_path / "out"
     one_line(capsys, [*argv, "--out", out, *TINY[:6]], needle, absent=["positive layer"])
     assert not out.exists()
+
+
+def test_a_planners_value_grid_is_none_or_3_points_at_least():
+    from diffcontrol.settings import PlanConfig
+
+    with pytest.raises(ConfigError, match=r"value_grid must be 0 \(no terminal value\) or 3"):
+        PlanConfig(value_grid=2)
+    assert PlanConfig(value_grid=0).value_grid is None  # the command line's "none"
+    assert PlanConfig(value_grid=0) == PlanConfig()
 
 
 def test_a_config_names_the_bounds_of_a_size():

@@ -196,3 +196,19 @@ def test_a_three_way_choice_is_planned_relaxed_and_acted_on_as_its_heaviest_choi
     assert relaxed.shape == (3,) and np.all((relaxed >= 0) & (relaxed <= 1))
     assert policy(obs) == int(np.argmax(relaxed)) and env.action_space.contains(policy(obs))
     env.close()
+
+
+def test_the_pendulum_plans_with_its_grid_value_by_default_and_without_it_on_request(tmp_path):
+    """``plan pendulum``'s defaults are its best planner (H = 10, the 201-point grid value);
+    ``--value-grid 0`` drops the value and keeps the rest."""
+    from diffcontrol.mpc._config import default_plan_config
+
+    assert default_plan_config(diffcontrol.make("pendulum")) == PlanConfig(
+        horizon=10, value_grid=201
+    )
+    assert default_plan_config(diffcontrol.make("pendulum-unclipped")) == PlanConfig()
+    out = tmp_path / "p"
+    argv = ["plan", "pendulum", "--out", str(out), "--value-grid", "0", "--final-eval", "0"]
+    assert main([*argv, "--no-animation", "--quiet"]) == 0
+    settings = json.loads((out / "model.json").read_text())["controller"]["settings"]
+    assert settings["value_grid"] is None and settings["horizon"] == 10

@@ -163,6 +163,7 @@ def test_value_file_round_trips_through_the_command_line(tmp_path):
     assert main(argv) == 0
     doc = json.loads((out / "model.json").read_text())
     assert doc["controller"]["value"] == json.loads(path.read_text())
+    assert doc["controller"]["settings"]["value_grid"] is None  # in place of the default grid
     back = diffcontrol.load(out).planner.problem.terminal_cost
     x = jnp.array([2.0, 0.5])
     assert float(back(x)) == pytest.approx(float(value(x)), rel=1e-6) and abs(float(value(x))) > 1

@@ -13,7 +13,8 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
-from .config import MAX_VALUE_GRID, MAX_WIDTH, _Config, _opt
+from .config import _VALUE_GRID, MAX_VALUE_GRID, MAX_WIDTH, _Config, _opt
+from .errors import ConfigError
 
 MODELS = ("params", "hybrid", "neural")
 """The names of the model kinds ``identify.fit`` learns (``identify.kinds``, their registry):
@@ -270,12 +271,13 @@ class PlanConfig(_Config):
     )
     value_grid: int | None = _opt(
         "terminal cost -V_0 of the task's grid optimum with N points per state axis (tasks "
-        "with a state grid, e.g. pendulum; 401: about 35 s per load on one core); none if "
-        "omitted",
+        "with a state grid; 401: about 35 s per load on one core); 0: none (default: none, or "
+        "the task's own: pendulum 201)",
         None,
         "N",
-        low=3,
+        low=0,
         high=MAX_VALUE_GRID,
+        must=_VALUE_GRID,
     )
     value_levels: int = _opt("actions per action dimension of that grid", 41, "N", low=2, high=1001)
     terminal_weight: float = _opt("weight of the terminal cost", 1.0, "W", form="nonneg")
@@ -298,6 +300,12 @@ class PlanConfig(_Config):
         form="positive",
     )
     substeps: int = _opt("continuous-time tasks: RK4 steps per control period", 1, "N", high=1000)
+
+    def _check(self) -> None:
+        if self.value_grid in (1, 2):
+            raise ConfigError(f"value_grid must be {_VALUE_GRID}, got {self.value_grid!r}")
+        if self.value_grid == 0:  # the command line's "none"
+            object.__setattr__(self, "value_grid", None)
 
     @property
     def solver_iterations(self) -> int:

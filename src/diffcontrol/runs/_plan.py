@@ -125,8 +125,8 @@ def plan_run(
         env_id: with ``model``: the real system's Gymnasium id where the fit names one of yours.
         final_eval: evaluation episodes (``None``: the task's default; 0 skips).
         value: a learned terminal value (``mpc.ValueNetwork``, from ``mpc.learn_value``, or
-            the JSON file ``ValueResult.save`` wrote) as the terminal cost; its weights are
-            stored in ``model.json``.
+            the JSON file ``ValueResult.save`` wrote) as the terminal cost, in place of the
+            task's default grid value; its weights are stored in ``model.json``.
         settings: fields of ``config`` to change (``None`` values skipped): the command
             line's options, over the task's defaults.
         invocation: how the planner was made, recorded in ``run.json`` (default: its task).
@@ -151,11 +151,15 @@ def plan_run(
             "the task does not reconstruct it from an observation (it defines no "
             "state_from_observation)"
         )
+    # a value network replaces the task's default grid value, not one the caller asked for
+    own_grid = config is None and (settings or {}).get("value_grid") is None
     config = default_plan_config(task) if config is None else config
     unknown = set(settings or {}) - {f.name for f in dataclasses.fields(PlanConfig)}
     if unknown:
         raise ConfigError(f"unknown planner settings {sorted(unknown)}; see PlanConfig's fields")
     config = config.replace(**{k: v for k, v in (settings or {}).items() if v is not None})
+    if value is not None and own_grid:
+        config = config.replace(value_grid=None)
     config = for_task(config, task)
     say = progress or (lambda line: None)
     if value is not None:

@@ -22,7 +22,7 @@ from ..envs import make_env
 from ..errors import ConfigError, Interrupted, RunDirectoryError, TrainingDiverged
 from ..identify.fitted import checked_env_id, fitted_physics, fitted_task, read_fitted, real_system
 from ..identify.kinds import kind
-from ..mpc._config import loop_planner, plans_best
+from ..mpc._config import default_plan_config, loop_planner, plans_best
 from ..tasks import AnyTask, named_by_file, resolve
 from ..training import resolve_config, train
 from ..training._devices import is_writer, join_hosts
@@ -259,8 +259,11 @@ def _advice(task: AnyTask, out: Path, changed: Any) -> str:
     the Pendulum, docs/planning.md), the command that plans."""
     if changed or not isinstance(task, tasks.Task) or not plans_best(task):
         return ""
-    p = loop_planner(task)
-    plan = ["plan", task.name, "--horizon", str(p.horizon), "--value-grid", str(p.value_grid)]
+    p, own = loop_planner(task), default_plan_config(task)
+    plan = ["plan", task.name]  # the flags of the loop's planner that plan's defaults lack
+    for name in ("horizon", "value_grid"):
+        if getattr(p, name) != getattr(own, name):
+            plan += ["--" + name.replace("_", "-"), str(getattr(p, name))]
     return (
         f"a planner does better on {task.name} than this MLP (docs/planning.md); it needs JAX "
         f"to act: {shell_command(*plan, '--out', f'{out}-plan')}"

@@ -8,6 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..config import TrainConfig
+from ..settings import PlanConfig
 from ..systems import pendulum as pend
 from ._base import StepLoss, Task
 from ._grid import GridAxis
@@ -125,6 +126,13 @@ class Pendulum(Task):
             value_grid=201,
         )
 
+    def default_plan_config(self) -> PlanConfig:
+        """``diffcontrol plan pendulum``'s defaults: box-iLQR over H = 10 with the terminal
+        cost ``-V_0`` of the 201-point grid optimum, the Pendulum's best planner within a
+        load's seconds (docs/planning.md); ``--value-grid 0`` plans without it (H = 10 is too
+        short a horizon then: add ``--horizon 20``)."""
+        return PlanConfig(horizon=10, value_grid=201)
+
     def recipes(self) -> dict[str, dict[str, Any]]:
         return {
             # pendulum/DiffRL.jl@10bd26c: Dense(3,24,relu)-Dense(24,48,relu)-Dense(48,1), ADAM
@@ -204,6 +212,10 @@ class PendulumUnclipped(Pendulum):
     def default_config(self) -> TrainConfig:
         # no action bounds, so no grid optimum: the windows recipe
         return super().default_config().replace(**WINDOWS, head="linear")
+
+    def default_plan_config(self) -> PlanConfig:
+        """No grid value (no action bounds to solve it within): ``PlanConfig``'s defaults."""
+        return PlanConfig()
 
     def recipes(self) -> dict[str, dict[str, Any]]:
         recipe = dict(super().recipes()["original"])
