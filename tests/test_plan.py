@@ -198,6 +198,24 @@ def test_a_three_way_choice_is_planned_relaxed_and_acted_on_as_its_heaviest_choi
     env.close()
 
 
+def test_the_acrobot_plans_with_the_goal_weighted_past_the_power():
+    """``plan acrobot`` plans with ``reach``: ``pump`` with the goal indicator weighted 30
+    instead of 2 (docs/benchmarks.md: -66.9 against -86.7 in Acrobot-v1); training keeps
+    ``pump``, its first loss."""
+    from diffcontrol.mpc._config import default_plan_config
+    from diffcontrol.systems import acrobot as ac
+
+    task = diffcontrol.make("acrobot")
+    assert default_plan_config(task).loss == "reach" and task.losses[0] == "pump"
+    params = task.default_params()
+    state, choice = np.array([0.3, -0.2, 1.0, 2.0]), np.array([0.0, 0.0, 1.0])
+    after, *_ = task.step(params, state, choice)
+    losses = {n: float(task.step_loss(n)(params, state, choice, after, -1.0)) for n in task.losses}
+    below = 1 / (1 + np.exp(-(ac.GOAL_HEIGHT - float(ac.tip_height(after))) / 0.5))
+    assert losses["pump"] == pytest.approx(losses["power"] + 2 * below, rel=1e-5)
+    assert losses["reach"] == pytest.approx(losses["power"] + 30 * below, rel=1e-5)
+
+
 def test_the_pendulum_plans_with_its_grid_value_by_default_and_without_it_on_request(tmp_path):
     """``plan pendulum``'s defaults are its best planner (H = 10, the 201-point grid value);
     ``--value-grid 0`` drops the value and keeps the rest."""

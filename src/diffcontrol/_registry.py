@@ -77,7 +77,7 @@ BUILTIN: tuple[Builtin, ...] = (
         "acrobot",
         "diffcontrol.tasks.acrobot:Acrobot",
         "Acrobot-v1 swing-up: a 3-way straight-through choice of torque (exact Gymnasium dynamics)",
-        ("pump", "power"),
+        ("pump", "power", "reach"),
         (),
         "Acrobot", "TaskEnv", 500, -100.0,
     ),
