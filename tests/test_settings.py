@@ -77,7 +77,7 @@ CONFIGS = (
     PlanConfig,
 )
 # rules between fields, which the flags (one value each) cannot know
-_BETWEEN_FIELDS = {("TrainConfig", "value_grid", 1), ("TrainConfig", "value_grid", 2)}
+_BETWEEN_FIELDS = {(c, "value_grid", n) for c in ("TrainConfig", "PlanConfig") for n in (1, 2)}
 
 
 def _accepts(parse, text: str) -> bool:
