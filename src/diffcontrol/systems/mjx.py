@@ -1,0 +1,128 @@
+"""A MuJoCo model as a pure, differentiable JAX program, through MJX (``mujoco.mjx``).
+
+``MjxSystem(path)`` loads an MJCF file with MuJoCo's own parser and puts it on the device as
+an ``mjx.Model``. Its state is ``concat(qpos, qvel)``; ``simulate(state, ctrl, frames)`` sets
+the controls and advances ``frames`` physics steps of ``model.opt.timestep`` each, as
+Gymnasium's ``MujocoEnv.do_simulation`` does with ``mj_step(..., nstep=frames)``, and returns
+MJX's ``Data`` after the last one (positions, site poses, constraint forces of that step).
+
+Where the derivative is non-smooth or missing:
+
+- reverse mode needs ``model.opt.iterations = 1``: with more, MJX's constraint solver runs a
+  ``lax.while_loop``, which JAX cannot differentiate in reverse mode. One iteration of the
+  Newton solver solves a model without active constraints exactly (it has no constraint to
+  solve), so the step equals MuJoCo's C engine there; where a joint limit or a contact is
+  active, the one-iteration solve differs from the converged one and the two drift apart
+  (docs/mujoco.md measures it for each built-in model);
+- a joint limit or a contact switches on at a distance: a kink in the step, and a gradient
+  that sees only the side of the switch the state is on.
+
+The ``mujoco`` extra (``pip install 'diffcontrol[mujoco]'``) installs MuJoCo and MJX; without
+it, making a system raises ``ConfigError`` that says so.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import io
+import os
+from pathlib import Path
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array
+
+from ..errors import ConfigError
+
+EXTRA = "pip install 'diffcontrol[mujoco]'"
+
+
+def modules() -> tuple[Any, Any]:
+    """``(mujoco, mujoco.mjx)``, imported on first use (the optional ``mujoco`` extra)."""
+    try:
+        import mujoco
+    except ImportError as exc:
+        raise ConfigError(f"MuJoCo tasks need the mujoco extra: {EXTRA} ({exc})") from None
+    # MJX's optional Warp backend prints a line to stdout when Warp is not installed; the
+    # JAX backend this module uses does not need it, and stdout may be a --json answer.
+    with contextlib.redirect_stdout(io.StringIO()):
+        try:
+            from mujoco import mjx
+        except ImportError as exc:
+            raise ConfigError(f"MuJoCo tasks need MJX: {EXTRA} ({exc})") from None
+    return mujoco, mjx
+
+
+def gymnasium_asset(name: str) -> Path:
+    """The path of one of Gymnasium's own MuJoCo model files (``"reacher.xml"``), found
+    without importing Gymnasium's MuJoCo environments."""
+    import importlib.util
+
+    spec = importlib.util.find_spec("gymnasium")
+    assert spec is not None and spec.origin is not None  # a dependency of diffcontrol
+    return Path(spec.origin).parent / "envs" / "mujoco" / "assets" / name
+
+
+def resolve(model_file: str | os.PathLike[str]) -> Path:
+    """``model_file`` as a path: an existing file, or the name of a Gymnasium asset."""
+    path = Path(model_file).expanduser()
+    if path.is_file():
+        return path
+    asset = gymnasium_asset(str(model_file))
+    if os.sep not in str(model_file) and asset.is_file():
+        return asset
+    raise ConfigError(
+        f"MuJoCo model file {str(model_file)!r} does not exist; give the path of an MJCF "
+        "file, or the name of one of Gymnasium's assets (e.g. 'reacher.xml')"
+    )
+
+
+class MjxSystem:
+    """One MuJoCo model on the device, stepped by MJX.
+
+    Args:
+        model_file: an MJCF path, or the name of one of Gymnasium's assets.
+        iterations: the constraint solver's iterations (``model.opt.iterations``); 1, the
+            default, is what reverse-mode differentiation needs (module docstring).
+
+    Attributes:
+        mj_model: MuJoCo's ``MjModel`` (the C engine's), with ``iterations`` set.
+        model: the ``mjx.Model``.
+        nq, nv, nu: sizes of ``qpos``, ``qvel`` and ``ctrl``.
+        dt: the duration of one physics step (``opt.timestep``, s).
+    """
+
+    def __init__(self, model_file: str | os.PathLike[str], iterations: int = 1):
+        mujoco, mjx = modules()
+        self.path = resolve(model_file)
+        try:
+            mj_model = mujoco.MjModel.from_xml_path(str(self.path))
+        except ValueError as exc:  # MuJoCo's parser: one line naming the element
+            msg = " ".join(str(exc).split())
+            raise ConfigError(f"MuJoCo cannot load {str(self.path)!r}: {msg}") from None
+        mj_model.opt.iterations = iterations
+        self.mj_model = mj_model
+        self.nq, self.nv, self.nu = mj_model.nq, mj_model.nv, mj_model.nu
+        self.dt = float(mj_model.opt.timestep)
+        self._mjx = mjx
+        # Concrete arrays even when a task first loads its model inside a trace (jit, grad):
+        # a traced value kept here would leak into the next program.
+        with jax.ensure_compile_time_eval():
+            self.model = mjx.put_model(mj_model)
+            self.data0 = mjx.make_data(self.model)
+            """MJX's ``Data`` of the model's initial configuration (every field a step reads)."""
+        self.init_qpos = np.asarray(mj_model.qpos0, np.float32)
+        """``qpos0``: the model's reference configuration (Gymnasium's ``init_qpos``)."""
+
+    def simulate(self, state: Array, ctrl: Array, frames: int) -> Any:
+        """``Data`` after ``frames`` physics steps from ``state = concat(qpos, qvel)`` with the
+        controls ``ctrl`` held (MuJoCo clamps them to the actuators' ``ctrlrange``)."""
+        nq, nv = self.nq, self.nv
+        data = self.data0.replace(
+            qpos=state[:nq], qvel=state[nq : nq + nv], ctrl=jnp.asarray(ctrl, state.dtype)
+        )
+        step = functools.partial(self._mjx.step, self.model)
+        return jax.lax.fori_loop(0, frames, lambda _, d: step(d), data)

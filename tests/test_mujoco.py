@@ -1,0 +1,150 @@
+"""MuJoCo tasks through MJX against Gymnasium's own MuJoCo environments, and their gradients.
+
+Skipped without the ``mujoco`` extra; ``.ci/run`` installs it and runs these.
+
+Tolerances (the double pendulum, ``InvertedDoublePendulum-v5``):
+
+- float64 (``jax.enable_x64(True)``), one step of 5 RK4 physics steps from states of the reset
+  distribution and beyond it, the slider off its limit: ``ATOL_F64 = 1e-12`` on the
+  observation, the reward and the state. Both sides run MuJoCo's algorithms in IEEE double
+  (MJX's one constraint-solver iteration against the C engine's 100 solves no constraint here:
+  none is active); measured 8e-15.
+- float32, the default: ``ATOL_F32 = 1e-5`` on the observation and the reward (measured 2e-6:
+  float32 rounding through 20 RK4 stages at speeds of a few rad/s).
+- At the slider's limit the two differ by design (one solver iteration against 100): one step
+  from x = 0.98 m at 2 m/s moved the velocities 0.06 apart; ``test_the_limit_is_where_they_part``
+  checks that the difference is there and bounded, so that docs/mujoco.md's figure stays true.
+- Gradients of a 3-action loss, reverse mode (what training uses) against central finite
+  differences in float64, ``h = 1e-6``: truncation and rounding are both ~1e-10 relative;
+  measured 1e-9, ``RTOL_GRAD = 1e-6``.
+"""
+
+from __future__ import annotations
+
+import sys
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+pytest.importorskip("mujoco")
+pytest.importorskip("mujoco.mjx")
+gymnasium = pytest.importorskip("gymnasium")
+
+from diffcontrol.builtin.mujoco.tasks import InvertedDoublePendulum  # noqa: E402
+from diffcontrol.errors import ConfigError  # noqa: E402
+from diffcontrol.systems import mjx as mjx_system  # noqa: E402
+
+pytestmark = pytest.mark.mujoco
+
+ATOL_F64 = 1e-12
+ATOL_F32 = 1e-5
+RTOL_GRAD = 1e-6
+N_STATES = 100
+
+
+def _cases(task, n, seed=0):
+    """States from the reset distribution, every other one pushed further (0.3 rad, m, /s),
+    and a random force for each."""
+    rng = np.random.default_rng(seed)
+    params = task.default_params()
+    states = np.array(
+        jax.vmap(lambda k: task.reset(k, params))(jax.random.split(jax.random.PRNGKey(seed), n))
+    )
+    states[::2, :6] += rng.normal(0.0, 0.3, (len(states[::2]), 6))
+    return states.astype(np.float64), rng.uniform(-1.0, 1.0, (n, 1))
+
+
+def _against_gymnasium(task, states, actions, dtype):
+    env = gymnasium.make("InvertedDoublePendulum-v5").unwrapped
+    env.reset(seed=0)
+    step = jax.jit(jax.vmap(task.step, in_axes=(None, 0, 0)))
+    ns, rewards, terms = step(
+        task.default_params(), jnp.asarray(states, dtype), jnp.asarray(actions, dtype)
+    )
+    obs = np.asarray(jax.vmap(task.observe)(ns))
+    worst = dict(obs=0.0, reward=0.0, state=0.0)
+    for i, (state, action) in enumerate(zip(states, actions)):
+        task.set_gym_state(env, state)
+        o, r, term, truncated, _ = env.step(action)
+        assert not truncated and bool(terms[i]) == term, i
+        worst["obs"] = max(worst["obs"], float(np.abs(obs[i] - o).max()))
+        worst["reward"] = max(worst["reward"], abs(float(rewards[i]) - r))
+        qs = np.concatenate([env.data.qpos, env.data.qvel])
+        worst["state"] = max(worst["state"], float(np.abs(np.asarray(ns[i, :6]) - qs).max()))
+    env.close()
+    return worst, np.asarray(terms)
+
+
+def test_the_double_pendulum_steps_as_gymnasium_in_float64():
+    with jax.enable_x64(True):
+        task = InvertedDoublePendulum()  # its own model, loaded in float64
+        states, actions = _cases(task, N_STATES)
+        worst, terms = _against_gymnasium(task, states, actions, jnp.float64)
+    assert max(worst.values()) < ATOL_F64, worst
+    assert 0 < terms.sum() < len(terms)  # both outcomes of the termination test occur
+
+
+def test_the_double_pendulum_steps_as_gymnasium_in_float32():
+    task = InvertedDoublePendulum()
+    states, actions = _cases(task, N_STATES, seed=1)
+    worst, _ = _against_gymnasium(task, states, actions, jnp.float32)
+    assert worst["obs"] < ATOL_F32 and worst["reward"] < ATOL_F32, worst
+
+
+def test_the_limit_is_where_they_part():
+    """Against the slider's limit, MJX's one solver iteration is not the C engine's converged
+    solve: the step differs, by a bounded amount, and both see the constraint force."""
+    with jax.enable_x64(True):
+        task = InvertedDoublePendulum()
+        state = np.zeros(7)
+        state[0], state[3] = 0.98, 2.0  # running into the limit at x = 1 m
+        worst, _ = _against_gymnasium(task, state[None], np.array([[1.0]]), jnp.float64)
+    assert 1e-3 < worst["obs"] < 0.5, worst
+
+
+def test_gradients_through_three_actions_match_finite_differences():
+    with jax.enable_x64(True):
+        task = InvertedDoublePendulum()
+        params = task.default_params()
+
+        def loss(state, actions):
+            def body(s, u):
+                ns, reward, _ = task.step(params, s, u)
+                return ns, 10.0 - reward
+
+            return jax.lax.scan(body, state, actions)[1].sum()
+
+        state = task.reset(jax.random.PRNGKey(3), params)
+        actions = jnp.asarray(np.random.default_rng(3).uniform(-0.5, 0.5, (3, 1)))
+        g_state, g_actions = jax.jit(jax.grad(loss, argnums=(0, 1)))(state, actions)
+        f = jax.jit(loss)
+        h = 1e-6
+
+        def fd(x, i, other_first):
+            e = jnp.zeros_like(x).at[i].set(h)
+            args = (lambda y: (y, actions)) if other_first else (lambda y: (state, y))
+            return (f(*args(x + e)) - f(*args(x - e))) / (2 * h)
+
+        fd_actions = np.array([fd(actions, (i, 0), False) for i in range(3)])
+        fd_state = np.array([fd(state, i, True) for i in range(6)])
+    np.testing.assert_allclose(g_actions[:, 0], fd_actions, rtol=RTOL_GRAD, atol=1e-9)
+    np.testing.assert_allclose(g_state[:6], fd_state, rtol=RTOL_GRAD, atol=1e-9)
+    assert np.abs(fd_actions).min() > 1e-3  # the force reaches the loss
+
+
+def test_a_missing_model_file_is_one_line(tmp_path):
+    with pytest.raises(ConfigError, match="does not exist; give the path of an MJCF"):
+        mjx_system.MjxSystem(tmp_path / "robot.xml")
+    bad = tmp_path / "bad.xml"
+    bad.write_text("<mujoco><worldbody><body><joint type='nonsense'/></body></worldbody></mujoco>")
+    with pytest.raises(ConfigError, match="MuJoCo cannot load") as info:
+        mjx_system.MjxSystem(bad)
+    assert "\n" not in str(info.value)
+
+
+def test_without_the_extra_a_mujoco_task_says_what_to_install(monkeypatch):
+    monkeypatch.setitem(sys.modules, "mujoco", None)  # import mujoco raises ImportError
+    with pytest.raises(ConfigError, match=r"pip install 'diffcontrol\[mujoco\]'"):
+        InvertedDoublePendulum().system  # noqa: B018
