@@ -2,26 +2,31 @@
 
 Skipped without the ``mujoco`` extra; ``.ci/run`` installs it and runs these.
 
-Tolerances (the double pendulum, ``InvertedDoublePendulum-v5``):
+Each task (``InvertedDoublePendulum-v5``, ``Reacher-v5``, ``Swimmer-v5``, and the user's file
+``examples/mujoco_task.py`` on ``InvertedPendulum-v5``) against ``gymnasium.make(<id>)``, steps
+where a joint limit engages left out (counted: fewer than half of the cases):
 
-- float64 (``jax.enable_x64(True)``), one step of 5 RK4 physics steps from states of the reset
-  distribution and beyond it, the slider off its limit: ``ATOL_F64 = 1e-12`` on the
-  observation, the reward and the state. Both sides run MuJoCo's algorithms in IEEE double
-  (MJX's one constraint-solver iteration against the C engine's 100 solves no constraint here:
-  none is active); measured 8e-15.
+- float64 (``jax.enable_x64(True)``), one step (2-5 RK4 physics steps) from states of the
+  reset distribution and beyond it: ``ATOL_F64 = 1e-12`` on the observation, the reward and
+  the state. Both sides run MuJoCo's algorithms in IEEE double (MJX's one constraint-solver
+  iteration against the C engine's 100 solves no constraint here: none is active); measured
+  8e-15.
 - float32, the default: ``ATOL_F32 = 1e-5`` on the observation and the reward (measured 2e-6:
   float32 rounding through 20 RK4 stages at speeds of a few rad/s).
-- At the slider's limit the two differ by design (one solver iteration against 100): one step
-  from x = 0.98 m at 2 m/s moved the velocities 0.06 apart; ``test_the_limit_is_where_they_part``
-  checks that the difference is there and bounded, so that docs/mujoco.md's figure stays true.
-- Gradients of a 3-action loss, reverse mode (what training uses) against central finite
-  differences in float64, ``h = 1e-6``: truncation and rounding are both ~1e-10 relative;
-  measured 1e-9, ``RTOL_GRAD = 1e-6``.
+- At the double pendulum's slider limit the two differ by design (one solver iteration against
+  100): one step from x = 0.98 m at 2 m/s moved the velocities 0.06 apart;
+  ``test_the_limit_is_where_they_part`` checks that the difference is there and bounded.
+- Gradients (reverse mode, what training uses; the unconstrained step's, ``systems.mjx``) of
+  the double pendulum's 3-action loss against central finite differences of the step itself
+  in float64, ``h = 1e-6``: truncation and rounding are both ~1e-10 relative; measured 1e-9,
+  ``RTOL_GRAD = 1e-6``.
 """
 
 from __future__ import annotations
 
+import importlib.util
 import sys
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -32,7 +37,7 @@ pytest.importorskip("mujoco")
 pytest.importorskip("mujoco.mjx")
 gymnasium = pytest.importorskip("gymnasium")
 
-from diffcontrol.builtin.mujoco.tasks import InvertedDoublePendulum  # noqa: E402
+from diffcontrol.builtin.mujoco.tasks import InvertedDoublePendulum, Reacher, Swimmer  # noqa: E402
 from diffcontrol.errors import ConfigError  # noqa: E402
 from diffcontrol.systems import mjx as mjx_system  # noqa: E402
 
@@ -44,53 +49,94 @@ RTOL_GRAD = 1e-6
 N_STATES = 100
 
 
+def _example_task():
+    """``examples/mujoco_task.py``'s task: a user's file on Gymnasium's ``InvertedPendulum-v5``."""
+    path = Path(__file__).resolve().parents[1] / "examples" / "mujoco_task.py"
+    spec = importlib.util.spec_from_file_location("mujoco_task", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.Balance
+
+
+TASKS = {
+    "InvertedDoublePendulum-v5": InvertedDoublePendulum,
+    "Reacher-v5": Reacher,
+    "Swimmer-v5": Swimmer,
+    "InvertedPendulum-v5": _example_task(),
+}
+
+
 def _cases(task, n, seed=0):
     """States from the reset distribution, every other one pushed further (0.3 rad, m, /s),
-    and a random force for each."""
+    and a random action for each."""
     rng = np.random.default_rng(seed)
     params = task.default_params()
     states = np.array(
         jax.vmap(lambda k: task.reset(k, params))(jax.random.split(jax.random.PRNGKey(seed), n))
     )
-    states[::2, :6] += rng.normal(0.0, 0.3, (len(states[::2]), 6))
-    return states.astype(np.float64), rng.uniform(-1.0, 1.0, (n, 1))
+    size = task.system.nq + task.system.nv
+    states[::2, :size] += rng.normal(0.0, 0.3, (len(states[::2]), size))
+    return states.astype(np.float64), rng.uniform(-1.0, 1.0, (n, task.action_size))
 
 
-def _against_gymnasium(task, states, actions, dtype):
-    env = gymnasium.make("InvertedDoublePendulum-v5").unwrapped
+def _against_gymnasium(task, states, actions, dtype, limits=False):
+    env = gymnasium.make(task.gym_id).unwrapped
     env.reset(seed=0)
     step = jax.jit(jax.vmap(task.step, in_axes=(None, 0, 0)))
     ns, rewards, terms = step(
         task.default_params(), jnp.asarray(states, dtype), jnp.asarray(actions, dtype)
     )
     obs = np.asarray(jax.vmap(task.observe)(ns))
+    size = task.system.nq + task.system.nv
     worst = dict(obs=0.0, reward=0.0, state=0.0)
     for i, (state, action) in enumerate(zip(states, actions)):
         task.set_gym_state(env, state)
         o, r, term, truncated, _ = env.step(action)
         assert not truncated and bool(terms[i]) == term, i
+        if env.data.nefc:  # a joint limit engaged: compared only with limits=True
+            worst["limited"] = worst.get("limited", 0) + 1
+            if not limits:
+                continue
         worst["obs"] = max(worst["obs"], float(np.abs(obs[i] - o).max()))
         worst["reward"] = max(worst["reward"], abs(float(rewards[i]) - r))
         qs = np.concatenate([env.data.qpos, env.data.qvel])
-        worst["state"] = max(worst["state"], float(np.abs(np.asarray(ns[i, :6]) - qs).max()))
+        worst["state"] = max(worst["state"], float(np.abs(np.asarray(ns[i, :size]) - qs).max()))
     env.close()
     return worst, np.asarray(terms)
 
 
-def test_the_double_pendulum_steps_as_gymnasium_in_float64():
+@pytest.mark.parametrize("gym_id", TASKS)
+def test_steps_as_gymnasium_in_float64(gym_id):
     with jax.enable_x64(True):
-        task = InvertedDoublePendulum()  # its own model, loaded in float64
+        task = TASKS[gym_id]()  # its own model, loaded in float64
         states, actions = _cases(task, N_STATES)
         worst, terms = _against_gymnasium(task, states, actions, jnp.float64)
-    assert max(worst.values()) < ATOL_F64, worst
-    assert 0 < terms.sum() < len(terms)  # both outcomes of the termination test occur
+    # Most steps are off the limits (Reacher's target, pushed past its range, is not always).
+    assert worst.get("limited", 0) < len(states) // 2, worst
+    assert max(worst["obs"], worst["reward"], worst["state"]) < ATOL_F64, worst
+    if gym_id == "InvertedDoublePendulum-v5":  # both outcomes of the termination test occur
+        assert 0 < terms.sum() < len(terms)
 
 
-def test_the_double_pendulum_steps_as_gymnasium_in_float32():
-    task = InvertedDoublePendulum()
+@pytest.mark.parametrize("gym_id", TASKS)
+def test_steps_as_gymnasium_in_float32(gym_id):
+    task = TASKS[gym_id]()
     states, actions = _cases(task, N_STATES, seed=1)
     worst, _ = _against_gymnasium(task, states, actions, jnp.float32)
+    assert worst.get("limited", 0) < len(states) // 2, worst
     assert worst["obs"] < ATOL_F32 and worst["reward"] < ATOL_F32, worst
+
+
+@pytest.mark.parametrize("gym_id", TASKS)
+def test_a_reset_observes_what_gymnasiums_reset_does(gym_id):
+    """The first observation: the reset state's forward pass (Reacher's fingertip to target)."""
+    with jax.enable_x64(True):
+        task = TASKS[gym_id]()
+        state = np.asarray(task.reset(jax.random.PRNGKey(0), task.default_params()))
+        env = gymnasium.make(gym_id).unwrapped
+        env.reset(seed=0)
+        task.set_gym_state(env, state)
+        np.testing.assert_allclose(task.observe(state), env._get_obs(), atol=ATOL_F64)
 
 
 def test_the_limit_is_where_they_part():
@@ -100,8 +146,10 @@ def test_the_limit_is_where_they_part():
         task = InvertedDoublePendulum()
         state = np.zeros(7)
         state[0], state[3] = 0.98, 2.0  # running into the limit at x = 1 m
-        worst, _ = _against_gymnasium(task, state[None], np.array([[1.0]]), jnp.float64)
-    assert 1e-3 < worst["obs"] < 0.5, worst
+        worst, _ = _against_gymnasium(
+            task, state[None], np.array([[1.0]]), jnp.float64, limits=True
+        )
+    assert worst["limited"] == 1 and 1e-3 < worst["obs"] < 0.5, worst
 
 
 def test_gradients_through_three_actions_match_finite_differences():
@@ -148,3 +196,24 @@ def test_without_the_extra_a_mujoco_task_says_what_to_install(monkeypatch):
     monkeypatch.setitem(sys.modules, "mujoco", None)  # import mujoco raises ImportError
     with pytest.raises(ConfigError, match=r"pip install 'diffcontrol\[mujoco\]'"):
         InvertedDoublePendulum().system  # noqa: B018
+
+
+def test_an_episode_is_recorded_with_the_tasks_states():
+    """``evaluation.record_episode`` (the run's plots) reads the states of Gymnasium's MuJoCo
+    environment through the task (``gym_state``): ``qpos``, ``qvel`` and the extras."""
+    from diffcontrol.evaluation import record_episode
+
+    class Push:
+        def action(self, obs):
+            return np.array([0.3])
+
+        def __call__(self, obs):
+            return np.array([0.3], np.float32)
+
+    task = InvertedDoublePendulum()
+    rec = record_episode(Push(), task, seed=0)
+    assert rec.states.shape == (len(rec.actions) + 1, 7)
+    assert 0 < len(rec.actions) < 1000  # a steady push topples the poles
+    env = gymnasium.make("InvertedDoublePendulum-v5")
+    obs, _ = env.reset(seed=0)
+    np.testing.assert_allclose(rec.states[0, :3], [obs[0], *np.arctan2(obs[1:3], obs[3:5])])

@@ -90,6 +90,13 @@ def set_gym_state(task: Any, env: Any, state: np.ndarray) -> None:
 
 
 @task_hook
+def gym_state(task: Any, env: Any) -> np.ndarray:
+    """The task's state of the Gymnasium twin ``env`` (float64, laid out as ``reset``'s), for
+    recordings: the classic-control twins' ``env.unwrapped.state`` by default."""
+    return np.array(env.unwrapped.state, dtype=np.float64)
+
+
+@task_hook
 def gym_label(task: Any) -> str:
     """How evaluation results name the environment: ``gym_id``, or the task's own
     ``diffcontrol/<Name>-v0``."""

@@ -313,13 +313,13 @@ def record_episode(
         policy.reset()
     with _system_errors(label, real), contextlib.closing(env):
         obs, _ = env.reset(seed=seed)
-        states = [np.array(env.unwrapped.state, dtype=np.float64)]
+        states = [_gym.gym_state(task, env)]
         actions, rewards = [], []
         done = False
         while not done:
             actions.append(np.asarray(policy.action(obs), np.float64).reshape(-1))
             obs, reward, terminated, truncated, _ = env.step(policy(obs))
-            states.append(np.array(env.unwrapped.state, dtype=np.float64))
+            states.append(_gym.gym_state(task, env))
             rewards.append(float(reward))
             done = terminated or truncated
         dt = float(getattr(env.unwrapped, "dt", getattr(env.unwrapped, "tau", 0.02)))

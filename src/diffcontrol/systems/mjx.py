@@ -8,14 +8,13 @@ MJX's ``Data`` after the last one (positions, site poses, constraint forces of t
 
 Where the derivative is non-smooth or missing:
 
-- reverse mode needs ``model.opt.iterations = 1``: with more, MJX's constraint solver runs a
-  ``lax.while_loop``, which JAX cannot differentiate in reverse mode. One iteration of the
-  Newton solver solves a model without active constraints exactly (it has no constraint to
-  solve), so the step equals MuJoCo's C engine there; where a joint limit or a contact is
-  active, the one-iteration solve differs from the converged one and the two drift apart
-  (docs/mujoco.md measures it for each built-in model);
-- a joint limit or a contact switches on at a distance: a kink in the step, and a gradient
-  that sees only the side of the switch the state is on.
+- the step runs ``model.opt.iterations = 1`` of the constraint solver: with more, MJX runs a
+  ``lax.while_loop``, which JAX cannot differentiate in reverse mode. One iteration solves a
+  model without active constraints exactly (there is nothing to solve), so the step equals
+  MuJoCo's C engine there; where a joint limit or a contact is active, the one-iteration solve
+  differs from the converged one and the two drift apart (``tests/test_mujoco.py``);
+- the derivative of a step is that of the step without its constraint solver (``simulate``):
+  exact where no constraint is active, blind to a constraint's force where one is.
 
 The ``mujoco`` extra (``pip install 'diffcontrol[mujoco]'``) installs MuJoCo and MJX; without
 it, making a system raises ``ConfigError`` that says so.
@@ -24,7 +23,6 @@ it, making a system raises ``ConfigError`` that says so.
 from __future__ import annotations
 
 import contextlib
-import functools
 import io
 import os
 from pathlib import Path
@@ -114,15 +112,62 @@ class MjxSystem:
             self.model = mjx.put_model(mj_model)
             self.data0 = mjx.make_data(self.model)
             """MJX's ``Data`` of the model's initial configuration (every field a step reads)."""
+            free = mujoco.MjModel.from_xml_path(str(self.path))
+            free.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONSTRAINT
+            self.unconstrained = mjx.put_model(free)
+            """The model with its constraint solver switched off: the steps' derivatives."""
+            self.data0_unconstrained = mjx.make_data(self.unconstrained)
         self.init_qpos = np.asarray(mj_model.qpos0, np.float32)
         """``qpos0``: the model's reference configuration (Gymnasium's ``init_qpos``)."""
 
+    def body_id(self, name: str) -> int:
+        """The index of body ``name``; ``ConfigError`` naming the bodies there are if none."""
+        mujoco, _ = modules()
+        index = mujoco.mj_name2id(self.mj_model, mujoco.mjtObj.mjOBJ_BODY, name)
+        if index < 0:
+            names = [self.mj_model.body(i).name for i in range(self.mj_model.nbody)]
+            raise ConfigError(f"model {self.path.name!r} has no body {name!r}; it has {names}")
+        return int(index)
+
+    def forward(self, state: Array) -> Any:
+        """``Data`` of ``state = concat(qpos, qvel)`` after MuJoCo's forward pass (positions,
+        velocities, constraint forces), as Gymnasium's ``set_state`` leaves it."""
+        nq, nv = self.nq, self.nv
+        data = self.data0.replace(qpos=state[:nq], qvel=state[nq : nq + nv])
+        return self._mjx.forward(self.model, data)
+
     def simulate(self, state: Array, ctrl: Array, frames: int) -> Any:
         """``Data`` after ``frames`` physics steps from ``state = concat(qpos, qvel)`` with the
-        controls ``ctrl`` held (MuJoCo clamps them to the actuators' ``ctrlrange``)."""
+        controls ``ctrl`` held (MuJoCo clamps them to the actuators' ``ctrlrange``).
+
+        Each physics step's value is MJX's step of the model; its derivative is that of the
+        same step with the constraint solver switched off (``unconstrained``). The two are
+        the same function wherever no constraint is active. Where one is (a joint at its
+        limit), the gradient does not see the constraint force. MJX's own derivative of its
+        solver is NaN at random states with no constraint active (its line search's
+        tolerance takes the square root of an exact zero), which ends training.
+        """
         nq, nv = self.nq, self.nv
         data = self.data0.replace(
             qpos=state[:nq], qvel=state[nq : nq + nv], ctrl=jnp.asarray(ctrl, state.dtype)
         )
-        step = functools.partial(self._mjx.step, self.model)
-        return jax.lax.fori_loop(0, frames, lambda _, d: step(d), data)
+        return jax.lax.fori_loop(0, frames, lambda _, d: self._step(d), data)
+
+    def _step(self, data: Any) -> Any:
+        exact = jax.lax.stop_gradient(self._mjx.step(self.model, data))
+        # The unconstrained model's Data has no constraint rows: its own, in this state.
+        start = self.data0_unconstrained.replace(
+            qpos=data.qpos, qvel=data.qvel, act=data.act, ctrl=data.ctrl, time=data.time
+        )
+        smooth = self._mjx.step(self.unconstrained, start)
+
+        def value_of_one_gradient_of_other(e: Any, s: Any) -> Any:
+            if not jnp.issubdtype(e.dtype, jnp.inexact) or e.shape != s.shape:
+                return e
+            return s + jax.lax.stop_gradient(e - s)
+
+        fields = {
+            name: value_of_one_gradient_of_other(getattr(exact, name), getattr(smooth, name))
+            for name in ("qpos", "qvel", "act", "ctrl", "xpos", "xquat", "site_xpos", "xipos")
+        }
+        return exact.replace(**fields)

@@ -37,8 +37,9 @@ class MujocoTask(Task):
         model_file: the MJCF file: a path, or the name of one of Gymnasium's assets
             (``"inverted_double_pendulum.xml"``).
         frame_skip: physics steps per action (Gymnasium's ``frame_skip``).
-        reset_noise_scale: ``reset`` draws ``qpos0 + U(-s, s)`` and ``s N(0, 1)`` velocities,
-            Gymnasium's usual scheme; override ``reset`` for another.
+        reset_noise_scale, reset_velocity: ``reset`` draws ``qpos0 + U(-s, s)`` and velocities
+            ``s N(0, 1)`` (``"normal"``) or ``U(-s, s)`` (``"uniform"``), Gymnasium's two usual
+            schemes; override ``initial_qpos_qvel`` for another.
         solver_iterations: the constraint solver's iterations (1: reverse mode needs it).
 
     A subclass defines ``observe(state)`` and ``reward(state, action, next_state, data)``
@@ -49,6 +50,7 @@ class MujocoTask(Task):
     model_file: ClassVar[str]
     frame_skip: ClassVar[int] = 1
     reset_noise_scale: ClassVar[float] = 0.1
+    reset_velocity: ClassVar[str] = "normal"
     solver_iterations: ClassVar[int] = 1
     extras_size: ClassVar[int] = 0
 
@@ -67,11 +69,22 @@ class MujocoTask(Task):
 
     def reset(self, key: PRNGKeyArray, params: Any) -> Array:
         del params
+        qpos, qvel = self.initial_qpos_qvel(key)
+        state = jnp.concatenate([qpos, qvel])
+        if not self.extras_size:
+            return state
+        # What Gymnasium's reset observes: set_state's mj_forward of the new state.
+        return jnp.concatenate([state, self.extras(self.system.forward(state))])
+
+    def initial_qpos_qvel(self, key: PRNGKeyArray) -> tuple[Array, Array]:
+        """``(qpos, qvel)`` of a new episode: ``qpos0 + U(-s, s)``, and ``s N(0, 1)`` or ``U(-s,
+        s)`` velocities (``reset_velocity``), ``s = reset_noise_scale``."""
         sys, scale = self.system, self.reset_noise_scale
         k_pos, k_vel = jax.random.split(key)
         qpos = sys.init_qpos + jax.random.uniform(k_pos, (sys.nq,), minval=-scale, maxval=scale)
-        qvel = scale * jax.random.normal(k_vel, (sys.nv,))
-        return jnp.concatenate([qpos, qvel, jnp.zeros((self.extras_size,), qpos.dtype)])
+        if self.reset_velocity == "uniform":
+            return qpos, jax.random.uniform(k_vel, (sys.nv,), minval=-scale, maxval=scale)
+        return qpos, scale * jax.random.normal(k_vel, (sys.nv,))
 
     def step(self, params: Any, state: Array, action: Array) -> tuple[Array, Array, Array]:
         del params
@@ -99,6 +112,17 @@ class MujocoTask(Task):
         """The velocities in ``state``."""
         nq = self.system.nq
         return state[nq : nq + self.system.nv]
+
+    def body_id(self, name: str) -> int:
+        """The index of the model's body ``name`` (for ``data.xpos[...]``)."""
+        return self.system.body_id(name)
+
+    def gym_state(self, env: Any) -> np.ndarray:
+        """The state of Gymnasium's MuJoCo environment: its ``qpos``, ``qvel`` and the
+        ``extras`` read from its ``MjData`` (the fields MJX's ``Data`` names alike)."""
+        data = env.unwrapped.data
+        extras = np.asarray(self.extras(data), np.float64).reshape(-1)
+        return np.concatenate([data.qpos, data.qvel, extras]).astype(np.float64)
 
     def set_gym_state(self, env: Any, state: np.ndarray) -> None:
         """Put Gymnasium's MuJoCo environment into ``state`` (``set_state(qpos, qvel)``)."""
