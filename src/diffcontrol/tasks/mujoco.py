@@ -53,6 +53,7 @@ class MujocoTask(Task):
     reset_velocity: ClassVar[str] = "normal"
     solver_iterations: ClassVar[int] = 1
     extras_size: ClassVar[int] = 0
+    losses: ClassVar[tuple[str, ...]] = ("cost",)
 
     @functools.cached_property
     def system(self) -> MjxSystem:
@@ -103,6 +104,12 @@ class MujocoTask(Task):
         self, state: Array, action: Array, next_state: Array, data: Any
     ) -> tuple[Array, Array]:
         """``(reward, terminated)`` of one step; ``data`` is MJX's ``Data`` after it."""
+
+    def step_loss(self, name: str) -> Any:
+        """``cost``: minus the step's reward (a subclass adds or replaces losses)."""
+        if name == "cost":
+            return lambda params, state, action, next_state, reward: -reward
+        raise KeyError(name)
 
     def qpos(self, state: Array) -> Array:
         """The positions in ``state``."""

@@ -128,7 +128,6 @@ class Reacher(MujocoTask):
     action_head = "tanh"
     action_low = (-1.0, -1.0)
     action_high = (1.0, 1.0)
-    losses = ("cost",)
 
     def initial_qpos_qvel(self, key):
         # Gymnasium's reset_model: arm angles qpos0 + U(-0.1, 0.1), a target uniform in the
@@ -158,11 +157,6 @@ class Reacher(MujocoTask):
     def reward(self, state, action, next_state, data):
         reward = -jnp.linalg.norm(self.to_target(data)) - jnp.sum(jnp.square(action))
         return reward, jnp.asarray(False)
-
-    def step_loss(self, name):
-        if name == "cost":
-            return lambda params, state, action, next_state, reward: -reward
-        raise KeyError(name)
 
     def default_config(self):
         # Whole 50-step episodes of 32 simulations per update.
@@ -203,7 +197,6 @@ class Swimmer(MujocoTask):
     action_head = "tanh"
     action_low = (-1.0, -1.0)
     action_high = (1.0, 1.0)
-    losses = ("cost",)
 
     def observe(self, state):
         return state[2:]
@@ -211,11 +204,6 @@ class Swimmer(MujocoTask):
     def reward(self, state, action, next_state, data):
         speed = (next_state[0] - state[0]) / self.dt
         return speed - SWIMMER_CTRL_COST * jnp.sum(jnp.square(action)), jnp.asarray(False)
-
-    def step_loss(self, name):
-        if name == "cost":
-            return lambda params, state, action, next_state, reward: -reward
-        raise KeyError(name)
 
     def default_config(self):
         return TrainConfig(
