@@ -1,7 +1,7 @@
 """Benchmark of the MuJoCo tasks: BPTT through MJX, judged in Gymnasium's own environments.
 
-Each run is the real command line, `diffcontrol train diffcontrol.builtin.mujoco.tasks:CLASS
---out DIR --seed S [FLAGS]`, in a fresh process pinned to one core (`taskset -c 0`) with the
+Each run is the real command line, `diffcontrol train NAME --out DIR --seed S [FLAGS]` (NAME:
+the task's registered name), in a fresh process pinned to one core (`taskset -c 0`) with the
 persistent compilation cache off, so `train_seconds` includes compiling from scratch. Each
 controller is then judged as issue 41 asks: `diffcontrol evaluate DIR --episodes 50 --seed
 1000`, the mean return of 50 episodes of Gymnasium's own environment on reset seeds the
@@ -29,6 +29,11 @@ sys.path.insert(0, str(HERE))
 from _common import machine, train_cli  # noqa: E402
 
 TARGETS = {"InvertedDoublePendulum": 9300.0, "Reacher": -3.75, "Swimmer": 282.0}
+NAMES = {
+    "InvertedDoublePendulum": "inverted-double-pendulum",
+    "Reacher": "reacher",
+    "Swimmer": "swimmer",
+}
 MINUTES = 30.0
 
 
@@ -43,7 +48,7 @@ def main() -> None:
     parser.add_argument("--out", type=Path)
     parser.add_argument("flags", nargs="*", help="after --: flags of `diffcontrol train`")
     args = parser.parse_args()
-    path = f"diffcontrol.builtin.mujoco.tasks:{args.task}"
+    path = NAMES[args.task]
     out = args.out or HERE / "results" / f"mujoco_{args.task}.json"
     print(f"{'seed':>4} {'train s':>8} {'compile s':>9} {'process s':>9} {'return':>10} {'std':>8}")
     rows = []

@@ -22,7 +22,9 @@ from diffcontrol.controllers import HEADS
 from diffcontrol.tasks import ContinuousTask, Task
 from diffcontrol.training import make_ode_trainer
 
-NAMES = diffcontrol.tasks.names()
+from ._tasks import walked
+
+NAMES = walked()
 DISCRETE = [n for n in NAMES if isinstance(diffcontrol.make(n), Task)]
 BATCH = 8
 

@@ -30,6 +30,8 @@ from diffcontrol.rollout import rollout
 from diffcontrol.tasks import controller_kwargs
 from diffcontrol.training import make_trainer, resolve_config, task_params
 
+from ._tasks import walked
+
 EPS_FD = 1e-6
 RTOL_FD = 1e-6
 NUM_STEPS = 30
@@ -279,7 +281,7 @@ def test_window_loss_gradient_matches_fd(task_name, overrides):
 
 
 def _names_of(kind: type) -> list[str]:
-    return [n for n in diffcontrol.tasks.names() if isinstance(diffcontrol.tasks.make(n), kind)]
+    return [n for n in walked() if isinstance(diffcontrol.tasks.make(n), kind)]
 
 
 @pytest.fixture(scope="module", params=_names_of(diffcontrol.tasks.Task))

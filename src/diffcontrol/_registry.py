@@ -29,9 +29,10 @@ class Builtin(NamedTuple):
     """One built-in task: its name, its class (``module:Class``), what ``list`` says of it
     (``summary``, ``losses``, ``recipes``), its Gymnasium environment (the id
     ``diffcontrol/<env_name>-v0`` of ``env``, a class of ``diffcontrol.envs``, episodes of
-    ``steps``, the reward ``threshold``) and ``hooks``: the module that registers what the
+    ``steps``, the reward ``threshold``), ``hooks``: the module that registers what the
     layers do with the task their own way, imported when a layer's hook first meets it
-    (``tasks._hooks``)."""
+    (``tasks._hooks``), and ``extra``: the pip extra its simulator needs (``mujoco``), if
+    any."""
 
     name: str
     path: str
@@ -43,6 +44,7 @@ class Builtin(NamedTuple):
     steps: int
     threshold: float | None
     hooks: str | None = None
+    extra: str | None = None
 
 
 BUILTIN: tuple[Builtin, ...] = (
@@ -124,6 +126,36 @@ BUILTIN: tuple[Builtin, ...] = (
         ("grid-value",),
         "MountainCarContinuous", "TaskEnv", 999, 90.0,
     ),
+    Builtin(
+        "inverted-double-pendulum",
+        "diffcontrol.builtin.mujoco.tasks:InvertedDoublePendulum",
+        "InvertedDoublePendulum-v5 by BPTT through MJX on Gymnasium's own model file",
+        ("cost",),
+        (),
+        "InvertedDoublePendulum", "TaskEnv", 1000, 9100.0,
+        "diffcontrol.builtin.mujoco.zoo",
+        extra="mujoco",
+    ),
+    Builtin(
+        "reacher",
+        "diffcontrol.builtin.mujoco.tasks:Reacher",
+        "Reacher-v5 by BPTT through MJX on Gymnasium's own model file",
+        ("cost",),
+        (),
+        "Reacher", "TaskEnv", 50, -3.75,
+        "diffcontrol.builtin.mujoco.zoo",
+        extra="mujoco",
+    ),
+    Builtin(
+        "swimmer",
+        "diffcontrol.builtin.mujoco.tasks:Swimmer",
+        "Swimmer-v5 by BPTT through MJX on Gymnasium's own model file",
+        ("cost",),
+        (),
+        "Swimmer", "TaskEnv", 1000, 360.0,
+        "diffcontrol.builtin.mujoco.zoo",
+        extra="mujoco",
+    ),
 )  # fmt: skip
 
 OTHER_ENVS: tuple[tuple[str, str, int], ...] = (
@@ -136,6 +168,12 @@ OTHER_ENVS: tuple[tuple[str, str, int], ...] = (
 def builtin(name: str) -> Builtin | None:
     """The built-in task called ``name``, or ``None``."""
     return next((row for row in BUILTIN if row.name == name), None)
+
+
+def extra_of(name: str) -> str | None:
+    """The pip extra that the built-in task ``name`` needs (its row's ``extra``), or ``None``."""
+    row = builtin(name)
+    return None if row is None else row.extra
 
 
 def hooks_of(cls: type) -> str | None:
@@ -177,7 +215,8 @@ def register_envs() -> None:
 
 
 def listing() -> list[str]:
-    """The lines of ``diffcontrol list``: one per task with its summary, losses and recipes.
+    """The lines of ``diffcontrol list``: one per task with its summary, losses and recipes
+    (and the pip extra it needs, if any).
 
     The built-in tasks come from ``BUILTIN`` without importing JAX, or from the registry where
     ``diffcontrol.tasks`` is already imported (so tasks registered in this process are listed
@@ -190,7 +229,8 @@ def listing() -> list[str]:
         live = [tasks.make(name) for name in tasks.names()]
         rows = [(t.name, t.summary, tuple(t.losses), tuple(t.recipes())) for t in live]
     lines = [
-        f"{name:<26} {summary}  [losses: {'/'.join(losses)}; recipes: {', '.join(recipes) or '-'}]"
+        f"{name:<26} {summary}  [losses: {'/'.join(losses)}; recipes: {', '.join(recipes) or '-'}"
+        + (f"; needs the {extra_of(name)!r} extra]" if extra_of(name) else "]")
         for name, summary, losses, recipes in rows
     ]
     listed = {row[0] for row in rows}

@@ -119,6 +119,7 @@ class Reacher(MujocoTask):
     name = "reacher"
     summary = "Reacher-v5 by BPTT through MJX on Gymnasium's own model file"
     gym_id = "Reacher-v5"
+    reward_threshold = -3.75
     model_file = "reacher.xml"
     frame_skip = 2
     extras_size = 2
@@ -188,6 +189,7 @@ class Swimmer(MujocoTask):
     name = "swimmer"
     summary = "Swimmer-v5 by BPTT through MJX on Gymnasium's own model file"
     gym_id = "Swimmer-v5"
+    reward_threshold = 360.0
     model_file = "swimmer.xml"
     frame_skip = 4
     reset_velocity = "uniform"  # Gymnasium's: U(-0.1, 0.1) positions and speeds
