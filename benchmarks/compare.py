@@ -1,4 +1,5 @@
-"""Benchmark: diffcontrol against RL baselines on CartPole and Pendulum, 5 seeds each.
+"""Benchmark: diffcontrol against RL baselines on CartPole and Pendulum, 5 seeds each (or on
+other tasks with baselines, such as the MuJoCo ones at a fixed budget; examples below).
 
 Each task is the real command line, `diffcontrol compare TASK --seeds 5`, in a fresh
 process pinned to one core (`taskset -c CORE`, default core 1) with the persistent
@@ -9,6 +10,8 @@ and SAC and TD3 (Pendulum-v1) with rl-baselines3-zoo's published settings and bu
     python benchmarks/compare.py                      # both tasks, 5 seeds (about an hour)
     python benchmarks/compare.py --tasks cartpole --seeds 2
     python benchmarks/compare.py --resume             # continue an interrupted benchmark
+    python benchmarks/compare.py --tasks swimmer --seeds 1 --compare-args "--rl-steps 200000" \
+        --out benchmarks/results/compare_swimmer.json
 
 Prints the tables and a check of the claim "at least 10x fewer simulated episodes and 10x
 less wall-clock than the best RL baseline", and writes benchmarks/results/compare.json

@@ -152,34 +152,40 @@ def test_the_limit_is_where_they_part():
     assert worst["limited"] == 1 and 1e-3 < worst["obs"] < 0.5, worst
 
 
-def test_gradients_through_three_actions_match_finite_differences():
+@pytest.mark.parametrize("gym_id", ["InvertedDoublePendulum-v5", "Reacher-v5", "Swimmer-v5"])
+def test_gradients_through_three_actions_match_finite_differences(gym_id):
+    """The loss of three steps from a reset state (off the joint limits) against central
+    differences, in float64, by the actions and by every position and speed."""
     with jax.enable_x64(True):
-        task = InvertedDoublePendulum()
+        task = TASKS[gym_id]()
         params = task.default_params()
+        size = task.system.nq + task.system.nv
 
         def loss(state, actions):
             def body(s, u):
                 ns, reward, _ = task.step(params, s, u)
-                return ns, 10.0 - reward
+                return ns, -reward
 
             return jax.lax.scan(body, state, actions)[1].sum()
 
         state = task.reset(jax.random.PRNGKey(3), params)
-        actions = jnp.asarray(np.random.default_rng(3).uniform(-0.5, 0.5, (3, 1)))
+        actions = jnp.asarray(np.random.default_rng(3).uniform(-0.5, 0.5, (3, task.action_size)))
         g_state, g_actions = jax.jit(jax.grad(loss, argnums=(0, 1)))(state, actions)
         f = jax.jit(loss)
         h = 1e-6
 
-        def fd(x, i, other_first):
+        def fd(x, i, by_state):
             e = jnp.zeros_like(x).at[i].set(h)
-            args = (lambda y: (y, actions)) if other_first else (lambda y: (state, y))
+            args = (lambda y: (y, actions)) if by_state else (lambda y: (state, y))
             return (f(*args(x + e)) - f(*args(x - e))) / (2 * h)
 
-        fd_actions = np.array([fd(actions, (i, 0), False) for i in range(3)])
-        fd_state = np.array([fd(state, i, True) for i in range(6)])
-    np.testing.assert_allclose(g_actions[:, 0], fd_actions, rtol=RTOL_GRAD, atol=1e-9)
-    np.testing.assert_allclose(g_state[:6], fd_state, rtol=RTOL_GRAD, atol=1e-9)
-    assert np.abs(fd_actions).min() > 1e-3  # the force reaches the loss
+        fd_actions = np.array(
+            [[fd(actions, (t, j), False) for j in range(task.action_size)] for t in range(3)]
+        )
+        fd_state = np.array([fd(state, i, True) for i in range(size)])
+    np.testing.assert_allclose(g_actions, fd_actions, rtol=RTOL_GRAD, atol=1e-9)
+    np.testing.assert_allclose(g_state[:size], fd_state, rtol=RTOL_GRAD, atol=1e-9)
+    assert np.abs(fd_actions[0]).min() > 1e-6  # every first action reaches the loss
 
 
 def test_a_missing_model_file_is_one_line(tmp_path):
@@ -217,3 +223,27 @@ def test_an_episode_is_recorded_with_the_tasks_states():
     env = gymnasium.make("InvertedDoublePendulum-v5")
     obs, _ = env.reset(seed=0)
     np.testing.assert_allclose(rec.states[0, :3], [obs[0], *np.arctan2(obs[1:3], obs[3:5])])
+
+
+def test_the_rl_baselines_normalise_as_the_zoo_and_are_judged_on_what_they_saw():
+    """Each MuJoCo task has PPO and SAC; the zoo's PPO normalises observations (with the
+    algorithm's gamma for the rewards), and the evaluation feeds the policy its training's
+    normalised observations, not the raw ones."""
+    pytest.importorskip("stable_baselines3")
+    import diffcontrol
+    from diffcontrol.compare.baselines import build_model, rl_setup
+    from diffcontrol.compare.run import make_eval_env, sb3_act
+
+    for name in ("inverted-double-pendulum", "reacher", "swimmer"):
+        assert set(rl_setup(diffcontrol.make(name)).baselines) == {"ppo", "sac"}, name
+    task = diffcontrol.make("reacher")
+    baseline = rl_setup(task).baselines["ppo"]
+    model = build_model(baseline, lambda: make_eval_env(task), seed=0)
+    model.learn(600)
+    norm = model.get_vec_normalize_env()
+    assert norm is not None and norm.gamma == baseline.kwargs["gamma"] == 0.9
+    obs = np.stack([make_eval_env(task).reset(seed=i)[0] for i in range(4)])
+    expected, _ = model.predict(norm.normalize_obs(obs), deterministic=True)
+    np.testing.assert_array_equal(sb3_act(model)(obs), expected)
+    raw, _ = model.predict(obs, deterministic=True)
+    assert not np.allclose(raw, expected)

@@ -5,7 +5,9 @@ environment, copied value by value from its ``hyperparams/<algo>.yml`` (the file
 named next to each). Settings the zoo leaves out are Stable-Baselines3's defaults, as in the
 zoo. ``lin_X`` in the zoo is a learning rate (or clip range) that decays linearly from ``X``
 to 0 over the budget; ``noise_std`` is the standard deviation of Gaussian action noise in
-Stable-Baselines3's normalised ``[-1, 1]`` action space.
+Stable-Baselines3's normalised ``[-1, 1]`` action space; ``normalize: true`` wraps the training
+environments in ``VecNormalize`` (observations and rewards, with the algorithm's ``gamma``, as
+the zoo does), whose observation statistics the evaluation then applies.
 
 Stable-Baselines3 and PyTorch are imported only when a baseline is built, so the rest of
 diffcontrol works without them; ``require_rl()`` raises a ``DiffcontrolError`` naming the
@@ -35,6 +37,8 @@ class Baseline:
         kwargs: constructor arguments; ``"lin_X"`` strings become linear schedules,
             ``noise_std`` becomes ``NormalActionNoise``.
         source: where the values were published.
+        normalize: the zoo's ``normalize: true``: running normalisation of observations and
+            rewards (``VecNormalize``).
     """
 
     algo: str
@@ -42,6 +46,7 @@ class Baseline:
     n_envs: int = 1
     kwargs: dict[str, Any] = dataclasses.field(default_factory=dict)
     source: str = ""
+    normalize: bool = False
 
 
 ZOO = "DLR-RM/rl-baselines3-zoo"
@@ -114,10 +119,13 @@ def build_model(
     import torch
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.noise import NormalActionNoise
+    from stable_baselines3.common.vec_env import VecNormalize
 
     if torch_threads:
         torch.set_num_threads(int(torch_threads))
     env = make_vec_env(make_env, n_envs=baseline.n_envs, seed=seed)
+    if baseline.normalize:
+        env = VecNormalize(env, gamma=baseline.kwargs.get("gamma", 0.99))
     kwargs = dict(baseline.kwargs)
     for name in ("learning_rate", "clip_range"):
         value = kwargs.get(name)

@@ -95,9 +95,14 @@ def numpy_policy_act(policy: Any) -> Callable[[np.ndarray], list]:
 
 
 def sb3_act(model: Any) -> Callable[[np.ndarray], Any]:
-    """Batch ``act`` of a Stable-Baselines3 model (deterministic actions)."""
+    """Batch ``act`` of a Stable-Baselines3 model (deterministic actions), on observations
+    normalised as in its training where that normalises them (``VecNormalize``'s statistics
+    of that moment, not updated by the evaluation)."""
+    normalize = model.get_vec_normalize_env()
 
     def act(obs: np.ndarray) -> Any:
+        if normalize is not None:
+            obs = normalize.normalize_obs(obs)
         actions, _ = model.predict(obs, deterministic=True)
         return actions
 
@@ -239,6 +244,7 @@ def run_rl(
         "config": {
             "n_timesteps": budget,
             "n_envs": baseline.n_envs,
+            **({"normalize": True} if baseline.normalize else {}),
             **{k: _jsonable(v) for k, v in baseline.kwargs.items()},
         },
         "env_steps": int(model.num_timesteps),
