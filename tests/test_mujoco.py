@@ -152,23 +152,28 @@ def test_the_limit_is_where_they_part():
     assert worst["limited"] == 1 and 1e-3 < worst["obs"] < 0.5, worst
 
 
+def _three_step_loss(task):
+    params = task.default_params()
+
+    def loss(state, actions):
+        def body(s, u):
+            ns, reward, _ = task.step(params, s, u)
+            return ns, -reward
+
+        return jax.lax.scan(body, state, actions)[1].sum()
+
+    return loss
+
+
 @pytest.mark.parametrize("gym_id", ["InvertedDoublePendulum-v5", "Reacher-v5", "Swimmer-v5"])
 def test_gradients_through_three_actions_match_finite_differences(gym_id):
     """The loss of three steps from a reset state (off the joint limits) against central
     differences, in float64, by the actions and by every position and speed."""
     with jax.enable_x64(True):
         task = TASKS[gym_id]()
-        params = task.default_params()
         size = task.system.nq + task.system.nv
-
-        def loss(state, actions):
-            def body(s, u):
-                ns, reward, _ = task.step(params, s, u)
-                return ns, -reward
-
-            return jax.lax.scan(body, state, actions)[1].sum()
-
-        state = task.reset(jax.random.PRNGKey(3), params)
+        loss = _three_step_loss(task)
+        state = task.reset(jax.random.PRNGKey(3), task.default_params())
         actions = jnp.asarray(np.random.default_rng(3).uniform(-0.5, 0.5, (3, task.action_size)))
         g_state, g_actions = jax.jit(jax.grad(loss, argnums=(0, 1)))(state, actions)
         f = jax.jit(loss)
@@ -247,3 +252,50 @@ def test_the_rl_baselines_normalise_as_the_zoo_and_are_judged_on_what_they_saw()
     np.testing.assert_array_equal(sb3_act(model)(obs), expected)
     raw, _ = model.predict(obs, deterministic=True)
     assert not np.allclose(raw, expected)
+
+
+def test_the_exact_gradient_sees_a_joint_limit_the_smooth_one_does_not():
+    """Swimmer's first joint pressed into its limit (100 degrees): the forward-mode derivative
+    (``gradient="exact"``) matches central differences; the smooth one (the step without its
+    constraint solver) is off, as docs/own-system.md says."""
+
+    class Exact(Swimmer):
+        gradient = "exact"
+
+    with jax.enable_x64(True):
+        exact, smooth = Exact(), Swimmer()
+        state = exact.reset(jax.random.PRNGKey(1), exact.default_params())
+        state = state.at[3].set(1.70).at[8].set(3.0)  # the joint's angle and speed
+        actions = jnp.asarray(np.random.default_rng(0).uniform(-1, 1, (3, 2)))
+        f = jax.jit(_three_step_loss(exact))
+        h = 1e-6
+        fd = np.array(
+            [
+                [
+                    (f(state, actions.at[t, j].add(h)) - f(state, actions.at[t, j].add(-h)))
+                    / (2 * h)
+                    for j in range(2)
+                ]
+                for t in range(3)
+            ]
+        )
+        g_exact = jax.jit(jax.grad(_three_step_loss(exact), argnums=1))(state, actions)
+        g_smooth = jax.jit(jax.grad(_three_step_loss(smooth), argnums=1))(state, actions)
+    np.testing.assert_allclose(g_exact, fd, rtol=RTOL_GRAD, atol=1e-9)
+    assert np.abs(np.asarray(g_smooth) - fd).max() > 1e-3 * np.abs(fd).max()
+
+
+def test_the_exact_gradient_is_finite_in_float32_at_many_states():
+    """MJX's own reverse-mode derivative of its solver turned NaN at random float32 states;
+    the forward-mode one never does (64 states, half pushed to or past the limits)."""
+
+    class Exact(Swimmer):
+        gradient = "exact"
+
+    task = Exact()
+    states, actions = _cases(task, 64, seed=5)
+    states[::2, 3:5] = np.sign(states[::2, 3:5]) * 1.75
+    grad = jax.jit(jax.vmap(jax.grad(_three_step_loss(task), argnums=(0, 1))))
+    acts = np.repeat(actions[:, None, :], 3, axis=1)
+    g_state, g_actions = grad(jnp.asarray(states, jnp.float32), jnp.asarray(acts, jnp.float32))
+    assert np.isfinite(np.asarray(g_state)).all() and np.isfinite(np.asarray(g_actions)).all()

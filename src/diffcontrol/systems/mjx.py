@@ -13,8 +13,13 @@ Where the derivative is non-smooth or missing:
   model without active constraints exactly (there is nothing to solve), so the step equals
   MuJoCo's C engine there; where a joint limit or a contact is active, the one-iteration solve
   differs from the converged one and the two drift apart (``tests/test_mujoco.py``);
-- the derivative of a step is that of the step without its constraint solver (``simulate``):
-  exact where no constraint is active, blind to a constraint's force where one is.
+- the derivative (``simulate``, ``gradient``): ``"exact"``, the derivative of the step itself
+  (the one-iteration solve included), computed in forward mode; or ``"smooth"``, that of the
+  step without its constraint solver: the same where no constraint is active, blind to a
+  constraint's force where one is. MJX's own reverse-mode derivative of its solver can be NaN
+  (its line search's tolerance takes the square root of an exact zero; the zero cotangent
+  times the infinite slope is NaN), which ends training; forward mode never forms that
+  product, since the tolerance only enters comparisons.
 
 The ``mujoco`` extra (``pip install 'diffcontrol[mujoco]'``) installs MuJoCo and MJX; without
 it, making a system raises ``ConfigError`` that says so.
@@ -23,12 +28,14 @@ it, making a system raises ``ConfigError`` that says so.
 from __future__ import annotations
 
 import contextlib
+import functools
 import io
 import os
 from pathlib import Path
 from typing import Any
 
 import jax
+import jax.flatten_util
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array
@@ -78,13 +85,22 @@ def resolve(model_file: str | os.PathLike[str]) -> Path:
     )
 
 
+GRADIENTS = ("exact", "smooth")
+"""How ``MjxSystem.simulate`` is differentiated (module docstring)."""
+
+DIFFERENTIATED = ("qpos", "qvel", "act", "xpos", "xquat", "site_xpos", "xipos", "qfrc_constraint")
+"""The fields of ``Data`` a step's derivative reaches: the state, the bodies' and sites' poses
+and the constraint forces. A task reads its losses and observations from these."""
+
+
 class MjxSystem:
     """One MuJoCo model on the device, stepped by MJX.
 
     Args:
         model_file: an MJCF path, or the name of one of Gymnasium's assets.
         iterations: the constraint solver's iterations (``model.opt.iterations``); 1, the
-            default, is what reverse-mode differentiation needs (module docstring).
+            default, is what differentiation needs (module docstring).
+        gradient: ``"exact"`` or ``"smooth"``: how ``simulate`` is differentiated.
 
     Attributes:
         mj_model: MuJoCo's ``MjModel`` (the C engine's), with ``iterations`` set.
@@ -93,8 +109,13 @@ class MjxSystem:
         dt: the duration of one physics step (``opt.timestep``, s).
     """
 
-    def __init__(self, model_file: str | os.PathLike[str], iterations: int = 1):
+    def __init__(
+        self, model_file: str | os.PathLike[str], iterations: int = 1, gradient: str = "smooth"
+    ):
+        if gradient not in GRADIENTS:
+            raise ConfigError(f"gradient must be one of {GRADIENTS}, got {gradient!r}")
         mujoco, mjx = modules()
+        self.gradient = gradient
         self.path = resolve(model_file)
         try:
             mj_model = mujoco.MjModel.from_xml_path(str(self.path))
@@ -140,18 +161,24 @@ class MjxSystem:
         """``Data`` after ``frames`` physics steps from ``state = concat(qpos, qvel)`` with the
         controls ``ctrl`` held (MuJoCo clamps them to the actuators' ``ctrlrange``).
 
-        Each physics step's value is MJX's step of the model; its derivative is that of the
-        same step with the constraint solver switched off (``unconstrained``). The two are
-        the same function wherever no constraint is active. Where one is (a joint at its
-        limit), the gradient does not see the constraint force. MJX's own derivative of its
-        solver is NaN at random states with no constraint active (its line search's
-        tolerance takes the square root of an exact zero), which ends training.
+        The value is MJX's steps of the model. The derivative (of the fields in
+        ``DIFFERENTIATED``, by ``state`` and ``ctrl``) is, with ``gradient="exact"``, that of
+        these steps, formed column by column in forward mode; with ``"smooth"``, that of the
+        same steps with the constraint solver switched off, one physics step at a time: the
+        same function wherever no constraint is active; where one is (a joint at its
+        limit), it does not see the constraint's force.
         """
         nq, nv = self.nq, self.nv
         data = self.data0.replace(
             qpos=state[:nq], qvel=state[nq : nq + nv], ctrl=jnp.asarray(ctrl, state.dtype)
         )
+        if self.gradient == "exact":
+            return _exact_frames(self, frames, data.qpos, data.qvel, data.act, data.ctrl)
         return jax.lax.fori_loop(0, frames, lambda _, d: self._step(d), data)
+
+    def _frames(self, frames: int, qpos: Array, qvel: Array, act: Array, ctrl: Array) -> Any:
+        data = self.data0.replace(qpos=qpos, qvel=qvel, act=act, ctrl=ctrl)
+        return jax.lax.fori_loop(0, frames, lambda _, d: self._mjx.step(self.model, d), data)
 
     def _step(self, data: Any) -> Any:
         exact = jax.lax.stop_gradient(self._mjx.step(self.model, data))
@@ -171,3 +198,35 @@ class MjxSystem:
             for name in ("qpos", "qvel", "act", "ctrl", "xpos", "xquat", "site_xpos", "xipos")
         }
         return exact.replace(**fields)
+
+
+@functools.partial(jax.custom_vjp, nondiff_argnums=(0, 1))
+def _exact_frames(system: MjxSystem, frames: int, qpos, qvel, act, ctrl) -> Any:
+    """``system._frames``, whose reverse-mode derivative is formed in forward mode."""
+    return system._frames(frames, qpos, qvel, act, ctrl)
+
+
+def _exact_frames_fwd(system: MjxSystem, frames: int, qpos, qvel, act, ctrl):
+    return system._frames(frames, qpos, qvel, act, ctrl), (qpos, qvel, act, ctrl)
+
+
+def _exact_frames_bwd(system: MjxSystem, frames: int, inputs, cotangent):
+    # The Jacobian of the differentiated fields by every input, one forward-mode column per
+    # input number (a few dozen at most), then the cotangent's product with it.
+    flat, unflatten = jax.flatten_util.ravel_pytree(inputs)
+
+    def fields(x):
+        data = system._frames(frames, *unflatten(x))
+        return {name: getattr(data, name) for name in DIFFERENTIATED}
+
+    jacobian = jax.jacfwd(fields)(flat)
+    total = jnp.zeros_like(flat)
+    for name in DIFFERENTIATED:
+        ct = getattr(cotangent, name)
+        if ct is None or ct.dtype == jax.dtypes.float0:
+            continue
+        total = total + jnp.tensordot(ct, jacobian[name], axes=ct.ndim)
+    return unflatten(total)
+
+
+_exact_frames.defvjp(_exact_frames_fwd, _exact_frames_bwd)

@@ -41,6 +41,8 @@ class MujocoTask(Task):
             ``s N(0, 1)`` (``"normal"``) or ``U(-s, s)`` (``"uniform"``), Gymnasium's two usual
             schemes; override ``initial_qpos_qvel`` for another.
         solver_iterations: the constraint solver's iterations (1: reverse mode needs it).
+        gradient: how a step is differentiated (``systems.mjx``): ``"smooth"`` (the step
+            without its constraint solver) or ``"exact"`` (forward mode).
 
     A subclass defines ``observe(state)`` and ``reward(state, action, next_state, data)``
     (``data``: MJX's ``Data`` after the step), and ``extras(data)`` if its observation reads
@@ -52,13 +54,16 @@ class MujocoTask(Task):
     reset_noise_scale: ClassVar[float] = 0.1
     reset_velocity: ClassVar[str] = "normal"
     solver_iterations: ClassVar[int] = 1
+    gradient: ClassVar[str] = "smooth"
     extras_size: ClassVar[int] = 0
     losses: ClassVar[tuple[str, ...]] = ("cost",)
 
     @functools.cached_property
     def system(self) -> MjxSystem:
         """The model on the device, loaded when first stepped (not when the task is made)."""
-        return MjxSystem(self.model_file, iterations=self.solver_iterations)
+        return MjxSystem(
+            self.model_file, iterations=self.solver_iterations, gradient=self.gradient
+        )
 
     @property
     def dt(self) -> float:
@@ -97,7 +102,8 @@ class MujocoTask(Task):
     def extras(self, data: Any) -> Array:
         """What the observation reads from a step's ``Data`` besides ``qpos`` and ``qvel``
         (``extras_size`` numbers; none by default)."""
-        return jnp.zeros((self.extras_size,), data.qpos.dtype)
+        # jnp's dtype of qpos: Gymnasium's data is NumPy float64, which JAX may not allow.
+        return jnp.zeros((self.extras_size,), jnp.asarray(data.qpos).dtype)
 
     @abc.abstractmethod
     def reward(
