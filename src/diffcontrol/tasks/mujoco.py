@@ -61,9 +61,7 @@ class MujocoTask(Task):
     @functools.cached_property
     def system(self) -> MjxSystem:
         """The model on the device, loaded when first stepped (not when the task is made)."""
-        return MjxSystem(
-            self.model_file, iterations=self.solver_iterations, gradient=self.gradient
-        )
+        return MjxSystem(self.model_file, iterations=self.solver_iterations, gradient=self.gradient)
 
     @property
     def dt(self) -> float:
