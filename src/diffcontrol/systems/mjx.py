@@ -161,12 +161,12 @@ class MjxSystem:
         """``Data`` after ``frames`` physics steps from ``state = concat(qpos, qvel)`` with the
         controls ``ctrl`` held (MuJoCo clamps them to the actuators' ``ctrlrange``).
 
-        The value is MJX's steps of the model. The derivative (of the fields in
-        ``DIFFERENTIATED``, by ``state`` and ``ctrl``) is, with ``gradient="exact"``, that of
-        these steps, formed column by column in forward mode; with ``"smooth"``, that of the
-        same steps with the constraint solver switched off, one physics step at a time: the
-        same function wherever no constraint is active; where one is (a joint at its
-        limit), it does not see the constraint's force.
+        The value is MJX's steps of the model. The derivative by ``state`` and ``ctrl`` is,
+        with ``gradient="exact"``, that of these steps (of the fields in ``DIFFERENTIATED``),
+        formed column by column in forward mode; with ``"smooth"``, that of the same steps
+        with the constraint solver switched off, one physics step at a time (of the state and
+        the poses): the same function wherever no constraint is active; where one is (a joint
+        at its limit), it does not see the constraint's force.
         """
         nq, nv = self.nq, self.nv
         data = self.data0.replace(

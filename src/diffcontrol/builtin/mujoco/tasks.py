@@ -199,6 +199,9 @@ class Swimmer(MujocoTask):
     action_head = "tanh"
     action_low = (-1.0, -1.0)
     action_high = (1.0, 1.0)
+    # The speeds to about unit size for the controller's first layer: a stroke turns the
+    # joints at up to 4-5 rad/s and the body at about 2.
+    obs_scale = (1.0, 1.0, 1.0, 1.0, 1.0, 0.5, 0.25, 0.25)
 
     def observe(self, state):
         return state[2:]
