@@ -46,8 +46,10 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=50)
     parser.add_argument("--eval-seed", type=int, default=1000)
     parser.add_argument("--out", type=Path)
-    parser.add_argument("flags", nargs="*", help="after --: flags of `diffcontrol train`")
-    args = parser.parse_args()
+    argv = sys.argv[1:]
+    cut = argv.index("--") if "--" in argv else len(argv)
+    args = parser.parse_args(argv[:cut])
+    args.flags = argv[cut + 1 :]  # after --: flags of `diffcontrol train`
     path = NAMES[args.task]
     out = args.out or HERE / "results" / f"mujoco_{args.task}.json"
     print(f"{'seed':>4} {'train s':>8} {'compile s':>9} {'process s':>9} {'return':>10} {'std':>8}")
