@@ -38,9 +38,11 @@ ROOT = HERE.parent
 def claim_check(summary: list[dict]) -> list[dict]:
     """Per threshold: diffcontrol's median episodes and seconds to reach it against the best
     (lowest median) RL baseline's, and whether both ratios are at least 10."""
-    dc = next(r for r in summary if r["method"] == "diffcontrol")
+    dc = next((r for r in summary if r["method"] == "diffcontrol"), None)
     rl = [r for r in summary if r["method"] != "diffcontrol"]
     out = []
+    if dc is None:  # --compare-args "--methods ..." without diffcontrol: nothing to check
+        return out
     for i, t in enumerate(dc["thresholds"]):
         row = {"threshold": t["threshold"], "diffcontrol_reached": f"{t['reached']}/{t['of']}"}
         for key in ("episodes", "train_seconds"):
