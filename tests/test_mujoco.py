@@ -107,8 +107,9 @@ def _against_gymnasium(task, states, actions, dtype, limits=False):
 
 @pytest.mark.parametrize("gym_id", TASKS)
 def test_steps_as_gymnasium_in_float64(gym_id):
+    task = TASKS[gym_id]()
+    task.system  # noqa: B018  (loaded in float32: a state in float64 steps a float64 copy)
     with jax.enable_x64(True):
-        task = TASKS[gym_id]()  # its own model, loaded in float64
         states, actions = _cases(task, N_STATES)
         worst, terms = _against_gymnasium(task, states, actions, jnp.float64)
     # Most steps are off the limits (Reacher's target, pushed past its range, is not always).
@@ -209,9 +210,23 @@ def test_without_the_extra_a_mujoco_task_says_what_to_install(monkeypatch):
         InvertedDoublePendulum().system  # noqa: B018
 
 
-def test_an_episode_is_recorded_with_the_tasks_states():
-    """``evaluation.record_episode`` (the run's plots) reads the states of Gymnasium's MuJoCo
-    environment through the task (``gym_state``): ``qpos``, ``qvel`` and the extras."""
+@pytest.mark.parametrize("gym_id", ["InvertedDoublePendulum-v5", "Reacher-v5", "Swimmer-v5"])
+def test_the_state_comes_back_from_the_observation(gym_id):
+    """``state_from_observation`` (what ``plan`` and ``loop`` act and fit from) inverts
+    ``observe`` on states of the reset distribution: exactly, but for what the observation
+    leaves out and the steps do not read (Swimmer's position in the plane, 0)."""
+    task = TASKS[gym_id]()
+    keys = jax.random.split(jax.random.PRNGKey(3), 16)
+    states = jax.vmap(lambda k: task.reset(k, task.default_params()))(keys)
+    back = jax.vmap(lambda s: task.state_from_observation(task.observe(s)))(states)
+    if gym_id == "Swimmer-v5":
+        assert np.all(np.asarray(back[:, :2]) == 0)
+        back, states = back[:, 2:], states[:, 2:]
+    np.testing.assert_allclose(np.asarray(back), np.asarray(states), atol=1e-6)
+
+
+def _toppling_episode():
+    """The double pendulum's episode under a steady push (it topples in a few dozen steps)."""
     from diffcontrol.evaluation import record_episode
 
     class Push:
@@ -221,13 +236,46 @@ def test_an_episode_is_recorded_with_the_tasks_states():
         def __call__(self, obs):
             return np.array([0.3], np.float32)
 
-    task = InvertedDoublePendulum()
-    rec = record_episode(Push(), task, seed=0)
+    return record_episode(Push(), InvertedDoublePendulum(), seed=0)
+
+
+def test_an_episode_is_recorded_with_the_tasks_states():
+    """``evaluation.record_episode`` (the run's plots) reads the states of Gymnasium's MuJoCo
+    environment through the task (``gym_state``): ``qpos``, ``qvel`` and the extras."""
+    rec = _toppling_episode()
     assert rec.states.shape == (len(rec.actions) + 1, 7)
     assert 0 < len(rec.actions) < 1000  # a steady push topples the poles
     env = gymnasium.make("InvertedDoublePendulum-v5")
     obs, _ = env.reset(seed=0)
     np.testing.assert_allclose(rec.states[0, :3], [obs[0], *np.arctan2(obs[1:3], obs[3:5])])
+
+
+def test_animate_renders_with_mujoco_and_draws_without_opengl(tmp_path, monkeypatch):
+    """``animate`` of a MuJoCo task: MuJoCo's own renderer where an OpenGL context can be
+    made (EGL here, headless), one picture per frame, the poles moving between them; with no
+    OpenGL backend (``MUJOCO_GL`` naming none), matplotlib drawings of the bodies instead."""
+    from PIL import Image
+
+    from diffcontrol.animation import animate
+    from diffcontrol.tasks import _mujoco_frames
+
+    task, rec = InvertedDoublePendulum(), _toppling_episode()
+    steps = rec.states.shape[0]  # every state a frame (max_frames below)
+    try:
+        pictures = list(_mujoco_frames.rendered(task, rec.states[::4]))
+    except Exception as exc:  # noqa: BLE001  (what making the context raised)
+        pytest.skip(f"no OpenGL context on this machine: {exc}")
+    assert len(pictures) == len(rec.states[::4])
+    assert pictures[0].shape == (*_mujoco_frames.SIZE, 3) and pictures[0].dtype == np.uint8
+    assert pictures[0].std() > 5  # a scene, not a blank
+    assert np.abs(pictures[0].astype(int) - pictures[-1]).mean() > 0.5  # the poles fell
+    gif = animate(rec, task, tmp_path / "mj.gif", max_frames=steps)
+    with Image.open(gif) as im:
+        assert im.n_frames == steps and im.size == _mujoco_frames.SIZE[::-1]
+    monkeypatch.setenv("MUJOCO_GL", "no-such-backend")
+    drawn = animate(rec, task, tmp_path / "drawn.gif", max_frames=steps)
+    with Image.open(drawn) as im:
+        assert im.n_frames == steps and im.size != _mujoco_frames.SIZE[::-1]
 
 
 def test_the_rl_baselines_normalise_as_the_zoo_and_are_judged_on_what_they_saw():

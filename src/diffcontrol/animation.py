@@ -24,7 +24,7 @@ from .tasks._scene import close, scene  # noqa: E402, F401  (for a task's frames
 
 def can_draw(task: Any) -> bool:
     """Whether ``task`` draws itself: its class defines ``frames(recording, every)``, which
-    yields one matplotlib figure per frame (``scene`` makes a blank one)."""
+    yields one matplotlib figure (``scene`` makes a blank one) or RGB array per frame."""
     return callable(getattr(type(task), "frames", None))
 
 
@@ -83,6 +83,8 @@ class Frames:
         self.background: Any = None
 
     def render(self, fig: Any) -> np.ndarray:
+        if isinstance(fig, np.ndarray):  # a picture already (MuJoCo's renderer)
+            return fig
         canvas = fig.canvas
         changed = [
             (ax, a) for ax in fig.axes for a in ax.get_children() if a.stale and a not in self.idle

@@ -189,6 +189,8 @@ def plan_run(
         params = planner.problem.params if own else task_params(task)
         config_ = task.default_config()  # the run's training settings: none, the defaults
         result = PlanResult(task, None, config_, params, metrics, config, info, policy, value)
+        if final_eval != 0:  # minutes where a step is slow to solve (a MuJoCo model)
+            say("final evaluation: one plan solved per step of every episode")
         run_, files = save_run(  # into the directory plan_run claimed
             result,
             out,

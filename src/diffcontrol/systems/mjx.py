@@ -127,19 +127,40 @@ class MjxSystem:
         self.nq, self.nv, self.nu = mj_model.nq, mj_model.nv, mj_model.nu
         self.dt = float(mj_model.opt.timestep)
         self._mjx = mjx
+        self._free = mujoco.MjModel.from_xml_path(str(self.path))
+        self._free.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONSTRAINT
         # Concrete arrays even when a task first loads its model inside a trace (jit, grad):
         # a traced value kept here would leak into the next program.
         with jax.ensure_compile_time_eval():
-            self.model = mjx.put_model(mj_model)
-            self.data0 = mjx.make_data(self.model)
-            """MJX's ``Data`` of the model's initial configuration (every field a step reads)."""
-            free = mujoco.MjModel.from_xml_path(str(self.path))
-            free.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONSTRAINT
-            self.unconstrained = mjx.put_model(free)
-            """The model with its constraint solver switched off: the steps' derivatives."""
-            self.data0_unconstrained = mjx.make_data(self.unconstrained)
+            self._put(mj_model, self._free)
+        self._by_dtype: dict[Any, MjxSystem] = {}
         self.init_qpos = np.asarray(mj_model.qpos0, np.float32)
         """``qpos0``: the model's reference configuration (Gymnasium's ``init_qpos``)."""
+
+    def _put(self, mj_model: Any, free: Any) -> None:
+        """The models and their initial ``Data`` on the device (JAX's default float type)."""
+        mjx = self._mjx
+        self.model = mjx.put_model(mj_model)
+        self.data0 = mjx.make_data(self.model)
+        """MJX's ``Data`` of the model's initial configuration (every field a step reads)."""
+        self.unconstrained = mjx.put_model(free)
+        """The model with its constraint solver switched off: the steps' derivatives."""
+        self.data0_unconstrained = mjx.make_data(self.unconstrained)
+
+    def at(self, dtype: Any) -> MjxSystem:
+        """This system with its model and ``Data`` in ``dtype``: itself where they are, else a
+        copy put on the device again. A state in float64 (``jax_enable_x64`` turned on after
+        the model was loaded) steps in float64: MJX's loops need every float in one type."""
+        if jnp.asarray(self.data0.qpos).dtype == dtype:
+            return self
+        key = jnp.dtype(dtype)
+        if key not in self._by_dtype:
+            copy = object.__new__(MjxSystem)
+            copy.__dict__.update(self.__dict__)
+            with jax.ensure_compile_time_eval(), jax.enable_x64(key.itemsize == 8):
+                copy._put(self.mj_model, self._free)
+            self._by_dtype[key] = copy
+        return self._by_dtype[key]
 
     def body_id(self, name: str) -> int:
         """The index of body ``name``; ``ConfigError`` naming the bodies there are if none."""
@@ -154,8 +175,9 @@ class MjxSystem:
         """``Data`` of ``state = concat(qpos, qvel)`` after MuJoCo's forward pass (positions,
         velocities, constraint forces), as Gymnasium's ``set_state`` leaves it."""
         nq, nv = self.nq, self.nv
-        data = self.data0.replace(qpos=state[:nq], qvel=state[nq : nq + nv])
-        return self._mjx.forward(self.model, data)
+        sys = self.at(state.dtype)
+        data = sys.data0.replace(qpos=state[:nq], qvel=state[nq : nq + nv])
+        return sys._mjx.forward(sys.model, data)
 
     def simulate(self, state: Array, ctrl: Array, frames: int) -> Any:
         """``Data`` after ``frames`` physics steps from ``state = concat(qpos, qvel)`` with the
@@ -169,12 +191,13 @@ class MjxSystem:
         at its limit), it does not see the constraint's force.
         """
         nq, nv = self.nq, self.nv
-        data = self.data0.replace(
+        sys = self.at(state.dtype)
+        data = sys.data0.replace(
             qpos=state[:nq], qvel=state[nq : nq + nv], ctrl=jnp.asarray(ctrl, state.dtype)
         )
-        if self.gradient == "exact":
-            return _exact_frames(self, frames, data.qpos, data.qvel, data.act, data.ctrl)
-        return jax.lax.fori_loop(0, frames, lambda _, d: self._step(d), data)
+        if sys.gradient == "exact":
+            return _exact_frames(sys, frames, data.qpos, data.qvel, data.act, data.ctrl)
+        return jax.lax.fori_loop(0, frames, lambda _, d: sys._step(d), data)
 
     def _frames(self, frames: int, qpos: Array, qvel: Array, act: Array, ctrl: Array) -> Any:
         data = self.data0.replace(qpos=qpos, qvel=qvel, act=act, ctrl=ctrl)

@@ -14,8 +14,9 @@ from __future__ import annotations
 
 import abc
 import functools
-from typing import Any, ClassVar, NamedTuple
+from typing import Any, ClassVar
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -25,9 +26,9 @@ from ..systems.mjx import MjxSystem
 from ._base import Task
 
 
-class MujocoParams(NamedTuple):
+class MujocoParams(eqx.Module):
     """The physical parameters of a MuJoCo task: none beyond its model file (the masses,
-    lengths and gears live in the ``mjx.Model``)."""
+    lengths and gears live in the ``mjx.Model``). A dataclass, as every task's parameters."""
 
 
 class MujocoTask(Task):
@@ -43,6 +44,9 @@ class MujocoTask(Task):
         solver_iterations: the constraint solver's iterations (1: reverse mode needs it).
         gradient: how a step is differentiated (``systems.mjx``): ``"smooth"`` (the step
             without its constraint solver) or ``"exact"`` (forward mode).
+        camera: ``animate``'s view, ``(name, value)`` pairs of MuJoCo's ``MjvCamera``
+            (``("distance", 4.0)``, ``("elevation", -20)``) over its default: the whole model,
+            following its first body.
 
     A subclass defines ``observe(state)`` and ``reward(state, action, next_state, data)``
     (``data``: MJX's ``Data`` after the step), and ``extras(data)`` if its observation reads
@@ -55,6 +59,7 @@ class MujocoTask(Task):
     reset_velocity: ClassVar[str] = "normal"
     solver_iterations: ClassVar[int] = 1
     gradient: ClassVar[str] = "smooth"
+    camera: ClassVar[tuple[tuple[str, Any], ...]] = ()
     extras_size: ClassVar[int] = 0
     losses: ClassVar[tuple[str, ...]] = ("cost",)
 
@@ -114,6 +119,13 @@ class MujocoTask(Task):
         if name == "cost":
             return lambda params, state, action, next_state, reward: -reward
         raise KeyError(name)
+
+    def frames(self, recording: Any, every: int) -> Any:
+        """``animate``'s frames: MuJoCo's renderer where OpenGL is there, else matplotlib
+        (``tasks._mujoco_frames``)."""
+        from ._mujoco_frames import frames
+
+        return frames(self, recording, every)
 
     def qpos(self, state: Array) -> Array:
         """The positions in ``state``."""

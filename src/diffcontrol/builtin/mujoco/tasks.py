@@ -73,6 +73,12 @@ class InvertedDoublePendulum(MujocoTask):
             ]
         )
 
+    def state_from_observation(self, observation):
+        # Exact to rounding while the speeds and the slider's force are inside the
+        # observation's clip (+-10).
+        hinges = jnp.arctan2(observation[1:3], observation[3:5])
+        return jnp.concatenate([observation[:1], hinges, observation[5:9]])
+
     def penalties(self, next_state, data):
         """``(terminated, dist_penalty + vel_penalty)`` after a step."""
         x, y = data.site_xpos[0, 0], data.site_xpos[0, 2]
@@ -155,6 +161,12 @@ class Reacher(MujocoTask):
             [jnp.cos(qpos[:2]), jnp.sin(qpos[:2]), qpos[2:], qvel[:2], state[8:10]]
         )
 
+    def state_from_observation(self, observation):
+        # The target never moves (nothing drives its slide joints): its speeds are zero.
+        arm = jnp.arctan2(observation[2:4], observation[:2])
+        qvel = jnp.concatenate([observation[6:8], jnp.zeros_like(observation[:2])])
+        return jnp.concatenate([arm, observation[4:6], qvel, observation[8:10]])
+
     def reward(self, state, action, next_state, data):
         reward = -jnp.linalg.norm(self.to_target(data)) - jnp.sum(jnp.square(action))
         return reward, jnp.asarray(False)
@@ -206,6 +218,11 @@ class Swimmer(MujocoTask):
 
     def observe(self, state):
         return state[2:]
+
+    def state_from_observation(self, observation):
+        # The position in the plane, which the observation leaves out, at the origin: the
+        # fluid is the same everywhere, so the steps and the rewards do not depend on it.
+        return jnp.concatenate([jnp.zeros_like(observation[:2]), observation])
 
     def reward(self, state, action, next_state, data):
         speed = (next_state[0] - state[0]) / self.dt
