@@ -46,7 +46,7 @@ class MujocoTask(Task):
             without its constraint solver) or ``"exact"`` (forward mode).
         camera: ``animate``'s view, ``(name, value)`` pairs of MuJoCo's ``MjvCamera``
             (``("distance", 4.0)``, ``("elevation", -20)``) over its default: the whole model,
-            following its first body.
+            following its centre of mass (``tasks._mujoco_frames``).
 
     A subclass defines ``observe(state)`` and ``reward(state, action, next_state, data)``
     (``data``: MJX's ``Data`` after the step), and ``extras(data)`` if its observation reads
