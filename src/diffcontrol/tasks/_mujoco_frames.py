@@ -45,29 +45,33 @@ def plane(positions: np.ndarray) -> np.ndarray:
     return np.sort(np.argsort(flat.max(0) - flat.min(0))[-2:])
 
 
-def radius(mujoco: Any, model: Any, states: np.ndarray, nq: int) -> float:
-    """How far the moving geoms (those of bodies other than the world) reach from the
-    model's centre of mass, at most over ``states``: their centres' distance plus their
-    bounding radius."""
+def kinematics(task: Any, states: np.ndarray) -> tuple[np.ndarray, float]:
+    """The bodies' world positions in each state, ``[frames, bodies, 3]`` (the world body left
+    out), and how far the moving geoms (of bodies other than the world) reach from the model's
+    centre of mass at most over ``states`` (their centres' distance plus their bounding
+    radius), by MuJoCo's kinematics in the C engine."""
+    import mujoco
+
+    model, nq = task.system.mj_model, task.system.nq
     data = mujoco.MjData(model)
     moving = model.geom_bodyid > 0
-    if not np.any(moving):
-        return 1.0
-    reach = 0.0
-    for state in states:
+    positions = np.empty((len(states), model.nbody - 1, 3))
+    reach = 0.0 if np.any(moving) else 1.0
+    for i, state in enumerate(states):
         data.qpos[:] = state[:nq]
         mujoco.mj_kinematics(model, data)
-        mujoco.mj_comPos(model, data)
-        centre = data.subtree_com[0]
-        far = np.linalg.norm(data.geom_xpos[moving] - centre, axis=-1) + model.geom_rbound[moving]
-        reach = max(reach, float(far.max()))
-    return max(reach, 0.05)
+        positions[i] = data.xpos[1:]
+        if np.any(moving):
+            mujoco.mj_comPos(model, data)
+            far = np.linalg.norm(data.geom_xpos[moving] - data.subtree_com[0], axis=-1)
+            reach = max(reach, float(np.max(far + model.geom_rbound[moving])))
+    return positions, max(reach, 0.05)
 
 
 def _camera(mujoco: Any, model: Any, positions: np.ndarray, reach: float, settings: dict) -> Any:
     """The view: following the model's centre of mass, facing the plane its bodies move in
     (from the side where it holds the vertical, from above at 60 degrees where it does not),
-    from 3.5 times the geoms' ``reach`` from it (``radius``); ``settings`` (``distance``,
+    from 3.5 times the geoms' ``reach`` from it (``kinematics``); ``settings`` (``distance``,
     ``elevation``, ``azimuth``, ``trackbodyid``) over it."""
     camera = mujoco.MjvCamera()
     mujoco.mjv_defaultFreeCamera(model, camera)
@@ -100,8 +104,8 @@ def rendered(task: Any, states: np.ndarray) -> Iterator[np.ndarray]:
         render_context = mujoco.MjrContext(model, mujoco.mjtFontScale.mjFONTSCALE_150)
         mujoco.mjr_setBuffer(mujoco.mjtFramebuffer.mjFB_OFFSCREEN, render_context)
         viewport = mujoco.MjrRect(0, 0, width, height)
-        reach = radius(mujoco, model, states, system.nq)
-        camera = _camera(mujoco, model, body_positions(task, states), reach, dict(task.camera))
+        positions, reach = kinematics(task, states)
+        camera = _camera(mujoco, model, positions, reach, dict(task.camera))
         option, perturb = mujoco.MjvOption(), mujoco.MjvPerturb()
         pixels = np.empty((height, width, 3), np.uint8)
         for state in states:
@@ -119,28 +123,12 @@ def rendered(task: Any, states: np.ndarray) -> Iterator[np.ndarray]:
         context.free()
 
 
-def body_positions(task: Any, states: np.ndarray) -> np.ndarray:
-    """The bodies' world positions in each state, ``[frames, bodies, 3]`` (the world body
-    left out), by MuJoCo's kinematics in the C engine."""
-    import mujoco
-
-    system = task.system
-    model = system.mj_model
-    data = mujoco.MjData(model)
-    out = np.empty((len(states), model.nbody - 1, 3))
-    for i, state in enumerate(states):
-        data.qpos[:] = state[: system.nq]
-        mujoco.mj_kinematics(model, data)
-        out[i] = data.xpos[1:]
-    return out
-
-
 def drawn(task: Any, states: np.ndarray, times: np.ndarray) -> Iterator[Any]:
     """matplotlib figures of ``states``: the bodies as dots, each joined to its parent, on the
     plane of the two axes along which they spread most."""
     from ._scene import close, scene
 
-    positions = body_positions(task, states)
+    positions, _ = kinematics(task, states)
     axes = plane(positions)
     flat = positions[..., axes]
     low, high = flat.reshape(-1, 2).min(0), flat.reshape(-1, 2).max(0)
