@@ -115,12 +115,18 @@ def test_divergence_is_reported_and_the_best_parameters_kept(task, clean):
     assert np.isfinite(result.loss) and result.loss <= result.nominal_loss
 
 
-def test_too_little_data_says_how_much_is_needed(task):
+def test_too_little_data_says_how_much_is_needed(task, monkeypatch):
     short = _record(1, max_steps=60)
     with pytest.raises(InsufficientDataError, match="60 recorded transitions .* at least 100"):
         identify.fit_parameters(task, short, ("g", "friction"))
     with pytest.raises(InsufficientDataError, match="no episode has 80 steps"):
         identify.fit_parameters(task, short, ("g",), window=80)
+    # a task with physical parameters to fit is pointed at them; one without is not
+    with pytest.raises(InsufficientDataError, match=r"at least 1000 .*\(--model params\)"):
+        identify.fit_model(task, short, "neural")
+    monkeypatch.setattr(type(task), "fit_parameter_names", ())
+    with pytest.raises(InsufficientDataError, match="record more episodes$"):
+        identify.fit_model(task, short, "neural")
 
 
 def test_unknown_names_and_other_systems_are_refused(task, clean):

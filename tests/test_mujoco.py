@@ -37,6 +37,7 @@ pytest.importorskip("mujoco")
 pytest.importorskip("mujoco.mjx")
 gymnasium = pytest.importorskip("gymnasium")
 
+from diffcontrol import _jax_setup  # noqa: E402
 from diffcontrol.builtin.mujoco.tasks import InvertedDoublePendulum, Reacher, Swimmer  # noqa: E402
 from diffcontrol.errors import ConfigError  # noqa: E402
 from diffcontrol.systems import mjx as mjx_system  # noqa: E402
@@ -237,6 +238,25 @@ def _toppling_episode():
             return np.array([0.3], np.float32)
 
     return record_episode(Push(), InvertedDoublePendulum(), seed=0)
+
+
+def test_a_step_traced_in_float64_leaves_the_float32_step_working():
+    """A model fit traces the task's step in float64 (``_jax_setup.float64``); the training
+    after it traces the same step in float32. JAX's caches keep MJX's float64 NumPy tables
+    from the first trace, and the second then fails to lower unless ``float64()`` clears them
+    on leaving (as it does once an MJX step has run in float64)."""
+    task = Reacher()
+    params = task.default_params()
+    state = task.reset(jax.random.PRNGKey(0), params)
+    action = jnp.zeros(task.action_size)
+
+    def step(s, a):
+        return task.step(params, s, a)[0]
+
+    with _jax_setup.float64():
+        wide = jax.jit(step).lower(state.astype(jnp.float64), action.astype(jnp.float64))
+    narrow = jax.jit(step).lower(state, action)
+    assert wide.out_info.dtype == jnp.float64 and narrow.out_info.dtype == jnp.float32
 
 
 def test_an_episode_is_recorded_with_the_tasks_states():

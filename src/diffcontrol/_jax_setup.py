@@ -221,3 +221,38 @@ class FastJit:
                 raise
             self.jitted = jax.jit(self.fn, **self.jit_kwargs)
             return self.jitted(*args, **kwargs)
+
+
+_STALE_AFTER_X64 = False
+
+
+def traced_in_float64() -> None:
+    """Say that a program traced under ``float64()`` read float64 NumPy constants through
+    ``jax.numpy`` functions that JAX compiles once (MJX's integrator tables through
+    ``jnp.tril``). JAX's staging caches keep those constants' float64 types, and a later trace
+    of the same code in float32 then fails to lower ("operand type mismatch ... f64");
+    ``float64()`` clears the caches when it ends."""
+    global _STALE_AFTER_X64
+    _STALE_AFTER_X64 = True
+
+
+class float64:  # noqa: N801 (used as a context manager, like jax.enable_x64)
+    """``jax.enable_x64(True)``, after which JAX's caches are cleared if anything traced inside
+    called ``traced_in_float64`` (the compiled programs that diffcontrol keeps itself stay;
+    only JAX's own are traced and compiled again): the model fits and the reference checks
+    run in float64, the training after them in float32."""
+
+    def __enter__(self) -> None:
+        import jax
+
+        self._x64 = jax.enable_x64(True)
+        self._x64.__enter__()
+
+    def __exit__(self, *exc: Any) -> None:
+        global _STALE_AFTER_X64
+        self._x64.__exit__(*exc)
+        import jax
+
+        if _STALE_AFTER_X64 and not jax.config.jax_enable_x64:
+            _STALE_AFTER_X64 = False
+            jax.clear_caches()

@@ -473,7 +473,7 @@ def evaluate_closed_loop(
     # jax.random draws would give others), then widened.
     keys = jnp.stack([jax.random.PRNGKey(seed + i) for i in range(starts)])
     y0s = np.asarray(jax.jit(jax.vmap(task.reset, in_axes=(0, None)))(keys, params), np.float64)
-    with jax.enable_x64(True):
+    with _jax_setup.float64():
         p64 = jax.tree.map(lambda x: jax.device_put(np.asarray(x, np.float64)), params)
         ts = jnp.linspace(0.0, float(config.horizon_s), config.saves)
         y0s = jax.device_put(y0s)
@@ -572,7 +572,7 @@ def simulate_continuous(
     horizon = float(config.horizon_s)
     params = task.default_params() if params is None else params
     n = int(round(horizon * rate_hz)) + 1
-    with jax.enable_x64(True):
+    with _jax_setup.float64():
         # Widened by NumPy (exactly) and placed: no conversion program per array.
         def wide(x):
             return jax.device_put(np.asarray(x, np.float64))

@@ -18,9 +18,11 @@ import optax
 from jaxtyping import Array
 
 from .. import _gym
+from .._jax_setup import float64
 from ..errors import ConfigError, InsufficientDataError
 from ..tasks._base import Task
 from ._shooting import FitResult, adam_fit, check_settings
+from ._task import fit_parameter_names
 from .ensemble import Ensemble, bootstrap_counts, check_members, make_ensemble
 from .network import Correction
 from .steps import _windows, check_data, masked_mean, predict, task_actions
@@ -182,12 +184,14 @@ def fit_network(
     check_data(task, data)
     need = kind.min_transitions
     if data.num_steps < need:
+        more = "record more episodes"
+        if fit_parameter_names(task):
+            more += ", or fit the physical parameters (--model params) from less"
         raise InsufficientDataError(
             f"{data.num_steps} recorded transitions are too few for a {kind.name} model: at least "
-            f"{need} are needed ({need // 200} Pendulum-v1 episodes of 200 steps); record more "
-            "episodes, or fit the physical parameters (--model params) from less"
+            f"{need} are needed; {more}"
         )
-    with jax.enable_x64(True):
+    with float64():
         return _fit_network(
             task, data, kind, params, window, steps, learning_rate, hidden, seed,
             (members, bool(bootstrap), float(uncertainty_penalty)),

@@ -31,6 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
+from .._jax_setup import float64
 from .._shell import command
 from ..errors import ConfigError, DataFileError, InsufficientDataError
 from ..tasks._hooks import task_hook
@@ -222,7 +223,7 @@ def fit_vector_field(
             "more episodes"
         )
     params = task.default_params() if params is None else params
-    with jax.enable_x64(True):
+    with float64():
         return _fit(
             task, data, model_type, network, params, names, window, steps, learning_rate, tuple(hidden),
             weight_decay, substeps, lm_steps, seed, dt,
@@ -337,7 +338,7 @@ def prediction_errors(
     dt = check_data(task, data)
     names = [parse_column(c)[1] for c in data_columns(task)[0]]
     out = {}
-    with jax.enable_x64(True):
+    with float64():
         m = _f64(model)
         run = jax.jit(jax.vmap(lambda s, a: predict(m, s, a, dt, substeps)[-1]))
         for h in horizons:

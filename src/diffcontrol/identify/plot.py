@@ -17,6 +17,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from .. import _gym
+from .._jax_setup import float64
 from ..io import write_figure  # noqa: E402
 from .data import TrajectoryData  # noqa: E402
 from .ode import predict as ode_predict  # noqa: E402
@@ -35,7 +36,7 @@ def task_predictor(task: Any, params: Any) -> Predictor:
         return predict(task, p, _gym.state_from_observation(task, obs0), actions)
 
     def run(obs0: np.ndarray, actions: np.ndarray) -> np.ndarray:
-        with jax.enable_x64(True):
+        with float64():
             p = jax.tree.map(lambda x: jnp.asarray(x, jnp.float64), params)
             acts = jnp.asarray(task_actions(task, actions))
             return np.asarray(open_loop(p, jnp.asarray(obs0), acts))
@@ -52,7 +53,7 @@ def ode_predictor(model: Any, dt: float, substeps: int) -> Predictor:
         return ode_predict(m, state, actions, dt, substeps)
 
     def run(state0: np.ndarray, actions: np.ndarray) -> np.ndarray:
-        with jax.enable_x64(True):
+        with float64():
             m = jax.tree.map(
                 lambda a: jnp.asarray(a, jnp.float64) if eqx.is_inexact_array(a) else a, model
             )

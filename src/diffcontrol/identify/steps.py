@@ -42,6 +42,7 @@ import numpy as np
 import optax
 
 from .. import _gym
+from .._jax_setup import float64
 from .._shell import command
 from ..errors import ConfigError, DataFileError, InsufficientDataError
 from ._shooting import (
@@ -286,7 +287,7 @@ def fit_parameters(
             f"parameter(s) {list(names)}: at least {need} are needed "
             f"({MIN_TRANSITIONS_PER_PARAMETER} per parameter); record more episodes"
         )
-    with jax.enable_x64(True):
+    with float64():
         return _fit(task, data, names, window, steps, learning_rate, lm_steps, init or {})
 
 
@@ -381,7 +382,7 @@ def prediction_errors(
         many predictions; 0 and ``rmse`` NaN where no episode is that long).
     """
     out = {}
-    with jax.enable_x64(True):
+    with float64():
         params = jax.tree.map(lambda x: jnp.asarray(x, jnp.float64), params)
         # the parameters are an argument: one program for every model of the same shape
         run = jax.jit(jax.vmap(lambda p, s, a: predict(task, p, s, a)[-1], (None, 0, 0)))

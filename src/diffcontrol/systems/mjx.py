@@ -40,6 +40,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array
 
+from .._jax_setup import traced_in_float64
 from ..errors import ConfigError
 
 EXTRA = "pip install 'diffcontrol[mujoco]'"
@@ -151,9 +152,11 @@ class MjxSystem:
         """This system with its model and ``Data`` in ``dtype``: itself where they are, else a
         copy put on the device again. A state in float64 (``jax_enable_x64`` turned on after
         the model was loaded) steps in float64: MJX's loops need every float in one type."""
-        if jnp.asarray(self.data0.qpos).dtype == dtype:
-            return self
         key = jnp.dtype(dtype)
+        if key.itemsize == 8:
+            traced_in_float64()  # MJX's float64 NumPy tables stay in JAX's caches
+        if jnp.asarray(self.data0.qpos).dtype == key:
+            return self
         if key not in self._by_dtype:
             copy = object.__new__(MjxSystem)
             copy.__dict__.update(self.__dict__)

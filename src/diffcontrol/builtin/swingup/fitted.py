@@ -42,6 +42,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from ..._jax_setup import float64
 from ...errors import ConfigError, ModelFileError
 from ...identify.data import TrajectoryData
 from ...identify.network import Correction, correction_from_dict, correction_to_dict
@@ -412,7 +413,7 @@ def record_swingup(
             raise ConfigError(f"{name} must be a positive number, got {value!r}")
     steps = int(round(duration_s / dt_s))
     hold = max(1, int(round(hold_s / dt_s)))
-    with jax.enable_x64(True):
+    with float64():
         advance = held_force_step(params, dt_s)
 
         @jax.jit

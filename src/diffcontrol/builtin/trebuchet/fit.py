@@ -44,6 +44,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
+from ..._jax_setup import float64
 from ...errors import ConfigError, InsufficientDataError
 from ...identify._routes import TrajectoryRoute
 from ...identify._shooting import FitResult, check_settings, set_params, standard_errors
@@ -128,7 +129,7 @@ def fit_throws(
     unknown = [n for n in init if n not in names]
     if unknown:
         raise ConfigError(f"init names {unknown} are not among the fitted ones {list(names)}")
-    with jax.enable_x64(True):
+    with float64():
         return _fit(throws, names, steps, learning_rate, lm_steps, init, as64(base))
 
 

@@ -17,6 +17,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..._jax_setup import float64
 from ...errors import ConfigError
 from ...identify.data import TrajectoryData
 from ...io import now_iso
@@ -99,7 +100,7 @@ def predict_distances(params: tb.TrebuchetParams | None, throws: Throws) -> np.n
     columns = (throws.wind, throws.release_angle, throws.counterweight)
     shape = np.broadcast_shapes(*(np.shape(c) for c in columns))
     n, inputs = padded_rows(*columns)
-    with jax.enable_x64(True):
+    with float64():
         p = as64(params or tb.TrebuchetParams())
         return np.asarray(_shoot(*inputs, p))[:n].reshape(shape)
 
