@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -175,3 +176,23 @@ def test_evaluate_on_another_system_reports_that_systems_optimum(pendulum_run, c
     assert main([*argv, "--env", "diffcontrol/Pendulum-v0"]) == 2
     err = capsys.readouterr().err
     assert "physics" in err and len(err.strip().splitlines()) == 1
+
+
+def test_the_first_values_are_kept_for_a_builtin_task_and_its_physics():
+    """``solve_first`` (the planners' and the training windows' terminal value) solves a
+    built-in task once per grid, horizon and physics, for any instance of its class; a user's
+    task (a class defined outside diffcontrol) is solved every time."""
+    first = optimal.solve_first(TASK, 21, 5, horizon=3)
+    assert optimal.solve_first(TASK, 21, 7, horizon=3) is not first  # other actions
+    assert optimal.solve_first(Pendulum(), 21, 5, PARAMS, horizon=3) is first
+    np.testing.assert_array_equal(first.values, optimal.solve(TASK, 21, 5, horizon=3).values[:1])
+    heavier = eqx.tree_at(lambda p: p.g, PARAMS, 12.0)
+    assert optimal.solve_first(TASK, 21, 5, heavier, horizon=3) is not first
+
+    class Mine(Pendulum):
+        pass
+
+    mine = Mine()
+    assert optimal.solve_first(mine, 21, 5, horizon=3) is not optimal.solve_first(
+        mine, 21, 5, horizon=3
+    )

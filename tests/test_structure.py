@@ -96,8 +96,8 @@ def test_no_import_cycle():
 
 
 LAYERS = [
-    "errors _version _registry _shell _timing _interrupts _jax_setup io _run_dir config settings "
-    "controllers policies",
+    "errors _version _registry _shell _timing _interrupts _jax_setup _fingerprint io _run_dir "
+    "config settings controllers policies",
     "systems",
     "tasks",
     "rollout checks _checks _gym",

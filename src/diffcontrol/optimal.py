@@ -23,6 +23,7 @@ each a vectorised step of every grid point. It runs on CPU and GPU unchanged.
 
 from __future__ import annotations
 
+import collections
 import dataclasses
 import itertools
 from collections.abc import Iterable, Sequence
@@ -34,7 +35,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, PyTree
 
-from . import _gym
+from . import _fingerprint, _gym
 from .errors import ConfigError
 from .evaluation import eval_environment
 from .tasks._grid import GridAxis
@@ -173,6 +174,46 @@ def solve(
     states = jnp.asarray(np.stack([m.ravel() for m in mesh], axis=1), jnp.float32)
     values = _backward(task, params, axes, sizes, states, actions, horizon)
     return ValueTable(values, actions, params, task, axes)
+
+
+def solve_first(
+    task: Any,
+    points: int | Sequence[int] = 801,
+    levels: int = 41,
+    params: PyTree | None = None,
+    horizon: int | None = None,
+) -> ValueTable:
+    """``solve``'s table cut to ``V_0`` (the best return of a whole horizon from each grid
+    state: a planner's or a training window's terminal value). Kept in this process for a
+    built-in task, by its class and fingerprint, the grid, the horizon and the physics, so that
+    training or planning the same task on the same physics again does not solve it again; a
+    user's task is solved every time (its step may read what changed since).
+    ``forget_solved()`` lets them go."""
+    params = task.default_params() if params is None else params
+    horizon = task.episode_length if horizon is None else int(horizon)
+    ours = type(task).__module__.startswith("diffcontrol.")
+    mark = _fingerprint.fingerprint(task) if ours else None
+    sizes = tuple(points) if isinstance(points, Sequence) else points
+    key = (type(task), mark, sizes, levels, horizon, _fingerprint.physics_key(params))
+    if mark is not None and key in _SOLVED:
+        _SOLVED.move_to_end(key)
+        return _SOLVED[key][1]
+    table = solve(task, points, levels, params=params, horizon=horizon)
+    first = eqx.tree_at(lambda t: t.values, table, table.values[:1])
+    if mark is not None:
+        while len(_SOLVED) >= _SOLVED_KEPT:
+            _SOLVED.popitem(last=False)
+        _SOLVED[key] = (task, first)  # the task held, so that its methods' ids stay its own
+    return first
+
+
+def forget_solved() -> None:
+    """Let go of the tables ``solve_first`` keeps."""
+    _SOLVED.clear()
+
+
+_SOLVED: collections.OrderedDict[tuple, tuple[Any, ValueTable]] = collections.OrderedDict()
+_SOLVED_KEPT = 4  # Pendulum's V_0 on 201 x 201 points is 160 kB
 
 
 @eqx.filter_jit

@@ -6,7 +6,6 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-import equinox as eqx
 import optax
 from jaxtyping import PyTree
 
@@ -139,8 +138,7 @@ def planner_from_config(
                 f"solving the terminal value: grid optimum of {config.value_grid} points per "
                 f"state axis, {config.value_levels} actions"
             )
-        table = optimal.solve(task, config.value_grid, config.value_levels, params=params)
-        first = eqx.tree_at(lambda t: t.values, table, table.values[:1])  # V_0 only
+        first = optimal.solve_first(task, config.value_grid, config.value_levels, params=params)
 
         def terminal_cost(state):
             return -first.value(0, state)

@@ -493,93 +493,14 @@ def terminal_value(
     if step_loss is not None:
         check_reward_loss(task, config, params, step_loss)
     horizon = config.horizon or task.episode_length
-    # kept only for a built-in task, by identity and fingerprint, as trainers are
-    # (_driver._kept_trainer): a user's step may read what changed since
-    ours = type(task).__module__.startswith("diffcontrol.")
-    fingerprint = _fingerprint(task) if ours else None
-    key = (id(task), fingerprint, config.value_grid, horizon, _physics_key(params))
-    keep = fingerprint is not None and not config.value_time
-    if keep and key in SOLVED:
-        return SOLVED[key][1]
     if progress:
         progress(
             f"solving the windows' terminal value: the grid optimum of {config.value_grid} "
             "points per state axis"
         )
-    table = optimal.solve(task, config.value_grid, params=params, horizon=horizon)
     if config.value_time:
-        return Constant(table)
-    value = Constant(eqx.tree_at(lambda t: t.values, table, table.values[:1]))
-    if not keep:
-        return value
-    while len(SOLVED) >= SOLVED_KEPT:
-        SOLVED.pop(next(iter(SOLVED)))
-    SOLVED[key] = (task, value)  # the task held, so that its id is not another's
-    return value
-
-
-SOLVED: dict[tuple, tuple[Any, Constant]] = {}
-"""The terminal values ``V_0`` solved in this process for built-in tasks, by task (identity
-and fingerprint), grid, horizon and physics:
-training the same task on the same physics again (a sweep's members, ``train`` called in a
-loop) does not solve it again. ``training.clear_compiled()`` lets them go."""
-SOLVED_KEPT = 4
-"""The most terminal values ``SOLVED`` keeps (the oldest goes first): Pendulum's 201 x 201 is
-160 kB."""
-
-
-_PLAIN = (bool, int, float, complex, str, bytes, type(None))
-
-
-def _fingerprint(task: Any, covered: tuple[str, ...] = ()) -> tuple | None:
-    """What the task's programs could depend on beyond its code: its own attributes (but
-    ``covered``, which the caller keys otherwise) and the plain-valued attributes of its
-    classes (arrays by their bytes). ``None`` (keep nothing) if an attribute is neither plain,
-    a tuple of plain values nor an array."""
-
-    def frozen(value: Any) -> Any:
-        if isinstance(value, _PLAIN):
-            return value
-        if isinstance(value, tuple) and all(isinstance(v, _PLAIN) for v in value):
-            return value
-        if isinstance(value, np.ndarray | jax.Array):
-            a = np.asarray(value)
-            return ("array", a.dtype.str, a.shape, a.tobytes())
-        raise TypeError
-
-    try:
-        own = tuple(sorted((k, frozen(v)) for k, v in vars(task).items() if k not in covered))
-    except (TypeError, ValueError):
-        return None
-    return own, _class_fingerprint(task)
-
-
-def _class_fingerprint(task: Any) -> tuple:
-    """The plain-valued attributes of the task's classes, and the identity of their methods
-    (a method replaced changes it)."""
-    return tuple(
-        (k, v if isinstance(v, _PLAIN + (tuple,)) else id(v))
-        for cls in type(task).__mro__
-        for k, v in sorted(vars(cls).items())
-        if not k.startswith("__")
-        and (isinstance(v, _PLAIN + (tuple,)) and _hashable(v) or callable(v))
-    )
-
-
-def _hashable(value: Any) -> bool:
-    """Whether ``value`` can be hashed (a tuple of lists cannot)."""
-    try:
-        hash(value)
-    except TypeError:
-        return False
-    return True
-
-
-def _physics_key(params: PyTree) -> tuple:
-    """``params`` as a hashable value: its structure and every leaf's dtype, shape and bytes."""
-    leaves, structure = jax.tree_util.tree_flatten(params)
-    arrays = [np.asarray(leaf) for leaf in leaves]
-    return str(structure), tuple((a.dtype.str, a.shape, a.tobytes()) for a in arrays)
+        return Constant(optimal.solve(task, config.value_grid, params=params, horizon=horizon))
+    return Constant(optimal.solve_first(task, config.value_grid, params=params, horizon=horizon))
 
 
 def check_reward_loss(task: Task, config: TrainConfig, params: PyTree, step_loss: StepLoss) -> None:

@@ -21,14 +21,14 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, PRNGKeyArray, PyTree
 
-from .. import _run_dir, _timing, io, policies
+from .. import _fingerprint, _run_dir, _timing, io, optimal, policies
 from .._jax_setup import FAST_COMPILE, compile_with
 from .._run_files import save_run
 from ..checks import validate_task
 from ..controllers import MLPController
 from ..errors import ConfigError, ModelFileError, TrainingDiverged
 from ..tasks import AnyTask, ContinuousTask, StepLoss, TrajectoryLoss, as_task, task_params
-from ._bptt import SOLVED, _fingerprint, _hashable, make_trainer
+from ._bptt import make_trainer
 from ._checkpoint import load_checkpoint, save_checkpoint
 from ._devices import batch_placement, check_devices, divisible, gathered, is_writer, placer
 from ._diagnostics import Diagnostics
@@ -495,7 +495,7 @@ def _kept_trainer(
     general = dataclasses.replace(config, seed=0)
     ours = type(task).__module__.startswith("diffcontrol.")
     builtin = ours and step_loss is None and trajectory_loss is None
-    fingerprint = _fingerprint(task) if builtin else None
+    fingerprint = _fingerprint.fingerprint(task) if builtin else None
     # A built-in wrapper whose programs read of it only its plain attributes, its classes,
     # the task it wraps and what ``_programs_key`` names (``FittedSwingUp``: its network is a
     # parameter) shares its trainer with every equal wrapper of that task (kept alive by the
@@ -504,13 +504,13 @@ def _kept_trainer(
     if shared:
         inner, extra, covered = shared()
         inner_ours = type(inner).__module__.startswith("diffcontrol.")
-        own = _fingerprint(task, covered)
-        inner_print = _fingerprint(inner) if inner_ours and own else None
+        own = _fingerprint.fingerprint(task, covered)
+        inner_print = _fingerprint.fingerprint(inner) if inner_ours and own else None
         fingerprint = inner_print and ("shared", own, id(inner), type(inner), inner_print, extra)
     fields = tuple(  # NaN (target_return's default) equal to itself, on every Python
         "nan" if isinstance(v, float) and math.isnan(v) else v for v in dataclasses.astuple(general)
     )
-    if not _hashable(fields):
+    if not _fingerprint.hashable(fields):
         fingerprint = None
     key = (None if shared else id(task), type(task), fingerprint, type(general), fields)
     kept = _TRAINERS.pop(key, None) if fingerprint is not None else None
@@ -651,7 +651,7 @@ def clear_compiled() -> None:
     solved terminal values (``jax.clear_caches`` does not)."""
     _EXECUTABLES.clear()
     _TRAINERS.clear()
-    SOLVED.clear()
+    optimal.forget_solved()
 
 
 def _outputs(shardings: Any) -> dict[str, Any]:
