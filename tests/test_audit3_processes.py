@@ -81,9 +81,12 @@ def test_a_file_size_limit_while_plan_writes_leaves_nothing_and_the_command_runs
 @pytest.mark.slow  # a loop killed while its planner is built, then resumed: about 25 s
 def test_a_loop_killed_while_its_planner_is_built_resumes(tmp_path):
     """new-loop-28: SIGKILL leaves round 1's run.json and nothing else of its planner;
-    ``loop --resume`` builds the planner and finishes."""
+    ``loop --resume`` builds the planner and finishes. The real pendulum is heavier than the
+    nominal one, so that round 1's planner solves its terminal value anew (a planner of the
+    nominal physics is already solved in the process, by round 0, and is built at once)."""
     argv = ["loop", "pendulum", "--out", "lp", "--controller", "plan", "--rounds", "1"]
     argv += ["--episodes", "1", "--fit-steps", "2", "--eval-episodes", "1", "--quiet"]
+    argv += ["--env", "diffcontrol/PendulumFriction-v0", "--env-arg", "g=12"]
     cmd = [sys.executable, "-P", "-m", "diffcontrol.cli", *argv]
     proc = subprocess.Popen(cmd, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     claim = tmp_path / "lp" / "round_1" / "run" / "run.json"
