@@ -249,10 +249,10 @@ class float64:  # noqa: N801 (used as a context manager, like jax.enable_x64)
         self._x64.__enter__()
 
     def __exit__(self, *exc: Any) -> None:
-        global _STALE_AFTER_X64
-        self._x64.__exit__(*exc)
         import jax
 
+        global _STALE_AFTER_X64
+        self._x64.__exit__(*exc)
         if _STALE_AFTER_X64 and not jax.config.jax_enable_x64:
             _STALE_AFTER_X64 = False
             jax.clear_caches()

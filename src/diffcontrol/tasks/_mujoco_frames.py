@@ -55,13 +55,14 @@ def kinematics(task: Any, states: np.ndarray) -> tuple[np.ndarray, float]:
     model, nq = task.system.mj_model, task.system.nq
     data = mujoco.MjData(model)
     moving = model.geom_bodyid > 0
+    any_moving = bool(np.any(moving))
     positions = np.empty((len(states), model.nbody - 1, 3))
-    reach = 0.0 if np.any(moving) else 1.0
+    reach = 0.0 if any_moving else 1.0
     for i, state in enumerate(states):
         data.qpos[:] = state[:nq]
         mujoco.mj_kinematics(model, data)
         positions[i] = data.xpos[1:]
-        if np.any(moving):
+        if any_moving:
             mujoco.mj_comPos(model, data)
             far = np.linalg.norm(data.geom_xpos[moving] - data.subtree_com[0], axis=-1)
             reach = max(reach, float(np.max(far + model.geom_rbound[moving])))
