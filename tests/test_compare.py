@@ -180,11 +180,17 @@ def test_compare_help(capsys):
 
 
 @pytest.mark.slow
-def test_compare_trebuchet_rl_in_the_diffcontrol_environment(tmp_path):
+def test_compare_trebuchet_rl_in_the_diffcontrol_environment(tmp_path, monkeypatch):
+    import tempfile
+
     pytest.importorskip("stable_baselines3")
     out = tmp_path / "t"
+    scratch = tmp_path / "tmp"
+    scratch.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(scratch))  # where SB3's own logger would write
     args = ["compare", "trebuchet", "--out", str(out), "--methods", "sac,td3"]
     assert main([*args, "--rl-steps", "40", "--eval-every", "20", *TINY]) == 0
+    assert not list(scratch.glob("SB3-*"))  # no empty SB3-<date> folder left per learn()
     doc = json.loads((out / "comparison.json").read_text())
     assert doc["eval_env"] == "diffcontrol/Trebuchet-v0" and doc["thresholds"] == [-2.0, -1.0]
     for run in doc["runs"]:

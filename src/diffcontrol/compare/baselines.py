@@ -135,5 +135,11 @@ def build_model(
         n = env.action_space.shape[-1]
         std = kwargs.pop("noise_std")
         kwargs["action_noise"] = NormalActionNoise(mean=np.zeros(n), sigma=std * np.ones(n))
+    from stable_baselines3.common.logger import Logger
+
     cls = getattr(sb3, baseline.algo)
-    return cls("MlpPolicy", env, seed=seed, device="cpu", verbose=0, **kwargs)
+    model = cls("MlpPolicy", env, seed=seed, device="cpu", verbose=0, **kwargs)
+    # A logger that writes nowhere: SB3's default makes an empty SB3-<date> folder in the
+    # temporary directory on every learn().
+    model.set_logger(Logger(folder=None, output_formats=[]))
+    return model
