@@ -42,9 +42,9 @@ def test_the_default_reset_is_the_initial_state():
 
 @pytest.mark.slow
 def test_several_starts_train_and_evaluate_on_the_reset_distribution():
-    config = TASK.default_config().replace(updates=4, eval_every=2, starts=3)
+    config = TASK.default_config().replace(updates=4, eval_every=2, starts=3, population=1)
     result = diffcontrol.train(TASK, config)
-    assert result.metrics["simulated_episodes"] == 4 * 3  # solves: updates x starts
+    assert result.metrics["simulated_episodes"] == 4 * 3  # updates x starts (of 2 windows each)
     trainer = make_ode_trainer(TASK, config)
     params = task_params(TASK)
     y0s = trainer.starts_of(jax.random.PRNGKey(0), params)

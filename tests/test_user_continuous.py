@@ -5,7 +5,8 @@ at its own control period."""
 from __future__ import annotations
 
 import json
-import textwrap
+import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,77 +14,17 @@ import pytest
 import diffcontrol
 from diffcontrol.cli import main
 
-USER_FILE = """
-import equinox as eqx
-import jax
-import jax.numpy as jnp
+USER_FILE = Path(__file__).resolve().parents[1] / "examples" / "damped_pendulum.py"
 
-import diffcontrol
-
-
-class Params(eqx.Module):
-    g: float = 9.81
-    b: float = 0.1
-
-
-class Swing(eqx.Module):
-    phi: jax.Array
-    phidot: jax.Array
-
-
-class DampedPendulum(diffcontrol.ContinuousTask):
-    name = "user-damped-pendulum"
-    summary = "swing a damped pendulum up (phi = 0 upright) with |u| <= 3"
-    observation_size = 3
-    action_size = 1
-    action_head = "tanh"
-    action_low, action_high = (-3.0,), (3.0,)
-    losses = ("upright",)
-    state_names = ("phi", "phidot")
-    feature_names = ("cos(phi)", "sin(phi)", "phidot")
-
-    def default_params(self):
-        return Params()
-
-    def default_config(self):
-        return diffcontrol.ODETrainConfig(horizon_s=8, saves=81, starts=16, updates=500)
-
-    def initial_state(self, params):
-        return jnp.array([jnp.pi, 0.0])
-
-    def reset(self, key, params):
-        k1, k2 = jax.random.split(key)
-        return jnp.array([jnp.pi + jax.random.uniform(k1, minval=-0.3, maxval=0.3),
-                          jax.random.uniform(k2, minval=-0.2, maxval=0.2)])
-
-    def vector_field(self, t, y, args):
-        p, force_fn = args
-        phi, phidot = y
-        u = force_fn(t, y)
-        return jnp.stack([phidot, p.g * jnp.sin(phi) - p.b * phidot + u])
-
-    def observe(self, state):
-        return jnp.stack([jnp.cos(state[0]), jnp.sin(state[0]), state[1]])
-
-    def trajectory(self, params, controller, ts, ys):
-        return Swing(phi=ys[:, 0], phidot=ys[:, 1])
-
-    def trajectory_loss(self, name):
-        def loss(tr):
-            c = 1 - jnp.cos(tr.phi) + 0.01 * tr.phidot**2
-            return jnp.mean(c) + 5 * c[-1]
-        return loss
-"""
-
-SPEC = "my_pendulum:DampedPendulum"
+SPEC = "damped_pendulum:DampedPendulum"
 TINY = ["--updates", "4", "--eval-every", "2", "--starts", "2", "--horizon-s", "1"]
-TINY += ["--saves", "11", "--hidden", "4"]
+TINY += ["--saves", "11", "--hidden", "4", "--population", "1"]
 
 
 @pytest.fixture(scope="module")
 def user_dir(tmp_path_factory):
     d = tmp_path_factory.mktemp("user-continuous")
-    (d / "my_pendulum.py").write_text(textwrap.dedent(USER_FILE))
+    shutil.copy(USER_FILE, d / "damped_pendulum.py")
     return d
 
 
@@ -199,3 +140,41 @@ def test_a_vector_field_that_misreads_the_action_is_one_line_naming_its_shape(
     assert "\n" not in str(e.value) and "state of shape (2,)" in str(e.value)
     with pytest.raises(diffcontrol.ConfigError, match=r"of shape \(3,\) for a state of shape"):
         diffcontrol.train(Flat(), config)
+
+
+def test_windows_take_one_step_each_through_their_own_solve(user_dir, monkeypatch):
+    """``window_s`` cuts each update's horizon into consecutive windows: one optimiser step
+    per window, each window's loss on its own share of the saved points; 0, or a window as
+    long as the horizon, is the whole horizon in one step. A configuration written before
+    ``window_s`` existed resumes as it was trained: the whole horizon."""
+    import jax
+    import optax
+
+    from diffcontrol.config import ODETrainConfig
+    from diffcontrol.training import make_ode_trainer, task_params
+
+    monkeypatch.chdir(user_dir)
+    task = diffcontrol.tasks.resolve(SPEC)
+    params = task_params(task)
+    config = task.default_config().replace(
+        horizon_s=1.0, saves=11, starts=2, population=1, hidden=(4,), window_s=0.25
+    )
+    seen = []  # the saved points of each trajectory the loss is traced on
+
+    def recording(trajectory):
+        seen.append(trajectory.phi.shape)
+        return task.trajectory_loss("upright")(trajectory)
+
+    trainer = make_ode_trainer(task, config, trajectory_loss=recording)
+    assert trainer.windows() == 4
+    state, stats = trainer.update(trainer.init(jax.random.PRNGKey(0), params), params)
+    assert int(optax.tree_utils.tree_get(state.opt_state, "count")[0]) == 4
+    # the check of the loss on a whole horizon (11 points), then one trace inside the scan
+    # over the windows, each of 10 / 4 intervals (3 points)
+    assert seen == [(11,), (3,)]
+    assert bool(jax.numpy.isfinite(stats.loss))
+    for whole in (0.0, 1.0):
+        assert make_ode_trainer(task, config.replace(window_s=whole)).windows() == 1
+    old = {k: v for k, v in config.to_json().items() if k != "window_s"}
+    assert ODETrainConfig.from_json(old).window_s == 0.0
+    assert ODETrainConfig().window_s == 2.0  # a new run of a user's task: 2 s windows

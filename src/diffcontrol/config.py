@@ -381,8 +381,10 @@ class ODETrainConfig(_Config):
     Every update solves the closed loop (the controller inside the ODE's right-hand side)
     from the task's initial state over ``horizon_s`` seconds with an adaptive solver, saves
     ``saves`` equally spaced points, differentiates the task's loss on that trajectory
-    through the solve by ``gradient``, and takes one Adam step. ``population`` controllers
-    from different initial weights train side by side under ``vmap``; the best is returned.
+    through the solve by ``gradient``, and takes one Adam step; with ``window_s``, one step
+    per window of the horizon instead, each differentiated through its own window only.
+    ``population`` controllers from different initial weights train side by side under
+    ``vmap``; the best is returned.
     """
 
     seed: int = _shared("seed", 0)
@@ -431,10 +433,21 @@ class ODETrainConfig(_Config):
         default=1,
         high=MAX_WIDTH,
     )
+    window_s: float = _opt(
+        "Truncated BPTT through the solve: each update cuts the horizon into about "
+        "horizon_s / window_s consecutive windows, differentiates each window's loss (the "
+        "task's loss on that window's saved points) through that window's solve only and takes "
+        "one optimiser step per window; a window's end states start the next without gradient. "
+        "Long chaotic solves give useless gradients; 0 (or window_s >= horizon_s) "
+        "differentiates the whole horizon.",
+        default=2.0,
+        metavar="S",
+        form="nonneg",
+    )
     population: int = _opt(
         "Controllers from different initial weights trained side by side under vmap; the best "
         "is returned. Helps against local minima (a cart that never moves).",
-        default=1,
+        default=4,
         high=MAX_WIDTH,
     )
     curriculum_start: float = _opt(
@@ -444,11 +457,11 @@ class ODETrainConfig(_Config):
         form="share",
     )
     curriculum_fraction: float = _shared("curriculum_fraction", 0.5)
-    learning_rate: float = _shared("learning_rate", 0.05)
+    learning_rate: float = _shared("learning_rate", 0.01)
     lr_schedule: str = _shared("lr_schedule", "constant")
     lr_final_fraction: float = _shared("lr_final_fraction", 0.05)
-    grad_clip: float = _shared("grad_clip", 0.0)
-    hidden: tuple[int, ...] = _shared("hidden", (8,))
+    grad_clip: float = _shared("grad_clip", 1.0)
+    hidden: tuple[int, ...] = _shared("hidden", (32, 32))
     activation: str = _shared("activation", "tanh")
     head: str = _head("Action head; empty means the task's (linear: an unbounded force).")
     loss: str = _shared("loss", "")
@@ -464,3 +477,11 @@ class ODETrainConfig(_Config):
     def target_return(self) -> float:
         """No early stop for continuous-time runs (the driver asks every config)."""
         return math.nan
+
+    @classmethod
+    def from_json(cls, data: Any) -> Any:
+        """As ``_Config.from_json``; a configuration written before ``window_s`` existed
+        differentiated its whole horizon, and resumes so (``window_s = 0``)."""
+        if isinstance(data, dict) and "window_s" not in data:
+            data = {**data, "window_s": 0.0}
+        return super().from_json(data)

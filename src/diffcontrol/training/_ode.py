@@ -3,6 +3,10 @@
 One *update* solves the closed loop of every population member from the task's initial state
 over the (possibly growing) horizon, differentiates each member's loss on its saved
 trajectory through its solve, and takes one optimiser step per member, all under ``vmap``.
+With ``window_s`` the horizon is cut into consecutive windows instead, each solved from where
+the last one ended, its loss differentiated through its own solve only, one step per window:
+over a long swing-up, the gradient through the whole solve is dominated by how the end state
+depends on the first seconds' actions (norms of 1e2 to 1e3) and no longer points downhill.
 A member whose solve fails (its step limit, a step too small) or whose loss or gradient is
 not finite is frozen and flagged, never updated with a NaN; the Python driver reports it and
 stops with a clear error when no member is left. A *chunk* is ``lax.scan`` over
@@ -108,12 +112,18 @@ class ODETrainer(eqx.Module):
         return cfg.horizon_s * jnp.minimum(1.0, frac)
 
     def solve(
-        self, controller: MLPController, params: PyTree, horizon: Array, gradient: str, y0=None
+        self,
+        controller: MLPController,
+        params: PyTree,
+        horizon: Array,
+        gradient: str,
+        y0=None,
+        saves: int | None = None,
     ):
         """One member's closed-loop solve from ``y0`` (default: the task's initial state),
-        saved at ``saves`` points of ``[0, horizon]``."""
+        saved at ``saves`` (default: the config's) points of ``[0, horizon]``."""
         cfg = self.config
-        ts = jnp.linspace(0.0, 1.0, cfg.saves) * horizon
+        ts = jnp.linspace(0.0, 1.0, saves or cfg.saves) * horizon
         args = (params, force_fn(self.task, controller))
         return solve_closed_loop(
             self.task.vector_field,
@@ -131,17 +141,21 @@ class ODETrainer(eqx.Module):
         """``(loss, (solution flags))`` of one member: the loss of its saved trajectory, or
         the mean loss of the trajectories from the initial states ``y0s`` (``[starts, state]``:
         every solve must succeed)."""
-
-        def one(y0):
-            sol = self.solve(controller, params, horizon, self.config.gradient, y0)
-            traj = self.task.trajectory(params, controller, sol.ts, sol.ys)
-            loss = jnp.reshape(self.loss_fn(traj), ())
-            return loss, (sol.ok, sol.max_steps_reached, sol.num_steps)
-
         if y0s is None:
-            return one(None)
-        loss, (ok, hit_max, steps) = jax.vmap(one)(y0s)
+            loss, (ok, hit_max, steps, _) = self._loss_and_ends(controller, params, horizon, None)
+            return loss, (ok, hit_max, steps)
+        loss, (ok, hit_max, steps, _) = jax.vmap(
+            lambda y0: self._loss_and_ends(controller, params, horizon, y0)
+        )(y0s)
         return jnp.mean(loss), (jnp.all(ok), jnp.any(hit_max), jnp.sum(steps))
+
+    def _loss_and_ends(self, controller, params, horizon, y0, saves=None):
+        """The loss of one solve from ``y0`` over ``horizon`` (``saves`` points), its flags
+        and its end state."""
+        sol = self.solve(controller, params, horizon, self.config.gradient, y0, saves)
+        traj = self.task.trajectory(params, controller, sol.ts, sol.ys)
+        loss = jnp.reshape(self.loss_fn(traj), ())
+        return loss, (sol.ok, sol.max_steps_reached, sol.num_steps, sol.ys[-1])
 
     def starts_of(self, key: PRNGKeyArray, params: PyTree):
         """``starts`` initial states from the task's reset distribution, or ``None`` (the one
@@ -212,6 +226,49 @@ class ODETrainer(eqx.Module):
             live,
         )
 
+    def windows(self) -> int:
+        """Consecutive windows per update (``window_s``): 1 differentiates the whole horizon."""
+        cfg = self.config
+        return max(1, round(cfg.horizon_s / cfg.window_s)) if cfg.window_s > 0 else 1
+
+    def _window_steps(self, ts: ODETrainState, params: PyTree, horizon: Array, y0s):
+        """Truncated BPTT through the solve: ``windows()`` consecutive windows of the horizon,
+        each differentiated through its own solve only and giving one optimiser step per
+        member; a window's end states start the next one without gradient."""
+        cfg = self.config
+        k = self.windows()
+        saves = max(2, round((cfg.saves - 1) / k) + 1)
+        window = horizon / k
+        if y0s is None:
+            y0s = self.task.initial_state(params)[None]
+        ys = jnp.broadcast_to(y0s, (cfg.population, *y0s.shape))
+
+        def grad_one(controller, ys):
+            diff, static = eqx.partition(controller, _trainable(controller))
+
+            def loss_of(diff):
+                ctrl = eqx.combine(diff, static)
+                loss, (ok, hit, steps, ends) = jax.vmap(
+                    lambda y0: self._loss_and_ends(ctrl, params, window, y0, saves)
+                )(ys)
+                return jnp.mean(loss), (jnp.all(ok), jnp.any(hit), jnp.sum(steps), ends)
+
+            (loss, (ok, hit, steps, ends)), grads = value_and_grad(loss_of, cfg.gradient)(diff)
+            return loss, ok, hit, steps, grads, jax.lax.stop_gradient(ends)
+
+        def body(carry, _):
+            ctrl, opt, code, ys = carry
+            loss, ok, hit, steps, grads, ends = eqx.filter_vmap(grad_one)(ctrl, ys)
+            ctrl, opt, code, loss, gnorm, steps, live = eqx.filter_vmap(self._member_apply)(
+                ctrl, opt, code, loss, ok, hit, steps, grads
+            )
+            ends = jnp.where(jnp.isfinite(ends), ends, ys)  # a failed member is frozen anyway
+            return (ctrl, opt, code, ends), (loss, gnorm, steps, live)
+
+        carry = (ts.controller, ts.opt_state, ts.fail_code, ys)
+        (ctrl, opt, code, _), (loss, gnorm, steps, live) = jax.lax.scan(body, carry, None, length=k)
+        return ctrl, opt, code, jnp.nanmean(loss, 0), jnp.nanmean(gnorm, 0), steps.sum(0), live[0]
+
     def update(self, ts: ODETrainState, params: PyTree) -> tuple[ODETrainState, ODEUpdateStats]:
         """One update of every member still training."""
         horizon = self.horizon_at(ts.update)
@@ -219,15 +276,18 @@ class ODETrainer(eqx.Module):
         y0s = self.starts_of(k_starts, params)  # the same starts for every member
         # One member's solve differentiated as it is, not under vmap, where the task says so
         # (``_one_member``); the optimiser's step stays under vmap.
-        if self._one_member():
-            out = _as_members(self._member_grad(_only(ts.controller), params, horizon, y0s))
+        if self.windows() > 1:
+            ctrl, opt, code, loss, gnorm, steps, live = self._window_steps(ts, params, horizon, y0s)
         else:
-            out = eqx.filter_vmap(self._member_grad, in_axes=(0, None, None, None))(
-                ts.controller, params, horizon, y0s
+            if self._one_member():
+                out = _as_members(self._member_grad(_only(ts.controller), params, horizon, y0s))
+            else:
+                out = eqx.filter_vmap(self._member_grad, in_axes=(0, None, None, None))(
+                    ts.controller, params, horizon, y0s
+                )
+            ctrl, opt, code, loss, gnorm, steps, live = eqx.filter_vmap(self._member_apply)(
+                ts.controller, ts.opt_state, ts.fail_code, *out
             )
-        ctrl, opt, code, loss, gnorm, steps, live = eqx.filter_vmap(self._member_apply)(
-            ts.controller, ts.opt_state, ts.fail_code, *out
-        )
         newly = (code != FAIL_NONE) & (ts.fail_code == FAIL_NONE)
         n_live = jnp.sum(live)
         new = ODETrainState(

@@ -43,6 +43,11 @@ from ...errors import ConfigError
 from ...settings import PlanConfig
 from ...tasks import ContinuousTask, TrajectoryLoss
 
+POST_NETWORK = dict(hidden=(8,), grad_clip=0.0, population=1, window_s=0.0)
+"""The post's training (a 3-8-1 network, unclipped Adam, the whole horizon differentiated in
+each update), which the swing-ups' defaults and figures are: not ``ODETrainConfig``'s own
+defaults, which are for a task of the user's."""
+
 ENERGY_WEIGHT = 0.1
 """Weight of the dissipated energy (per joule) in the ``energy`` loss."""
 
@@ -266,7 +271,9 @@ class CartPoleSwingUp(ContinuousTask):
         # The post's recipe (Tsit5 at reltol 1e-3 / abstol 1e-6, 50 saves, 3-8-1 tanh net with
         # Glorot init, Adam 0.05) with 1000 updates, as in the post's text (the repository ran
         # 1500: the ``original`` recipe).
-        return ODETrainConfig(horizon_s=1.0, saves=50, updates=1000, learning_rate=0.05)
+        return ODETrainConfig(
+            horizon_s=1.0, saves=50, updates=1000, learning_rate=0.05, **POST_NETWORK
+        )
 
     # --- a run is judged by a reference solve and drawn as a cart-pole (builtin.swingup) ---
 
@@ -307,12 +314,12 @@ class CartPoleSwingUpLimited(CartPoleSwingUp):
 
     def default_config(self) -> ODETrainConfig:
         return ODETrainConfig(
+            **{**POST_NETWORK, "population": 8},
             horizon_s=10.0,
             saves=50,
             updates=3000,
             learning_rate=0.05,
             lr_schedule="cosine",
-            population=8,
         )
 
     def default_plan_config(self):
@@ -356,5 +363,9 @@ class CartPoleSwingUpFriction(CartPoleSwingUp):
 
     def default_config(self) -> ODETrainConfig:
         return ODETrainConfig(
-            horizon_s=3.0, saves=50, updates=1000, learning_rate=0.05, population=4
+            **{**POST_NETWORK, "population": 4},
+            horizon_s=3.0,
+            saves=50,
+            updates=1000,
+            learning_rate=0.05,
         )
