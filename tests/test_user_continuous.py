@@ -178,3 +178,29 @@ def test_windows_take_one_step_each_through_their_own_solve(user_dir, monkeypatc
     old = {k: v for k, v in config.to_json().items() if k != "window_s"}
     assert ODETrainConfig.from_json(old).window_s == 0.0
     assert ODETrainConfig().window_s == 2.0  # a new run of a user's task: 2 s windows
+
+
+def test_a_continuous_task_without_planning_losses_is_planned_by_its_trajectory_loss(
+    user_dir, monkeypatch, capsys
+):
+    """A task that declares no running cost is planned with its trajectory loss of a
+    trajectory that stays at the state and action (here 6 x (1 - cos phi + 0.01 phidot^2));
+    its one action reaches the vector field as the scalar that training gives, and ``plan``
+    ends with the loss of its closed loop: a reference for the trained controller."""
+    import jax.numpy as jnp
+
+    from diffcontrol.mpc._discretise import DwellingCost, planning_losses, running_cost
+
+    monkeypatch.chdir(user_dir)
+    task = diffcontrol.tasks.resolve(SPEC)
+    assert planning_losses(task) == ("upright",)
+    rate = running_cost(task, "upright")
+    assert rate == DwellingCost(task, "upright")  # equal planners compile once
+    y = jnp.array([0.5, 2.0])
+    expected = 6 * (1 - np.cos(0.5) + 0.01 * 2.0**2)
+    assert float(rate(task.default_params(), y, jnp.array([1.0]))) == pytest.approx(expected)
+    out = user_dir / "plan"
+    argv = ["plan", SPEC, "--out", str(out), "--horizon", "3", "--iterations", "1"]
+    assert main([*argv, "--final-eval", "2", "--quiet", "--no-animation"]) == 0
+    assert "(2 starts)" in capsys.readouterr().out  # the loss of its closed loop from 2 starts
+    assert diffcontrol.policies.is_planner(json.loads((out / "model.json").read_text()))

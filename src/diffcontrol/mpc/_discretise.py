@@ -3,8 +3,8 @@
 ``discretise(task, dt)`` holds the action constant over each control period ``dt`` (a
 zero-order hold, as a digital controller applies it) and integrates the task's vector field
 over the period with the classical fourth-order Runge-Kutta method in ``substeps`` fixed steps.
-The result is a ``Task`` with a ``step``, the task's planning losses as step losses, and its
-reset distribution, so ``make_planner(discretise(task, 0.05), ILQR(), horizon=40,
+The result is a ``Task`` with a ``step``, the task's planning losses as step losses (by
+default each trajectory loss as ``DwellingCost``), and its reset distribution, so ``make_planner(discretise(task, 0.05), ILQR(), horizon=40,
 bounds=((-6,), (6,)))`` plans through the ODE model. ``ode_episode`` then runs such a planner
 against the continuous system itself (the action held for ``dt`` in an adaptive solve).
 
@@ -39,12 +39,14 @@ from ..tasks._hooks import task_hook
 
 
 class HeldAction(eqx.Module):
-    """``force_fn(t, state) = action``: the zero-order hold, as the vector field's input."""
+    """``force_fn(t, state) = action``: the zero-order hold, as the vector field's input, in
+    the shape the training's ``force_fn`` gives (``rollout.StateFeedback``: a one-action
+    task's action as a scalar)."""
 
     action: Array
 
     def __call__(self, t: Array, state: Array) -> Array:
-        return self.action
+        return self.action[0] if self.action.shape == (1,) else self.action
 
 
 def rk4_hold(task: ContinuousTask, params: PyTree, y: Array, action: Array, dt: float,
@@ -69,20 +71,50 @@ def rk4_hold(task: ContinuousTask, params: PyTree, y: Array, action: Array, dt: 
 
 def planning_losses(task: Any) -> tuple[str, ...]:
     """The losses a planner can plan a continuous-time task with: the task's
-    ``planning_losses`` declaration (each with a ``running_cost``), none by default."""
-    return tuple(getattr(task, "planning_losses", ()))
+    ``planning_losses`` declaration (each with a ``running_cost``), else its trajectory
+    losses (``losses``), each planned with the cost derived from it (``DwellingCost``)."""
+    declared = getattr(task, "planning_losses", None)
+    return tuple(declared if declared is not None else getattr(task, "losses", ()))
 
 
 @task_hook
 def running_cost(task: Any, name: str) -> Callable[[PyTree, Array, Array], Array]:
     """``rate(params, y, action)``: the cost per second of the planning loss ``name``, the
     additive counterpart of the trajectory loss of that name (``discretise`` integrates it over
-    each control period).
+    each control period). Default: ``DwellingCost`` of the task's trajectory loss ``name``.
 
     Raises:
-        ConfigError: the task defines none (the default).
+        ConfigError: the task has no trajectory loss of that name.
     """
-    raise ConfigError(f"task {task.name!r} has no planning loss {name!r} (running_cost)")
+    if name not in getattr(task, "losses", ()):
+        raise ConfigError(f"task {task.name!r} has no planning loss {name!r} (running_cost)")
+    return DwellingCost(task, name)
+
+
+@dataclasses.dataclass(frozen=True)
+class DwellingCost:
+    """The trajectory loss ``name`` of a trajectory that stays at ``y`` under ``action`` (two
+    saved points, one second apart): for a loss that averages a cost of the state and the
+    action over the saved points (plus end terms), that cost, up to its weights. What a task
+    that declares no ``running_cost`` is planned with (equal for equal arguments, so that
+    equal planners compile once)."""
+
+    task: Any
+    name: str
+
+    def __call__(self, params: PyTree, y: Array, action: Array) -> Array:
+        ys = jnp.stack([y, y])
+        trajectory = self.task.trajectory(params, _Hold(action), jnp.array([0.0, 1.0]), ys)
+        return jnp.reshape(self.task.trajectory_loss(self.name)(trajectory), ())
+
+
+class _Hold(eqx.Module):
+    """A controller that gives ``action`` whatever it observes."""
+
+    action: Array
+
+    def __call__(self, observation: Array) -> Array:
+        return self.action
 
 
 @task_hook
