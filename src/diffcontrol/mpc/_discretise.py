@@ -4,9 +4,10 @@
 zero-order hold, as a digital controller applies it) and integrates the task's vector field
 over the period with the classical fourth-order Runge-Kutta method in ``substeps`` fixed steps.
 The result is a ``Task`` with a ``step``, the task's planning losses as step losses (by
-default each trajectory loss as ``DwellingCost``), and its reset distribution, so ``make_planner(discretise(task, 0.05), ILQR(), horizon=40,
-bounds=((-6,), (6,)))`` plans through the ODE model. ``ode_episode`` then runs such a planner
-against the continuous system itself (the action held for ``dt`` in an adaptive solve).
+default each trajectory loss as ``DwellingCost``), and its reset distribution, so
+``make_planner(discretise(task, 0.05), ILQR(), horizon=40, bounds=((-6,), (6,)))`` plans
+through the ODE model. ``ode_episode`` then runs such a planner against the continuous system
+itself (the action held for ``dt`` in an adaptive solve).
 
 Why a hand-written fixed-step RK4 rather than ``diffrax.diffeqsolve``: the step sits inside
 iLQR's linearisation, where it is differentiated by ``jax.jacfwd`` and, through the loss, by

@@ -267,6 +267,7 @@ class ODETrainer(eqx.Module):
 
         carry = (ts.controller, ts.opt_state, ts.fail_code, ys)
         (ctrl, opt, code, _), (loss, gnorm, steps, live) = jax.lax.scan(body, carry, None, length=k)
+        # the members live when the update began: those whose solves it counts
         return ctrl, opt, code, jnp.nanmean(loss, 0), jnp.nanmean(gnorm, 0), steps.sum(0), live[0]
 
     def update(self, ts: ODETrainState, params: PyTree) -> tuple[ODETrainState, ODEUpdateStats]:
