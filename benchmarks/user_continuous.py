@@ -10,8 +10,12 @@ distribution that training never drew (``PRNGKey(1000 + i)``), integrated by Sci
 (rtol = atol = 1e-10) over the task's 8 s. A start counts as upright when it ends within
 0.1 rad of upright with |phi'| < 0.5 rad/s. Target: at least 18 of 20 for every seed.
 
+The reference (``--planner``): ``diffcontrol plan damped_pendulum:DampedPendulum`` with its
+defaults (box-iLQR at the task's 0.1 s control period, the trajectory loss as its cost), from
+the same starts, each action held for 0.1 s, in the library's own float64 reference solve.
+
     taskset -c 0 python benchmarks/user_continuous.py            # about 1 minute per seed
-    taskset -c 0 python benchmarks/user_continuous.py --before   # also the defaults before
+    taskset -c 0 python benchmarks/user_continuous.py --before --planner   # and the references
 """
 
 from __future__ import annotations
@@ -19,7 +23,9 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -62,10 +68,38 @@ def upright_from_held_out_starts(run: Path, starts: int = 20) -> list[dict]:
     return ends
 
 
+def held_out_loss(run: Path, starts: int = 20):
+    """``evaluate``'s closed loop of the run from the held-out starts: the library's float64
+    reference solve (the action of a planner held for its control period)."""
+    import diffcontrol
+    from diffcontrol.evaluation import evaluate_run
+
+    task = diffcontrol.tasks.resolve(SPEC)
+    return evaluate_run(task, diffcontrol.open_run(run, task), episodes=starts, seed=HELD_OUT)
+
+
+def planner_reference(work: Path, starts: int = 20) -> dict:
+    """``diffcontrol plan`` with the task's defaults, judged from the held-out starts."""
+    import subprocess
+
+    out = work / "plan"
+    cmd = [sys.executable, "-m", "diffcontrol.cli", "plan", SPEC, "--out", str(out), "--quiet"]
+    cmd = (["taskset", "-c", "0"] if shutil.which("taskset") else []) + cmd
+    t0 = time.perf_counter()
+    subprocess.run([*cmd, "--no-animation", "--final-eval", "1"], check=True)
+    seconds = time.perf_counter() - t0
+    result = held_out_loss(out, starts)
+    phi = (result.final_states[:, 0] + np.pi) % (2 * np.pi) - np.pi
+    upright = (np.abs(phi) < 0.1) & (np.abs(result.final_states[:, 1]) < 0.5)
+    return {"way": "planner", "upright": int(upright.sum()), "starts": starts,
+            "seconds": round(seconds, 1), "loss": float(np.mean(result.losses))}  # fmt: skip
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", type=int, default=3, help="training seeds 0..N-1 (default 3)")
     ap.add_argument("--before", action="store_true", help="also train with the old defaults")
+    ap.add_argument("--planner", action="store_true", help="also the planner's reference")
     ap.add_argument("--work", type=Path, default=Path("runs/bench-user-continuous"))
     ap.add_argument("--out", type=Path, default=HERE / "results" / "user_continuous.json")
     args = ap.parse_args()
@@ -80,6 +114,7 @@ def main() -> None:
             run = work / f"{way}-seed{seed}"
             metrics, seconds = train_cli(SPEC, seed, run, ["--no-animation", *extra])
             ends = upright_from_held_out_starts(run)
+            loss = float(np.mean(held_out_loss(run).losses))
             rows.append(
                 {
                     "way": way,
@@ -89,12 +124,18 @@ def main() -> None:
                     "starts": len(ends),
                     "seconds": round(seconds, 1),
                     "train_seconds": round(metrics["train_seconds"], 1),
-                    "closed_loop_loss": metrics["closed_loop"]["mean_loss"],  # its 20 starts
+                    "loss": loss,  # on the held-out starts
                     "ends": ends,
                 }
             )
             r = rows[-1]
-            print(f"{way:9s} seed {seed}: {r['upright']:2d}/{r['starts']} upright, {seconds:.1f} s")
+            print(
+                f"{way:9s} seed {seed}: {r['upright']:2d}/{r['starts']} upright, loss {loss:.3f}, {seconds:.1f} s"
+            )
+    if args.planner:
+        rows.append(planner_reference(work))
+        r = rows[-1]
+        print(f"planner: {r['upright']:2d}/{r['starts']} upright, loss {r['loss']:.3f}")
     met = all(r["upright"] >= 18 for r in rows if r["way"] == "defaults")
     print(f"target (>= 18 of 20 for every seed with the defaults): {'met' if met else 'missed'}")
     doc = {"machine": machine(), "spec": SPEC, "held_out_keys": HELD_OUT, "rows": rows}
