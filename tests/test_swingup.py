@@ -32,7 +32,7 @@ import diffcontrol
 from diffcontrol import rollout
 from diffcontrol.builtin.swingup import system as cp
 from diffcontrol.builtin.swingup.judge import swingup_result
-from diffcontrol.builtin.swingup.task import SwingUpTrajectory
+from diffcontrol.builtin.swingup.task import POST_NETWORK, SwingUpTrajectory
 from diffcontrol.cli import main
 from diffcontrol.config import ODETrainConfig
 from diffcontrol.errors import ConfigError, SolverFailed
@@ -150,7 +150,9 @@ def test_energy_balance(friction):
 
 def _loss_and_weights(gradient: str):
     """A float64 closed-loop loss of a 3-8-1 controller's layers, at tight tolerances."""
-    cfg = ODETrainConfig(horizon_s=0.6, saves=13, rtol=1e-10, atol=1e-10, gradient=gradient)
+    cfg = ODETrainConfig(
+        horizon_s=0.6, saves=13, rtol=1e-10, atol=1e-10, gradient=gradient, **POST_NETWORK
+    )
     trainer = make_ode_trainer(SWINGUP, cfg)
     params = jax.tree.map(lambda x: jnp.asarray(x, jnp.float64), SWINGUP.default_params())
     ctrl = jax.tree.map(

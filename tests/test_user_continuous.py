@@ -67,6 +67,14 @@ def test_train_and_evaluate_without_an_environment(user_dir, monkeypatch, capsys
             [final["phi"], final["phidot"]], sol.y[:, -1], rtol=1e-4, atol=1e-5
         )
 
+    # a run stored before window_s existed resumes, with the whole horizon it was trained on
+    doc = json.loads((out / "run.json").read_text())
+    del doc["config"]["window_s"], doc["complete"]
+    (out / "run.json").write_text(json.dumps(doc))
+    (out / "model.json").unlink()
+    assert main(["train", SPEC, "--out", str(out), "--resume", "--quiet"]) == 0
+    assert json.loads((out / "metrics.json").read_text())["config"]["window_s"] == 0.0
+
 
 def test_a_continuous_task_plans_at_its_own_control_period(user_dir, monkeypatch):
     """``plan`` needs no ``--dt``: a continuous task's control period is the interval between
@@ -169,9 +177,9 @@ def test_windows_take_one_step_each_through_their_own_solve(user_dir, monkeypatc
     assert trainer.windows() == 4
     state, stats = trainer.update(trainer.init(jax.random.PRNGKey(0), params), params)
     assert int(optax.tree_utils.tree_get(state.opt_state, "count")[0]) == 4
-    # the check of the loss on a whole horizon (11 points), then one trace inside the scan
-    # over the windows, each of 10 / 4 intervals (3 points)
-    assert seen == [(11,), (3,)]
+    # the checks of the loss on a whole horizon (11 points) and a window (10 / 4 intervals: 3
+    # points), then one trace inside the scan over the windows
+    assert seen == [(11,), (3,), (3,)]
     assert bool(jax.numpy.isfinite(stats.loss))
     for whole in (0.0, 1.0):
         assert make_ode_trainer(task, config.replace(window_s=whole)).windows() == 1

@@ -13,7 +13,7 @@ from .io import read_json, write_json_new
 RUN_FILE = "run.json"
 
 
-ADDED_SETTINGS = {"value_grid": 0, "value_time": False}
+ADDED_SETTINGS = {"value_grid": 0, "value_time": False, "window_s": 0.0}
 """Settings added to the configs after runs were stored, each with the value that trains as
 before it existed: a stored config without one is read as having that value, so that its run
 can still be resumed (``check_same_run``, and the sweeps' claim)."""

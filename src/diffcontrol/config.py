@@ -435,11 +435,12 @@ class ODETrainConfig(_Config):
     )
     window_s: float = _opt(
         "Truncated BPTT through the solve: each update cuts the horizon into about "
-        "horizon_s / window_s consecutive windows, differentiates each window's loss (the "
-        "task's loss on that window's saved points) through that window's solve only and takes "
-        "one optimiser step per window; a window's end states start the next without gradient. "
-        "Long chaotic solves give useless gradients; 0 (or window_s >= horizon_s) "
-        "differentiates the whole horizon.",
+        "horizon_s / window_s consecutive windows (of the curriculum's horizon where it grows), "
+        "differentiates each window's loss (the task's loss on that window's saved points, its "
+        "end terms at every window's end) through that window's solve only and takes one "
+        "optimiser step per window (a schedule spans them all); a window's end states start "
+        "the next without gradient. Long chaotic solves give useless gradients; 0 (or "
+        "window_s >= horizon_s) differentiates the whole horizon.",
         default=2.0,
         metavar="S",
         form="nonneg",

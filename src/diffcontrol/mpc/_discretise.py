@@ -241,8 +241,8 @@ def discretise(task: ContinuousTask, dt: float, substeps: int = 1) -> Discretise
         raise ConfigError(f"substeps={substeps!r} must be an integer >= 1")
     if not planning_losses(task):
         raise ConfigError(
-            f"task {task.name!r} has no planning losses; define its running_cost and "
-            "planning_losses to plan it"
+            f"task {task.name!r} has no planning losses; define its losses (trajectory_loss), "
+            "or its running_cost and planning_losses, to plan it"
         )
     return DiscretisedTask(task, step, substeps)
 

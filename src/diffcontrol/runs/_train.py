@@ -26,6 +26,7 @@ from ..mpc._config import default_plan_config, loop_planner, plans_best
 from ..tasks import AnyTask, named_by_file, resolve
 from ..training import resolve_config, train
 from ..training._devices import is_writer, join_hosts
+from ..training._ode import windows_of
 
 
 class RunInterrupted(Interrupted):
@@ -277,10 +278,13 @@ def _builtin_names() -> set[str]:
 def describe(task: AnyTask, config: Any, out: Path | str) -> str:
     """The line ``diffcontrol train`` starts with: what will be trained, how, and where."""
     if hasattr(config, "horizon_s"):  # an ODETrainConfig
+        k = windows_of(config)
+        windows = f" in {k} windows of {config.horizon_s / k:g} s" if k > 1 else ""
         return (
             f"training {task.name}: {config.updates} updates of {config.population} closed-loop "
-            f"solve(s) over {config.horizon_s:g} s ({config.solver}, rtol {config.rtol:g}, atol "
-            f"{config.atol:g}, gradient {config.gradient}; seed {config.seed}) -> {out}"
+            f"solve(s) over {config.horizon_s:g} s{windows} ({config.solver}, rtol "
+            f"{config.rtol:g}, atol {config.atol:g}, gradient {config.gradient}; seed "
+            f"{config.seed}) -> {out}"
         )
     window = f"window {config.window}"
     if config.final_window_start < config.updates:  # the window curriculum's last stage

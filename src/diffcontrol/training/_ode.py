@@ -119,11 +119,15 @@ class ODETrainer(eqx.Module):
         gradient: str,
         y0=None,
         saves: int | None = None,
+        t0: Array | None = None,
     ):
-        """One member's closed-loop solve from ``y0`` (default: the task's initial state),
-        saved at ``saves`` (default: the config's) points of ``[0, horizon]``."""
+        """One member's closed-loop solve from ``y0`` (default: the task's initial state) at
+        time ``t0`` (default 0), saved at ``saves`` (default: the config's) points of
+        ``[t0, t0 + horizon]``."""
         cfg = self.config
         ts = jnp.linspace(0.0, 1.0, saves or cfg.saves) * horizon
+        if t0 is not None:
+            ts = t0 + ts
         args = (params, force_fn(self.task, controller))
         return solve_closed_loop(
             self.task.vector_field,
@@ -149,10 +153,10 @@ class ODETrainer(eqx.Module):
         )(y0s)
         return jnp.mean(loss), (jnp.all(ok), jnp.any(hit_max), jnp.sum(steps))
 
-    def _loss_and_ends(self, controller, params, horizon, y0, saves=None):
-        """The loss of one solve from ``y0`` over ``horizon`` (``saves`` points), its flags
-        and its end state."""
-        sol = self.solve(controller, params, horizon, self.config.gradient, y0, saves)
+    def _loss_and_ends(self, controller, params, horizon, y0, saves=None, t0=None):
+        """The loss of one solve from ``y0`` at ``t0`` over ``horizon`` (``saves`` points),
+        its flags and its end state."""
+        sol = self.solve(controller, params, horizon, self.config.gradient, y0, saves, t0)
         traj = self.task.trajectory(params, controller, sol.ts, sol.ys)
         loss = jnp.reshape(self.loss_fn(traj), ())
         return loss, (sol.ok, sol.max_steps_reached, sol.num_steps, sol.ys[-1])
@@ -228,37 +232,38 @@ class ODETrainer(eqx.Module):
 
     def windows(self) -> int:
         """Consecutive windows per update (``window_s``): 1 differentiates the whole horizon."""
-        cfg = self.config
-        return max(1, round(cfg.horizon_s / cfg.window_s)) if cfg.window_s > 0 else 1
+        return windows_of(self.config)
 
     def _window_steps(self, ts: ODETrainState, params: PyTree, horizon: Array, y0s):
         """Truncated BPTT through the solve: ``windows()`` consecutive windows of the horizon,
         each differentiated through its own solve only and giving one optimiser step per
-        member; a window's end states start the next one without gradient."""
+        member; a window's end states start the next one without gradient, at the time they
+        were reached."""
         cfg = self.config
         k = self.windows()
-        saves = max(2, round((cfg.saves - 1) / k) + 1)
+        saves = window_saves(cfg)
         window = horizon / k
         if y0s is None:
             y0s = self.task.initial_state(params)[None]
         ys = jnp.broadcast_to(y0s, (cfg.population, *y0s.shape))
 
-        def grad_one(controller, ys):
+        def grad_one(controller, ys, t0):
             diff, static = eqx.partition(controller, _trainable(controller))
 
             def loss_of(diff):
                 ctrl = eqx.combine(diff, static)
                 loss, (ok, hit, steps, ends) = jax.vmap(
-                    lambda y0: self._loss_and_ends(ctrl, params, window, y0, saves)
+                    lambda y0: self._loss_and_ends(ctrl, params, window, y0, saves, t0)
                 )(ys)
                 return jnp.mean(loss), (jnp.all(ok), jnp.any(hit), jnp.sum(steps), ends)
 
             (loss, (ok, hit, steps, ends)), grads = value_and_grad(loss_of, cfg.gradient)(diff)
             return loss, ok, hit, steps, grads, jax.lax.stop_gradient(ends)
 
-        def body(carry, _):
+        def body(carry, j):
             ctrl, opt, code, ys = carry
-            loss, ok, hit, steps, grads, ends = eqx.filter_vmap(grad_one)(ctrl, ys)
+            grad_members = eqx.filter_vmap(grad_one, in_axes=(0, 0, None))
+            loss, ok, hit, steps, grads, ends = grad_members(ctrl, ys, j * window)
             ctrl, opt, code, loss, gnorm, steps, live = eqx.filter_vmap(self._member_apply)(
                 ctrl, opt, code, loss, ok, hit, steps, grads
             )
@@ -266,7 +271,7 @@ class ODETrainer(eqx.Module):
             return (ctrl, opt, code, ends), (loss, gnorm, steps, live)
 
         carry = (ts.controller, ts.opt_state, ts.fail_code, ys)
-        (ctrl, opt, code, _), (loss, gnorm, steps, live) = jax.lax.scan(body, carry, None, length=k)
+        (ctrl, opt, code, _), (loss, gnorm, steps, live) = jax.lax.scan(body, carry, jnp.arange(k))
         # the members live when the update began: those whose solves it counts
         return ctrl, opt, code, jnp.nanmean(loss, 0), jnp.nanmean(gnorm, 0), steps.sum(0), live[0]
 
@@ -421,33 +426,50 @@ def make_ode_trainer(
     if trajectory_loss is None:
         name = builtin_loss_name(task, config.loss, "trajectory_loss")
         trajectory_loss = task.trajectory_loss(name)
+    # A schedule spans every optimiser step: one per window of each update.
+    steps = config.replace(updates=config.updates * windows_of(config))
     trainer = ODETrainer(
-        task=task, config=config, loss_fn=trajectory_loss, optimizer=make_optimizer(config)
+        task=task, config=config, loss_fn=trajectory_loss, optimizer=make_optimizer(steps)
     )
     _check_loss(trainer)
     return trainer
 
 
+def windows_of(config: ODETrainConfig) -> int:
+    """Consecutive windows per update (``window_s``): 1 differentiates the whole horizon."""
+    if config.window_s <= 0:
+        return 1
+    return max(1, round(config.horizon_s / config.window_s))
+
+
+def window_saves(config: ODETrainConfig) -> int:
+    """The saved points of each window: its share of ``saves``, both ends included."""
+    return max(2, round((config.saves - 1) / windows_of(config)) + 1)
+
+
 def _check_loss(trainer: ODETrainer) -> None:
-    """Trace the loss once on an abstract trajectory: it must return one number."""
+    """Trace the loss on an abstract trajectory of the horizon's saved points, and of a
+    window's where the horizon is cut into windows: it must return one number."""
     task, cfg = trainer.task, trainer.config
+    for saves in sorted({cfg.saves, window_saves(cfg)}, reverse=True):
 
-    def traj_loss(params):
-        ctrl = trainer.new_controller(jax.random.PRNGKey(0))
-        ts = jnp.linspace(0.0, cfg.horizon_s, cfg.saves)
-        ys = jnp.zeros((cfg.saves, task.initial_state(params).shape[0]))
-        return trainer.loss_fn(task.trajectory(params, ctrl, ts, ys))
+        def traj_loss(params, saves=saves):
+            ctrl = trainer.new_controller(jax.random.PRNGKey(0))
+            ts = jnp.linspace(0.0, cfg.horizon_s, saves)
+            ys = jnp.zeros((saves, task.initial_state(params).shape[0]))
+            return trainer.loss_fn(task.trajectory(params, ctrl, ts, ys))
 
-    try:
-        out = jax.eval_shape(traj_loss, task.default_params())
-    except Exception as e:  # a user's loss can fail in any way; say whose fault it is
-        raise ConfigError(
-            f"the loss function failed on a {type(e).__name__}: {e}; it must take the task's "
-            "trajectory object and return a scalar"
-        ) from None
-    shape = getattr(out, "shape", None)
-    if shape is None or int(np.prod(shape)) != 1:
-        raise ConfigError(
-            f"the loss must return a scalar, but it returned shape {shape}; reduce it (e.g. "
-            "with jnp.sum or jnp.mean)"
-        )
+        where = "" if saves == cfg.saves else f" of a window's {saves} saved points (window_s)"
+        try:
+            out = jax.eval_shape(traj_loss, task.default_params())
+        except Exception as e:  # a user's loss can fail in any way; say whose fault it is
+            raise ConfigError(
+                f"the loss function failed on a {type(e).__name__}{where}: {e}; it must take "
+                "the task's trajectory object and return a scalar"
+            ) from None
+        shape = getattr(out, "shape", None)
+        if shape is None or int(np.prod(shape)) != 1:
+            raise ConfigError(
+                f"the loss must return a scalar, but it returned shape {shape}{where}; reduce "
+                "it (e.g. with jnp.sum or jnp.mean)"
+            )
