@@ -25,7 +25,7 @@ import numpy as np
 import optax
 from jaxtyping import Array, Float, Int, PRNGKeyArray, PyTree
 
-from ..config import ODETrainConfig
+from ..config import MAX_COUNT, ODETrainConfig
 from ..controllers import MLPController
 from ..errors import ConfigError, SolverFailed
 from ..rollout import force_fn, solve_closed_loop, value_and_grad
@@ -427,7 +427,7 @@ def make_ode_trainer(
         name = builtin_loss_name(task, config.loss, "trajectory_loss")
         trajectory_loss = task.trajectory_loss(name)
     # A schedule spans every optimiser step: one per window of each update.
-    steps = config.replace(updates=config.updates * windows_of(config))
+    steps = config.replace(updates=min(MAX_COUNT, config.updates * windows_of(config)))
     trainer = ODETrainer(
         task=task, config=config, loss_fn=trajectory_loss, optimizer=make_optimizer(steps)
     )
