@@ -212,3 +212,53 @@ def test_a_continuous_task_without_planning_losses_is_planned_by_its_trajectory_
     assert main([*argv, "--final-eval", "2", "--quiet", "--no-animation"]) == 0
     assert "(2 starts)" in capsys.readouterr().out  # the loss of its closed loop from 2 starts
     assert diffcontrol.policies.is_planner(json.loads((out / "model.json").read_text()))
+
+
+def test_each_window_starts_where_and_when_the_last_one_ended():
+    """A clock (``y' = 1`` from ``y = 0``) over 1 s in 4 windows: the windows' first saved
+    points are at t = 0, 0.25, 0.5, 0.75, each with the state the last window ended in."""
+    import jax
+    import jax.numpy as jnp
+
+    from diffcontrol.training import make_ode_trainer
+
+    class Clock(diffcontrol.ContinuousTask):
+        name = "clock"
+        observation_size = action_size = 1
+        action_head = "linear"
+        losses = ("late",)
+        state_names = ("y",)
+
+        def default_params(self):
+            return ()
+
+        def default_config(self):
+            return diffcontrol.ODETrainConfig(horizon_s=1.0, saves=9, window_s=0.25)
+
+        def initial_state(self, params):
+            return jnp.zeros(1)
+
+        def vector_field(self, t, y, args):
+            return jnp.ones(1)
+
+        def observe(self, state):
+            return state
+
+        def trajectory(self, params, controller, ts, ys):
+            return (ts, ys[:, 0])
+
+        def trajectory_loss(self, name):
+            def late(trajectory):
+                ts, ys = trajectory
+                jax.debug.callback(lambda t, y: seen.append((t, y)), ts[0], ys[0])
+                return jnp.mean(ys)
+
+            return late
+
+    seen = []
+    task = Clock()
+    config = task.default_config().replace(population=1, hidden=(2,))
+    trainer = make_ode_trainer(task, config)
+    trainer.update(trainer.init(jax.random.PRNGKey(0), ()), ())
+    starts = np.asarray([np.ravel(np.asarray(x)) for pair in seen for x in pair]).reshape(-1, 2)
+    np.testing.assert_allclose(starts, [[0.0, 0.0], [0.25, 0.25], [0.5, 0.5], [0.75, 0.75]])
