@@ -13,9 +13,12 @@ distribution that training never drew (``PRNGKey(1000 + i)``), integrated by Sci
 The reference (``--planner``): ``diffcontrol plan damped_pendulum:DampedPendulum`` with its
 defaults (box-iLQR at the task's 0.1 s control period, the trajectory loss as its cost), from
 the same starts, each action held for 0.1 s, in the library's own float64 reference solve.
+The grid optimum (``--optimum N``): ``diffcontrol evaluate RUN --task
+gridded_pendulum:GriddedPendulum --optimum N`` (the same task with a state grid, in
+``examples/``), the dynamic program's controller at the same period from the same starts.
 
     taskset -c 0 python benchmarks/user_continuous.py            # about 1 minute per seed
-    taskset -c 0 python benchmarks/user_continuous.py --before --planner   # and the references
+    taskset -c 0 python benchmarks/user_continuous.py --before --planner --optimum 401
 """
 
 from __future__ import annotations
@@ -83,6 +86,7 @@ def planner_reference(work: Path, starts: int = 20) -> dict:
     import subprocess
 
     out = work / "plan"
+    shutil.rmtree(out, ignore_errors=True)  # this script's own run of an earlier time
     cmd = [sys.executable, "-m", "diffcontrol.cli", "plan", SPEC, "--out", str(out), "--quiet"]
     cmd = (["taskset", "-c", "0"] if shutil.which("taskset") else []) + cmd
     t0 = time.perf_counter()
@@ -95,11 +99,32 @@ def planner_reference(work: Path, starts: int = 20) -> dict:
             "seconds": round(seconds, 1), "loss": float(np.mean(result.losses))}  # fmt: skip
 
 
+def grid_optimum(run: Path, points: int, starts: int = 20) -> dict:
+    """``diffcontrol evaluate RUN --optimum POINTS`` on the gridded task, from the held-out
+    starts: the grid optimum's row (a cold process, core 0)."""
+    import subprocess
+
+    cmd = [sys.executable, "-m", "diffcontrol.cli", "evaluate", str(run), "--task"]
+    cmd += ["gridded_pendulum:GriddedPendulum", "--episodes", str(starts), "--seed"]
+    cmd += [str(HELD_OUT), "--optimum", str(points), "--json"]
+    cmd = (["taskset", "-c", "0"] if shutil.which("taskset") else []) + cmd
+    t0 = time.perf_counter()
+    out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
+    seconds = time.perf_counter() - t0
+    opt = json.loads(out)["optimum"]
+    ends = np.array([[e["phi"], e["phidot"]] for e in opt["final_states"]])
+    phi = (ends[:, 0] + np.pi) % (2 * np.pi) - np.pi
+    upright = (np.abs(phi) < 0.1) & (np.abs(ends[:, 1]) < 0.5)
+    return {"way": "grid optimum", "points": points, "upright": int(upright.sum()),
+            "starts": starts, "seconds": round(seconds, 1), "loss": opt["mean_loss"]}  # fmt: skip
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", type=int, default=3, help="training seeds 0..N-1 (default 3)")
     ap.add_argument("--before", action="store_true", help="also train with the old defaults")
     ap.add_argument("--planner", action="store_true", help="also the planner's reference")
+    ap.add_argument("--optimum", type=int, metavar="N", help="also the grid optimum, N x N")
     ap.add_argument("--work", type=Path, default=Path("runs/bench-user-continuous"))
     ap.add_argument("--out", type=Path, default=HERE / "results" / "user_continuous.json")
     args = ap.parse_args()
@@ -112,6 +137,7 @@ def main() -> None:
     for way, extra in ways.items():
         for seed in range(args.seeds):
             run = work / f"{way}-seed{seed}"
+            shutil.rmtree(run, ignore_errors=True)  # this script's own run of an earlier time
             metrics, seconds = train_cli(SPEC, seed, run, ["--no-animation", *extra])
             ends = upright_from_held_out_starts(run)
             loss = float(np.mean(held_out_loss(run).losses))
@@ -136,6 +162,11 @@ def main() -> None:
         rows.append(planner_reference(work))
         r = rows[-1]
         print(f"planner: {r['upright']:2d}/{r['starts']} upright, loss {r['loss']:.3f}")
+    if args.optimum:
+        rows.append(grid_optimum(work / "defaults-seed0", args.optimum))
+        r = rows[-1]
+        print(f"grid optimum {args.optimum}: {r['upright']:2d}/{r['starts']} upright, loss "
+              f"{r['loss']:.3f}, {r['seconds']:.1f} s")  # fmt: skip
     met = all(r["upright"] >= 18 for r in rows if r["way"] == "defaults")
     print(f"target (>= 18 of 20 for every seed with the defaults): {'met' if met else 'missed'}")
     doc = {"machine": machine(), "spec": SPEC, "held_out_keys": HELD_OUT, "rows": rows}

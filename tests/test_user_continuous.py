@@ -14,7 +14,10 @@ import pytest
 import diffcontrol
 from diffcontrol.cli import main
 
-USER_FILE = Path(__file__).resolve().parents[1] / "examples" / "damped_pendulum.py"
+from ._cli import one_line
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+USER_FILE = EXAMPLES / "damped_pendulum.py"
 
 SPEC = "damped_pendulum:DampedPendulum"
 TINY = ["--updates", "4", "--eval-every", "2", "--starts", "2", "--horizon-s", "1"]
@@ -25,6 +28,7 @@ TINY += ["--saves", "11", "--hidden", "4", "--population", "1"]
 def user_dir(tmp_path_factory):
     d = tmp_path_factory.mktemp("user-continuous")
     shutil.copy(USER_FILE, d / "damped_pendulum.py")
+    shutil.copy(EXAMPLES / "gridded_pendulum.py", d / "gridded_pendulum.py")  # with a state grid
     return d
 
 
@@ -66,6 +70,19 @@ def test_train_and_evaluate_without_an_environment(user_dir, monkeypatch, capsys
         np.testing.assert_allclose(
             [final["phi"], final["phidot"]], sol.y[:, -1], rtol=1e-4, atol=1e-5
         )
+
+    # the grid optimum from the same starts: refused without a state grid, else the grid's
+    # controller judged as the run is, with the gap to it
+    one_line(capsys, ["evaluate", out, "--task", SPEC, "--optimum", "21"], "define state_grid")
+    gridded = ["evaluate", str(out), "--task", "gridded_pendulum:GriddedPendulum"]
+    assert main([*gridded, "--episodes", "2", "--optimum", "21", "--json"]) == 0
+    ev = json.loads(capsys.readouterr().out)
+    opt = ev["optimum"]
+    assert (opt["grid_points"], opt["dt"], opt["starts"], opt["seed"]) == ([21, 21], 0.1, 2, 0)
+    assert len(opt["losses"]) == len(opt["final_states"]) == 2
+    assert ev["gap_to_optimum"] == pytest.approx(ev["mean_loss"] / opt["mean_loss"] - 1)
+    assert main([*gridded, "--episodes", "2", "--optimum", "21"]) == 0
+    assert "grid optimum (grid 21 x 21, 41 actions, each held 0.1 s)" in capsys.readouterr().out
 
     # a run stored before window_s existed resumes, with the whole horizon it was trained on
     doc = json.loads((out / "run.json").read_text())
@@ -212,6 +229,24 @@ def test_a_continuous_task_without_planning_losses_is_planned_by_its_trajectory_
     assert main([*argv, "--final-eval", "2", "--quiet", "--no-animation"]) == 0
     assert "(2 starts)" in capsys.readouterr().out  # the loss of its closed loop from 2 starts
     assert diffcontrol.policies.is_planner(json.loads((out / "model.json").read_text()))
+
+
+@pytest.mark.slow
+def test_the_grid_optimum_of_a_continuous_task_answers_whether_it_is_feasible(
+    user_dir, monkeypatch
+):
+    """``mpc.closed_loop_optimum`` of the user's pendulum with a state grid: the grid's
+    controller, each action held for 0.1 s, swings it up from held-out starts in the float64
+    reference solve of the task's own ODE (a coarse 41 x 41 grid suffices)."""
+    from diffcontrol.mpc import closed_loop_optimum
+
+    monkeypatch.chdir(user_dir)
+    task = diffcontrol.tasks.resolve("gridded_pendulum:GriddedPendulum")
+    opt = closed_loop_optimum(task, 41, starts=2, seed=1000)
+    phi = (opt.result.final_states[:, 0] + np.pi) % (2 * np.pi) - np.pi
+    assert np.all(np.abs(phi) < 0.1) and np.all(np.abs(opt.result.final_states[:, 1]) < 0.5)
+    assert opt.result.horizon_s == 8.0 and opt.dt == pytest.approx(0.1)
+    assert opt.mean < 1.0  # hanging for 8 s costs 2 + 5 * 2
 
 
 def test_each_window_starts_where_and_when_the_last_one_ended():

@@ -397,6 +397,7 @@ class ClosedLoopResult:
     final_states: np.ndarray
     state_names: tuple[str, ...]
     warnings: list[str] = dataclasses.field(default_factory=list)
+    optimum: Any = None  # an ``mpc.ClosedLoopOptimum`` from the same starts, where asked for
     key = "closed_loop"
 
     def to_json(self) -> dict[str, Any]:
@@ -416,7 +417,13 @@ class ClosedLoopResult:
             "losses": self.losses.tolist(),
             "final_states": [dict(zip(self.state_names, s.tolist())) for s in self.final_states],
             "warnings": self.warnings,
+            **({} if self.optimum is None else {"optimum": self.optimum.to_json()}),
+            **({} if self.optimum is None else {"gap_to_optimum": self.optimum.gap(self.mean)}),
         }
+
+    @property
+    def mean(self) -> float:
+        return float(np.mean(self.losses))
 
     def headline(self) -> str:
         """A few words for the end of ``diffcontrol train``'s last line."""
@@ -426,8 +433,12 @@ class ClosedLoopResult:
         mean = np.mean(self.final_states, axis=0)
         final = ", ".join(f"{n} {v:.3g}" for n, v in zip(self.state_names, mean))
         warned = "".join(f"\nwarning: {w}" for w in self.warnings)
+        if self.optimum is not None:
+            gap = self.optimum.gap(self.mean)
+            side = "above" if gap >= 0 else "below"
+            warned += f"\n{self.optimum.summary()}\nthe controller's loss is {100 * abs(gap):.1f} % {side} it"
         return (
-            f"loss ({self.loss_name}) {np.mean(self.losses):.4g} ± {np.std(self.losses):.2g} over "
+            f"loss ({self.loss_name}) {self.mean:.4g} ± {np.std(self.losses):.2g} over "
             f"{self.losses.size} start(s) (seed {self.seed}; float64 reference solves of "
             f"{self.horizon_s:g} s); final state, mean over the starts: {final}{warned}"
         )

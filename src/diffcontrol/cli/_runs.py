@@ -36,7 +36,8 @@ def add_parsers(sub: Any) -> None:
         ("--seed", a.nonneg_int, 0, "S",
          "first reset seed, or the seed of the random targets (default 0)"),
         ("--optimum", a.positive_int, None, "N", "also run the reference optimum (a dynamic "
-         "program on an N x N state grid, e.g. 401; pendulum) and print the gap to it"),
+         "program on an N x N state grid, e.g. 401; a task with a state grid: pendulum, or a "
+         "continuous-time task of yours, held for its control period) and print the gap to it"),
         a.JSON,
         a.RUN_TASK,
     )

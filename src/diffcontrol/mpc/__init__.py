@@ -11,7 +11,8 @@ A continuous-time task (the swing-ups) is planned through its discrete-time view
 ``mpc.discretise(task, dt)`` (the action held for ``dt``, RK4), and run against its true ODE by
 ``mpc.ode_episode(planner, y0, steps)``; ``mpc.SampledPlannerPolicy(planner)`` is such a planner
 as a controller that holds each action for ``dt`` (what ``diffcontrol.load`` gives of a
-continuous-time task's planner).
+continuous-time task's planner). ``mpc.closed_loop_optimum`` solves a continuous-time task
+with a state grid by dynamic programming on its discretised view: a reference to judge against.
 
 A planner from stored settings: ``mpc.planner_from_config(task, PlanConfig(horizon=10))``;
 ``diffcontrol plan`` (``runs.plan_run``) writes one as a run directory that ``diffcontrol.load``
@@ -27,6 +28,7 @@ from ._distil import distil, labelled_episodes
 from ._document import make_planner_policy, planner_policy, planning_model
 from ._ilqr import ILQR
 from ._learn import ValueResult, closed_loop_loss, learn_value, load_value
+from ._optimum import ClosedLoopOptimum, closed_loop_optimum
 from ._planner import Planner, make_planner
 from ._policy import PlannerPolicy, SampledPlannerPolicy
 from ._problem import Problem, SolveInfo
@@ -34,6 +36,7 @@ from ._shooting import Shooting
 from ._value import ValueNetwork
 
 __all__ = [
+    "ClosedLoopOptimum",
     "DiscretisedTask",
     "ILQR",
     "Planner",
@@ -45,6 +48,7 @@ __all__ = [
     "ValueNetwork",
     "ValueResult",
     "closed_loop_loss",
+    "closed_loop_optimum",
     "discretise",
     "distil",
     "labelled_episodes",

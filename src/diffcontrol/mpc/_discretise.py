@@ -169,6 +169,10 @@ class DiscretisedTask(Task):
     def default_params(self) -> PyTree:
         return self.continuous.default_params()
 
+    def state_grid(self, params: PyTree) -> Any:
+        grid = getattr(self.continuous, "state_grid", None)  # a ContinuousTask may define one
+        return None if grid is None else grid(params)
+
     def default_config(self) -> Any:
         return self.continuous.default_config()
 

@@ -10,6 +10,7 @@ from .. import _gym, io
 from .._run_files import Run
 from ..errors import ConfigError
 from ..evaluation import evaluate_run
+from ..mpc import closed_loop_optimum
 from ..optimal import optimal_return
 from ._open import open_run
 
@@ -38,7 +39,8 @@ def evaluate_dir(
             on a grid of ``optimum`` points per state axis, 41 actions) and report the gap to
             it; for tasks with a state grid (Pendulum), on the system evaluated: the task's own,
             or a real system whose physics the task knows (``_gym.params_of_env``:
-            ``diffcontrol/PendulumFriction-v0`` with ``g`` and ``friction``).
+            ``diffcontrol/PendulumFriction-v0`` with ``g`` and ``friction``). A continuous-time
+            task with a state grid: its discretised view's (``mpc.closed_loop_optimum``).
 
     Returns:
         The ``Run`` and the task's evaluation result (``summary()``, ``to_json()``; with
@@ -73,7 +75,19 @@ def evaluate_dir(
 def _optimum(run: Run, ev: Any, points: int) -> Any:
     """The grid optimum, on the seeds ``ev`` was measured on, of the system it was measured
     on: the task's own, or the run's real system (``--env``, or the one a fitted model's data
-    came from) solved with its physics (the task's ``params_of_env``)."""
+    came from) solved with its physics (the task's ``params_of_env``); for a continuous-time
+    task, that of its discretised view from the same starts (``mpc.closed_loop_optimum``)."""
+    if not 3 <= points <= MAX_OPTIMUM_POINTS:
+        raise ConfigError(
+            f"--optimum {points}: the grid needs 3 to {MAX_OPTIMUM_POINTS} points per axis "
+            "(401 is within about 0.3 of the converged optimum for Pendulum)"
+        )
+    if ev.key == "closed_loop":
+        starts, config = int(ev.losses.size), run.config
+        return closed_loop_optimum(
+            run.task, points, OPTIMUM_LEVELS, params=run.params, config=config, starts=starts,
+            seed=ev.seed,
+        )  # fmt: skip
     real, params = run.real_env, None
     if real is not None and ev.key == "gym_eval":
         params = _gym.params_of_env(run.task, *real)
@@ -86,11 +100,6 @@ def _optimum(run: Run, ev: Any, points: int) -> Any:
             f"--optimum needs the physics of the system evaluated, and task "
             f"{run.task.name!r} does not know those of {getattr(ev, 'env_id', ev.key)}; "
             "leave --optimum out"
-        )
-    if not 3 <= points <= MAX_OPTIMUM_POINTS:
-        raise ConfigError(
-            f"--optimum {points}: the grid needs 3 to {MAX_OPTIMUM_POINTS} points per axis "
-            "(401 is within about 0.3 of the converged optimum for Pendulum)"
         )
     seeds = range(ev.seed, ev.seed + int(ev.returns.size))
     return optimal_return(
