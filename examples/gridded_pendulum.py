@@ -1,8 +1,8 @@
 """The damped pendulum of ``damped_pendulum.py`` with its state space as a grid, so that
-``evaluate --optimum`` can answer whether the task is feasible and how close a trained
-controller is to the best the task allows: it solves the task, each action held for the task's
-0.1 s control period, by dynamic programming on that grid and judges the grid's controller from
-the starts the controller is judged from. From this directory:
+``evaluate --optimum`` can answer whether the task is feasible and where a trained controller
+stands: it solves the task, each action held for the task's 0.1 s control period, by dynamic
+programming on that grid and judges the grid's controller from the starts the trained one is
+judged from. From this directory:
 
     diffcontrol train damped_pendulum:DampedPendulum --out runs/damped
     diffcontrol evaluate runs/damped --task gridded_pendulum:GriddedPendulum --optimum 401

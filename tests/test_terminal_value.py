@@ -153,6 +153,9 @@ def test_too_many_grid_points_over_more_axes_are_refused_before_anything_is_solv
         def state_grid(self, params):
             return (GridAxis(0.0, 1.0),) * 3
 
+        def reset(self, key, params):  # a state of three entries, one per axis
+            return jnp.zeros(3)
+
     def config(points):  # one step: only the grid's points count
         return PENDULUM.default_config().replace(value_grid=points, horizon=1)
 

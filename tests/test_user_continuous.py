@@ -4,6 +4,7 @@ at its own control period."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import shutil
 from pathlib import Path
@@ -237,7 +238,10 @@ def test_the_grid_optimum_of_a_continuous_task_answers_whether_it_is_feasible(
 ):
     """``mpc.closed_loop_optimum`` of the user's pendulum with a state grid: the grid's
     controller, each action held for 0.1 s, swings it up from held-out starts in the float64
-    reference solve of the task's own ODE (a coarse 41 x 41 grid suffices)."""
+    reference solve of the task's own ODE (a coarse 41 x 41 grid suffices), and keeps it at
+    rest upright to the end."""
+    import jax.numpy as jnp
+
     from diffcontrol.mpc import closed_loop_optimum
 
     monkeypatch.chdir(user_dir)
@@ -247,6 +251,36 @@ def test_the_grid_optimum_of_a_continuous_task_answers_whether_it_is_feasible(
     assert np.all(np.abs(phi) < 0.1) and np.all(np.abs(opt.result.final_states[:, 1]) < 0.5)
     assert opt.result.horizon_s == 8.0 and opt.dt == pytest.approx(0.1)
     assert opt.mean < 1.0  # hanging for 8 s costs 2 + 5 * 2
+
+    # where the plan ends counts: from upright rest it stays there to the last instant, over a
+    # horizon that is not a whole number of periods too (the last period cut short)
+    base = type(task)
+
+    class AtRest(base):
+        name = "user-damped-pendulum-at-rest"
+
+        def reset(self, key, params):
+            return jnp.zeros(2)
+
+    config = task.default_config().replace(horizon_s=1.04, saves=14)
+    rest = closed_loop_optimum(AtRest(), 41, starts=1, config=config)
+    assert rest.mean == 0.0 and np.all(rest.result.final_states == 0.0)
+    assert rest.gap(0.5) is None  # a gap to a loss of 0 is no fraction
+    judged = dataclasses.replace(rest.result, optimum=rest)  # a controller as good as it
+    assert "the controller's loss is 0 above it" in judged.summary()
+
+    # a grid that does not fit the state, or a table too large to hold, is one line
+    class ThreeAxes(base):
+        name = "user-damped-pendulum-3-axes"
+
+        def state_grid(self, params):
+            return (*task.state_grid(params), task.state_grid(params)[1])
+
+    with pytest.raises(diffcontrol.ConfigError, match="3 axes for a state of 2 entries"):
+        closed_loop_optimum(ThreeAxes(), 21)
+    long = task.default_config().replace(horizon_s=2000.0)
+    with pytest.raises(diffcontrol.ConfigError, match="more than 201,402,201; choose fewer"):
+        closed_loop_optimum(task, 1001, config=long)
 
 
 def test_each_window_starts_where_and_when_the_last_one_ended():

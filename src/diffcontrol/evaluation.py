@@ -434,9 +434,10 @@ class ClosedLoopResult:
         final = ", ".join(f"{n} {v:.3g}" for n, v in zip(self.state_names, mean))
         warned = "".join(f"\nwarning: {w}" for w in self.warnings)
         if self.optimum is not None:
-            gap = self.optimum.gap(self.mean)
-            side = "above" if gap >= 0 else "below"
-            warned += f"\n{self.optimum.summary()}\nthe controller's loss is {100 * abs(gap):.1f} % {side} it"
+            gap, diff = self.optimum.gap(self.mean), self.mean - self.optimum.mean
+            side = "above" if diff >= 0 else "below"
+            by = f"{abs(diff):.4g}" if gap is None else f"{100 * abs(gap):.1f} %"
+            warned += f"\n{self.optimum.summary()}\nthe controller's loss is {by} {side} it"
         return (
             f"loss ({self.loss_name}) {self.mean:.4g} ± {np.std(self.losses):.2g} over "
             f"{self.losses.size} start(s) (seed {self.seed}; float64 reference solves of "

@@ -3,7 +3,7 @@
 For a task whose ``state_grid`` hook returns a grid (Pendulum's ``(theta, theta_dot)``), the
 value of every grid point is computed backwards over the episode,
 
-    V_T(x) = 0,     V_t(x) = max_a  r(x, a) + (1 - terminated(x, a)) V_{t+1}(f(x, a)),
+    V_T(x) = 0 (or a given final value),     V_t(x) = max_a  r(x, a) + (1 - terminated(x, a)) V_{t+1}(f(x, a)),
 
 with the task's own ``step`` (``f``, ``r``: for Pendulum Gymnasium's dynamics and reward), the
 actions ``a`` on an even grid between the task's action bounds, and ``V_{t+1}`` between grid
@@ -26,6 +26,7 @@ from __future__ import annotations
 import collections
 import dataclasses
 import itertools
+import math
 from collections.abc import Iterable, Sequence
 from typing import Any
 
@@ -132,6 +133,12 @@ def _check_grid(task: Any, params: PyTree, points: int | Sequence[int], levels: 
             f"task {task.name!r} offers no state grid (its state_grid hook returns None), so it "
             "has no reference optimum; define state_grid for a task with a small state"
         )
+    state = jax.eval_shape(task.reset, jax.random.PRNGKey(0), params)
+    if len(axes) != int(np.prod(state.shape)):
+        raise ConfigError(
+            f"task {task.name!r}: its state_grid has {len(axes)} axes for a state of "
+            f"{int(np.prod(state.shape))} entries; give one GridAxis per entry of the state"
+        )
     sizes = (points,) * len(axes) if isinstance(points, int) else tuple(points)
     if len(sizes) != len(axes) or any(int(n) < 3 for n in sizes):
         raise ConfigError(
@@ -148,6 +155,7 @@ def solve(
     levels: int = 41,
     params: PyTree | None = None,
     horizon: int | None = None,
+    final: Any = None,
 ) -> ValueTable:
     """Solve ``task`` by finite-horizon dynamic programming on its ``state_grid``.
 
@@ -157,23 +165,36 @@ def solve(
         levels: actions per action dimension, evenly from ``action_low`` to ``action_high``.
         params: physical parameters (default ``task.default_params()``).
         horizon: steps (default ``task.episode_length``).
+        final: ``V_horizon(params, state)``, the value of ending in a state (default 0).
 
     Returns:
         The ``ValueTable`` (``V_0 ... V_horizon``; about ``4 (horizon+1) prod(points)`` bytes).
 
     Raises:
-        ConfigError: the task has no grid or no action bounds, or a size is out of range.
+        ConfigError: the task has no grid or no action bounds, or a size is out of range (a
+            table of more than ``MAX_TABLE`` values).
     """
     params = task.default_params() if params is None else params
     axes, sizes = _check_grid(task, params, points, levels)
     horizon = task.episode_length if horizon is None else int(horizon)
     if horizon < 1:
         raise ConfigError(f"horizon={horizon} must be >= 1 (steps to plan over)")
+    if (horizon + 1) * math.prod(sizes) > MAX_TABLE:
+        raise ConfigError(
+            f"a grid of {' x '.join(map(str, sizes))} points over {horizon} steps is a table of "
+            f"{(horizon + 1) * math.prod(sizes):,} values, more than {MAX_TABLE:,}; choose "
+            "fewer points per axis or a shorter horizon"
+        )
     actions = jnp.asarray(_action_grid(task, int(levels)))
     mesh = np.meshgrid(*(_axis_points(a, n) for a, n in zip(axes, sizes)), indexing="ij")
     states = jnp.asarray(np.stack([m.ravel() for m in mesh], axis=1), jnp.float32)
-    values = _backward(task, params, axes, sizes, states, actions, horizon)
+    values = _backward(task, params, axes, sizes, states, actions, horizon, final)
     return ValueTable(values, actions, params, task, axes)
+
+
+MAX_TABLE = 201 * 1001**2
+"""The most values ``solve`` holds (every step's grid: ``horizon + 1`` grids): Pendulum's
+1001 x 1001 table over 200 steps, 0.8 GB."""
 
 
 def solve_first(
@@ -217,7 +238,7 @@ _SOLVED_KEPT = 4  # Pendulum's V_0 on 201 x 201 points is 160 kB
 
 
 @eqx.filter_jit
-def _backward(task, params, axes, sizes, states, actions, horizon):
+def _backward(task, params, axes, sizes, states, actions, horizon, final=None):
     step_all = jax.vmap(task.step, in_axes=(None, 0, None))
     interp_all = jax.vmap(_interpolate, in_axes=(None, None, 0))
 
@@ -232,7 +253,10 @@ def _backward(task, params, axes, sizes, states, actions, horizon):
         v, _ = jax.lax.scan(best_of, jnp.full(states.shape[0], -jnp.inf), actions)
         return v, v
 
-    final = jnp.zeros(states.shape[0])
+    if final is None:
+        final = jnp.zeros(states.shape[0])
+    else:
+        final = jax.vmap(final, in_axes=(None, 0))(params, states).astype(states.dtype)
     _, earlier = jax.lax.scan(backup, final, None, length=horizon)
     # earlier[k] is V_{horizon-1-k}: reverse it and append V_horizon = 0.
     return jnp.concatenate([earlier[::-1], final[None]]).reshape((horizon + 1, *sizes))

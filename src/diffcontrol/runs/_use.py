@@ -12,6 +12,7 @@ from ..errors import ConfigError
 from ..evaluation import evaluate_run
 from ..mpc import closed_loop_optimum
 from ..optimal import optimal_return
+from ..tasks import ContinuousTask
 from ._open import open_run
 
 
@@ -44,7 +45,8 @@ def evaluate_dir(
 
     Returns:
         The ``Run`` and the task's evaluation result (``summary()``, ``to_json()``; with
-        ``optimum``, its ``optimum`` is the ``OptimumResult``).
+        ``optimum``, its ``optimum`` is the ``optimal.OptimumResult``, or for a continuous-time
+        task the ``mpc.ClosedLoopOptimum``).
 
     Raises:
         ConfigError: ``env_kwargs`` without ``env_id``, or a task with nothing to evaluate in.
@@ -80,7 +82,12 @@ def _optimum(run: Run, ev: Any, points: int) -> Any:
     if not 3 <= points <= MAX_OPTIMUM_POINTS:
         raise ConfigError(
             f"--optimum {points}: the grid needs 3 to {MAX_OPTIMUM_POINTS} points per axis "
-            "(401 is within about 0.3 of the converged optimum for Pendulum)"
+            "(for Pendulum, 401 is within about 0.3 of the converged optimum)"
+        )
+    if isinstance(run.task, ContinuousTask) and ev.key != "closed_loop":
+        raise ConfigError(
+            f"--optimum: task {run.task.name!r} is judged by its own evaluation ({ev.key}), "
+            "which has no grid optimum; leave --optimum out"
         )
     if ev.key == "closed_loop":
         starts, config = int(ev.losses.size), run.config

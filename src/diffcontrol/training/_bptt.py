@@ -423,9 +423,7 @@ class Constant:
         self.table = table
 
 
-MAX_TABLE = 201 * 1001**2
-"""The most values a terminal value's solve may hold (every step's grid: ``horizon + 1``
-grids), Pendulum's 1001 x 1001 table over 200 steps: 0.8 GB."""
+MAX_TABLE = optimal.MAX_TABLE
 MAX_HELD = 2**25
 """The most values a training program may hold as its terminal value (``value_time``: every
 step's grid, a constant of the compiled program and of its cache entry): 128 MB."""
