@@ -223,6 +223,38 @@ class FastJit:
             return self.jitted(*args, **kwargs)
 
 
+RUNNING = {"xla_cpu_use_fusion_emitters": True}
+"""XLA's options for a program whose running, not its compiling, is its cost (a grid dynamic
+program's sweeps over every grid point and action): the fusion emitters, XLA's own CPU default,
+named so that they hold under an ``XLA_FLAGS`` that turns them off (the test session's, where
+the older emitters run such a program at half the speed). Under XLA's defaults the program and
+its bits are the defaults'."""
+
+
+class RunningJit:
+    """``eqx.filter_jit(fn)`` whose programs compile with ``RUNNING`` on a CPU (chosen at the
+    first call, not at import); a jaxlib that does not know an option compiles with XLA's
+    defaults."""
+
+    def __init__(self, fn: Any):
+        self.fn, self.jitted = fn, None
+
+    def __call__(self, *args: Any, **kwargs: Any) -> Any:
+        import equinox as eqx
+        import jax
+
+        if self.jitted is None:
+            options = RUNNING if jax.default_backend() == "cpu" else {}
+            self.jitted = eqx.filter_jit(self.fn, compiler_options=options)
+        try:
+            return self.jitted(*args, **kwargs)
+        except jax.errors.JaxRuntimeError as e:
+            if not _unknown_option(e):
+                raise
+            self.jitted = eqx.filter_jit(self.fn)
+            return self.jitted(*args, **kwargs)
+
+
 _STALE_AFTER_X64 = False
 
 

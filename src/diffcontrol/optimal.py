@@ -36,7 +36,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, PyTree
 
-from . import _fingerprint, _gym
+from . import _fingerprint, _gym, _jax_setup
 from .errors import ConfigError
 from .evaluation import eval_environment
 from .tasks._grid import GridAxis
@@ -237,7 +237,7 @@ _SOLVED: collections.OrderedDict[tuple, tuple[Any, ValueTable]] = collections.Or
 _SOLVED_KEPT = 4  # Pendulum's V_0 on 201 x 201 points is 160 kB
 
 
-@eqx.filter_jit
+@_jax_setup.RunningJit  # its sweeps are its cost, not its compiling
 def _backward(task, params, axes, sizes, states, actions, horizon, final=None):
     step_all = jax.vmap(task.step, in_axes=(None, 0, None))
     interp_all = jax.vmap(_interpolate, in_axes=(None, None, 0))
