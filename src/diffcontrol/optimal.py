@@ -3,7 +3,7 @@
 For a task whose ``state_grid`` hook returns a grid (Pendulum's ``(theta, theta_dot)``), the
 value of every grid point is computed backwards over the episode,
 
-    V_T(x) = 0 (or a given final value),     V_t(x) = max_a  r(x, a) + (1 - terminated(x, a)) V_{t+1}(f(x, a)),
+    V_T(x) = 0,     V_t(x) = max_a  r(x, a) + (1 - terminated(x, a)) V_{t+1}(f(x, a)),
 
 with the task's own ``step`` (``f``, ``r``: for Pendulum Gymnasium's dynamics and reward), the
 actions ``a`` on an even grid between the task's action bounds, and ``V_{t+1}`` between grid
@@ -11,7 +11,7 @@ points by multilinear (for two dimensions bilinear) interpolation. The greedy co
 ``a_t(x) = argmax_a r(x, a) + V_{t+1}(f(x, a))`` at the true, off-grid state is an achievable
 controller, so its return on the exact dynamics is a lower bound on the best mean return; the
 value table's own prediction ``V_0`` converges to the same figure as the grid is refined
-(docs/planning.md has Pendulum-v1's).
+(docs/planning.md has Pendulum-v1's). ``solve(..., final=...)`` values the end otherwise.
 
 Everything runs under ``jit``: one ``lax.scan`` over time, inside it one over the actions (a
 running maximum, so memory is a few arrays of the grid's size whatever the number of actions),
@@ -258,7 +258,7 @@ def _backward(task, params, axes, sizes, states, actions, horizon, final=None):
     else:
         final = jax.vmap(final, in_axes=(None, 0))(params, states).astype(states.dtype)
     _, earlier = jax.lax.scan(backup, final, None, length=horizon)
-    # earlier[k] is V_{horizon-1-k}: reverse it and append V_horizon = 0.
+    # earlier[k] is V_{horizon-1-k}: reverse it and append V_horizon.
     return jnp.concatenate([earlier[::-1], final[None]]).reshape((horizon + 1, *sizes))
 
 
