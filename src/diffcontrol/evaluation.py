@@ -412,7 +412,7 @@ class ClosedLoopResult:
             "seed": self.seed,
             "horizon_s": self.horizon_s,
             "loss": self.loss_name,
-            "mean_loss": float(np.mean(self.losses)),
+            "mean_loss": self.mean,
             "std_loss": float(np.std(self.losses)),
             "losses": self.losses.tolist(),
             "final_states": [dict(zip(self.state_names, s.tolist())) for s in self.final_states],
@@ -427,7 +427,7 @@ class ClosedLoopResult:
 
     def headline(self) -> str:
         """A few words for the end of ``diffcontrol train``'s last line."""
-        return f"loss {np.mean(self.losses):.4g} ± {np.std(self.losses):.2g} ({self.losses.size} starts)"
+        return f"loss {self.mean:.4g} ± {np.std(self.losses):.2g} ({self.losses.size} starts)"
 
     def summary(self) -> str:
         mean = np.mean(self.final_states, axis=0)

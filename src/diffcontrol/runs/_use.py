@@ -12,7 +12,6 @@ from ..errors import ConfigError
 from ..evaluation import evaluate_run
 from ..mpc import closed_loop_optimum
 from ..optimal import optimal_return
-from ..tasks import ContinuousTask
 from ._open import open_run
 
 
@@ -84,24 +83,21 @@ def _optimum(run: Run, ev: Any, points: int) -> Any:
             f"--optimum {points}: the grid needs 3 to {MAX_OPTIMUM_POINTS} points per axis "
             "(for Pendulum, 401 is within about 0.3 of the converged optimum)"
         )
-    if isinstance(run.task, ContinuousTask) and ev.key != "closed_loop":
+    if ev.key not in ("gym_eval", "closed_loop"):  # a task's own evaluation (swing-up, aim)
         raise ConfigError(
             f"--optimum: task {run.task.name!r} is judged by its own evaluation ({ev.key}), "
             "which has no grid optimum; leave --optimum out"
         )
     if ev.key == "closed_loop":
-        starts, config = int(ev.losses.size), run.config
+        starts = int(ev.losses.size)
         return closed_loop_optimum(
-            run.task, points, OPTIMUM_LEVELS, params=run.params, config=config, starts=starts,
-            seed=ev.seed,
+            run.task, points, OPTIMUM_LEVELS, params=run.params, config=run.config,
+            starts=starts, seed=ev.seed,
         )  # fmt: skip
-    real, params = run.real_env, None
-    if real is not None and ev.key == "gym_eval":
-        params = _gym.params_of_env(run.task, *real)
-    if (
-        ev.key != "gym_eval"
-        or (real is None and ev.env_id != _gym.gym_label(run.task))
-        or (real is not None and params is None)
+    real = run.real_env
+    params = None if real is None else _gym.params_of_env(run.task, *real)
+    if (real is None and ev.env_id != _gym.gym_label(run.task)) or (
+        real is not None and params is None
     ):
         raise ConfigError(
             f"--optimum needs the physics of the system evaluated, and task "

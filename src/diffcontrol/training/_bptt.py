@@ -423,7 +423,6 @@ class Constant:
         self.table = table
 
 
-MAX_TABLE = optimal.MAX_TABLE
 MAX_HELD = 2**25
 """The most values a training program may hold as its terminal value (``value_time``: every
 step's grid, a constant of the compiled program and of its cache entry): 128 MB."""
@@ -432,7 +431,7 @@ step's grid, a constant of the compiled program and of its cache entry): 128 MB.
 def check_value_grid(task: Any, config: TrainConfig, params: PyTree = None) -> None:
     """Refuse a terminal value (``config.value_grid``) the task cannot have: no state grid, no
     action bounds, more grid points than ``MAX_VALUE_GRID`` squared, or a table over the
-    training horizon larger than ``MAX_TABLE`` values (``MAX_HELD`` with ``value_time``);
+    training horizon larger than ``optimal.MAX_TABLE`` values (``MAX_HELD`` with ``value_time``);
     nothing solved.
 
     Raises:
@@ -458,7 +457,7 @@ def check_value_grid(task: Any, config: TrainConfig, params: PyTree = None) -> N
             f"axes, more than {most:,}; choose at most {each} points per axis"
         )
     steps = (config.horizon or task.episode_length) + 1
-    limit = MAX_HELD if config.value_time else MAX_TABLE
+    limit = MAX_HELD if config.value_time else optimal.MAX_TABLE
     what = "held by the training program" if config.value_time else "solved"
     if steps * total > limit:
         each = int((limit / steps) ** (1 / len(axes)))
