@@ -49,6 +49,8 @@ def add_parsers(sub: Any) -> None:
         *shared,
         ("--recipe", str, None, "NAME",
          "start from a named set of settings, e.g. 'original' for the 2019 Flux recipe"),
+        ("--init", str, None, "RUN_DIR", "start from the controller trained in RUN_DIR instead "
+         "of random weights (fine-tuning, e.g. at a lower --learning-rate); the same network"),
         ("--resume", FLAG, False, None, "continue the interrupted run in DIR from its last "
          "checkpoint, with the settings of its run.json (a finished run is left as it is)"),
         ("--devices", a.positive_int, None, "N", "split the batch of simulations over N "
@@ -97,7 +99,7 @@ def cmd_train(args: argparse.Namespace) -> int:
             compile_cache=not args.no_compile_cache,
             progress=a.say(args),
             command=args.command_line,
-            **a.pick(args, "recipe model resume final_eval devices log_dir"),
+            **a.pick(args, "recipe model resume final_eval devices log_dir init"),
         )
     print(outcome.summary)
     if outcome.files:

@@ -19,14 +19,22 @@ from .. import _jax_setup, _run_dir, _timing, io, tasks
 from .._run_files import Run, mark_complete, read_run_file, release_claim, save_run
 from .._shell import command as shell_command
 from ..envs import make_env
-from ..errors import ConfigError, Interrupted, RunDirectoryError, TrainingDiverged
+from ..errors import (
+    ConfigError,
+    Interrupted,
+    ModelFileError,
+    RunDirectoryError,
+    TrainingDiverged,
+)
 from ..identify.fitted import checked_env_id, fitted_physics, fitted_task, read_fitted, real_system
 from ..identify.kinds import kind
 from ..mpc._config import default_plan_config, loop_planner, plans_best
 from ..tasks import AnyTask, named_by_file, resolve
 from ..training import resolve_config, train
 from ..training._devices import is_writer, join_hosts
+from ..training._driver import CHECKPOINT_FILE
 from ..training._ode import windows_of
+from ._open import open_run
 
 
 class RunInterrupted(Interrupted):
@@ -68,6 +76,7 @@ def train_run(
     inform: Callable[[str], None] | None = None,
     command: str | None = None,
     log_dir: str | Path | None = None,
+    init: str | Path | None = None,
 ) -> RunOutcome:
     """Train a controller into ``out_dir`` and write its files, as ``diffcontrol train``.
 
@@ -99,6 +108,9 @@ def train_run(
         inform: called with what is trained through (even when ``progress`` is silent).
         command: the command line to record in ``metrics.json``.
         log_dir: write the training curves there as TensorBoard event files (``train``'s).
+        init: a trained run's directory whose controller the training starts from
+            (``train``'s ``init``; a resume reads it from ``run.json`` where it has no
+            checkpoint yet).
 
     Raises:
         ConfigError, RunDirectoryError, ModelFileError, TrainingDiverged, SolverFailed: bad
@@ -131,6 +143,7 @@ def train_run(
     final_eval = invocation.get("final_eval") if final_eval is None else final_eval
     animation = animation and invocation.get("animation") is not False
     devices = devices or invocation.get("devices")
+    init = init or invocation.get("init")
     spec, the_task = task, resolve(task)
 
     config_cls = type(the_task.default_config())
@@ -169,9 +182,14 @@ def train_run(
             "approximate (the backward solve re-creates the state with the solver's error); "
             "checkpoint is exact for the computed solve"
         )
+    # a resumed run with a checkpoint starts from that, not from the run it was started from
+    checkpointed = resume and (out / CHECKPOINT_FILE).is_file()
+    start = _controller_of(init, the_task) if init and not checkpointed else None
     invocation = {"task": spec, "model": model, "final_eval": final_eval, "animation": animation}
     if devices:
         invocation["devices"] = devices
+    if init:
+        invocation["init"] = str(init)
     if env_id:
         invocation["env"] = env_id
     named = [] if spec in _builtin_names() else [spec]
@@ -195,6 +213,7 @@ def train_run(
             invocation=invocation,
             devices=devices,
             log_dir=log_dir,
+            init=start,
         )
     except BaseException as e:
         # nothing to resume (no run.json yet, or one without a checkpoint): say so
@@ -253,6 +272,25 @@ def train_run(
     )
     timings = _timing.describe(run.metrics["timings"])
     return RunOutcome(run, files, summary, timings, _advice(the_task, out, model or params))
+
+
+def _controller_of(run_dir: str | Path, task: AnyTask) -> Any:
+    """The trained controller in ``run_dir`` (``--init``), read for ``task``.
+
+    Raises:
+        ModelFileError: no run there, a damaged one, or one of another system (its
+            observation or action size), named as ``--init``'s.
+        ConfigError: a planner's run (it has no network to start from).
+    """
+    try:
+        controller = open_run(run_dir, task=task).controller
+    except ModelFileError as e:  # named as --init's, without open_run's advice to name --task
+        raise ModelFileError(f"--init {run_dir}: {str(e).split('; open it with')[0]}") from None
+    if controller is None:
+        raise ConfigError(
+            f"--init {run_dir}: a planner has no network to start from; give a trained run"
+        )
+    return controller
 
 
 def _advice(task: AnyTask, out: Path, changed: Any) -> str:

@@ -112,6 +112,7 @@ def train(
     invocation: dict[str, Any] | None = None,
     devices: int | None = None,
     log_dir: str | Path | None = None,
+    init: MLPController | None = None,
 ) -> TrainResult:
     """Train a controller for ``task`` by differentiating through its simulator.
 
@@ -145,6 +146,10 @@ def train(
         log_dir: write the training curves there as TensorBoard event files: the loss, the
             gradient norm and the learning rate of every update, the evaluation return of
             every evaluation point (``training._events``; needs tensorboardX).
+        init: start from this controller instead of random weights (fine-tuning, e.g. a
+            trained run's ``open_run(dir).controller`` at a lower learning rate). It must have
+            the network this run would make (the same sizes, activation and head); one
+            controller only (``population`` 1). A resumed run starts from its checkpoint.
 
     Returns:
         A ``TrainResult`` whose controller is the one of the best evaluation point when
@@ -211,6 +216,8 @@ def train(
         divisible(config.batch, devices, "batch", "--batch")
     with interrupts_deferred():  # one program (the keys too), not op by op
         ts, k_eval = _first_state(kept, config.seed, params)
+    if init is not None:
+        ts = _started_from(ts, init, config)
     ts_sharding, whole = batch_placement(ts, devices, 1 if _population(config) > 1 else 0)
     best = None  # the controller of the best evaluation point so far
 
@@ -430,6 +437,50 @@ a CPU they give the defaults' bits for every built-in task (compared leaf by lea
 ``tests/test_startup.py`` keeps checking two of them); level 0 would round the uniform draws'
 scaling differently. Not compared on a GPU, where only the level applies. An option named in
 ``XLA_FLAGS`` (the test suite names both) is left as it is."""
+
+
+def _started_from(ts: Any, init: Any, config: Any) -> Any:
+    """The first training state ``ts`` with ``init`` in place of its random controller (the
+    optimiser's state is that of fresh weights either way: zero moments).
+
+    Raises:
+        ConfigError: a population, or a controller whose network is not the one this run
+            makes (another size, activation or head).
+    """
+    if _population(config) > 1:
+        raise ConfigError(
+            f"init starts from one controller; a population of {_population(config)} would start "
+            "every member the same: leave population at 1"
+        )
+    fresh, static = eqx.partition(ts.controller, eqx.is_array)
+    given = eqx.filter(init, eqx.is_array)
+    new, old = jax.tree.leaves(given), jax.tree.leaves(fresh)
+    # the ODE trainer's controller has a leading population axis (of 1) on every array
+    lead = old[0].ndim - new[0].ndim if new and old else 0
+    fits = (
+        isinstance(init, MLPController)
+        and jax.tree.structure(init) == jax.tree.structure(ts.controller)
+        and all(np.shape(a) == b.shape[lead:] for a, b in zip(new, old, strict=True))
+    )
+    if not fits:
+        raise ConfigError(
+            f"the controller to start from ({_network(init)}) is not the network this run "
+            f"makes ({_network(ts.controller)}); use its hidden sizes, activation and head "
+            "(--hidden, --activation, --head)"
+        )
+    arrays = jax.tree.map(
+        lambda a, b: jnp.broadcast_to(jnp.asarray(a, b.dtype), b.shape), given, fresh
+    )
+    return eqx.tree_at(lambda t: t.controller, ts, eqx.combine(arrays, static))
+
+
+def _network(controller: Any) -> str:
+    """A controller's layer widths, activation and head, in words."""
+    if not isinstance(controller, MLPController):
+        return f"a {type(controller).__name__}, not an MLPController"
+    shapes = [layer.weight.shape[-2:] for layer in controller.layers]
+    widths = "x".join(str(n) for n in (shapes[0][1], *(out for out, _ in shapes)))
+    return f"layers {widths}, {controller.activation} activation, {controller.head} head"
 
 
 def _first_state(kept: _KeptTrainer, seed: int, params: PyTree) -> tuple[Any, PRNGKeyArray]:
