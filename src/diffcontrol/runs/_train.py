@@ -188,8 +188,8 @@ def train_run(
     invocation = {"task": spec, "model": model, "final_eval": final_eval, "animation": animation}
     if devices:
         invocation["devices"] = devices
-    if init:
-        invocation["init"] = str(init)
+    if init:  # absolute: a resume may run from another directory
+        invocation["init"] = os.path.abspath(init)
     if env_id:
         invocation["env"] = env_id
     named = [] if spec in _builtin_names() else [spec]
