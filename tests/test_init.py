@@ -15,7 +15,12 @@ SAME_SETTINGS = {"cartpole_run": TINY_CARTPOLE, "swingup_run": TINY_SWINGUP}
 
 
 @pytest.mark.parametrize(
-    ("fixture", "task"), [("cartpole_run", "cartpole"), ("swingup_run", "cartpole-swingup")]
+    ("fixture", "task"),
+    [
+        ("cartpole_run", "cartpole"),
+        # slow: with the swing-up's other tests, on the worker that has built its shared run
+        pytest.param("swingup_run", "cartpole-swingup", marks=pytest.mark.slow),
+    ],
 )
 def test_a_run_starts_where_the_run_it_names_ended(fixture, task, request, tmp_path):
     # discrete-time BPTT and the ODE trainer (whose controller has a population axis)
