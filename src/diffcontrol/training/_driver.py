@@ -214,10 +214,15 @@ def train(
                 "(devices > 1 splits the batch of discrete-time tasks)"
             )
         divisible(config.batch, devices, "batch", "--batch")
+    if init is not None and _population(config) > 1:  # refused before anything compiles
+        raise ConfigError(
+            f"init starts from one controller; a population of {_population(config)} would start "
+            "every member the same: leave population at 1"
+        )
     with interrupts_deferred():  # one program (the keys too), not op by op
         ts, k_eval = _first_state(kept, config.seed, params)
     if init is not None:
-        ts = _started_from(ts, init, config)
+        ts = _started_from(ts, init)
     ts_sharding, whole = batch_placement(ts, devices, 1 if _population(config) > 1 else 0)
     best = None  # the controller of the best evaluation point so far
 
@@ -439,19 +444,14 @@ scaling differently. Not compared on a GPU, where only the level applies. An opt
 ``XLA_FLAGS`` (the test suite names both) is left as it is."""
 
 
-def _started_from(ts: Any, init: Any, config: Any) -> Any:
-    """The first training state ``ts`` with ``init`` in place of its random controller (the
-    optimiser's state is that of fresh weights either way: zero moments).
+def _started_from(ts: Any, init: Any) -> Any:
+    """The first training state ``ts`` (of one controller) with ``init`` in place of its random
+    controller (the optimiser's state is that of fresh weights either way: zero moments).
 
     Raises:
-        ConfigError: a population, or a controller whose network is not the one this run
-            makes (another size, activation or head).
+        ConfigError: a controller whose network is not the one this run makes (another size,
+            activation or head).
     """
-    if _population(config) > 1:
-        raise ConfigError(
-            f"init starts from one controller; a population of {_population(config)} would start "
-            "every member the same: leave population at 1"
-        )
     fresh, static = eqx.partition(ts.controller, eqx.is_array)
     given = eqx.filter(init, eqx.is_array)
     new, old = jax.tree.leaves(given), jax.tree.leaves(fresh)
