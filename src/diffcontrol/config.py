@@ -281,6 +281,14 @@ class TrainConfig(_Config):
     hidden: tuple[int, ...] = _shared("hidden", (64, 64))
     activation: str = _shared("activation", "tanh")
     head: str = _head("Action head; empty means the task's (tanh for torques, sign for pushes).")
+    head_slope_floor: float = _opt(
+        "Least slope of a tanh or sigmoid head in the backward pass, as a fraction of its "
+        "slope at 0: an actuator held at its bound still gets a gradient (the forward pass "
+        "is unchanged); 0 keeps the exact slope.",
+        default=0.0,
+        metavar="X",
+        form="fraction",
+    )
     loss: str = _shared("loss", "")
     eval_every: int = _shared("eval_every", 50)
     eval_episodes: int = _opt(

@@ -19,6 +19,13 @@ Action heads (the last, parameter-free stage):
   (straight-through softmax; see ``straight_through_argmax``). A task turns the one-hot vector
   into its physical action with a dot product (the acrobot's torque is
   ``one_hot . (-1, 0, +1)``), so the gradient reaches the logits of every choice.
+
+The bounded heads take an optional slope floor for training (``head_floor``;
+``TrainConfig.head_slope_floor``): the backward pass uses ``max(f'(z), floor x f'(0))`` in
+place of the squashing function's own slope ``f'(z)``; the forward pass is unchanged. A
+saturated actuator then still tells the gradient which way its raw output should move. With
+the exact slope, a controller that has learned to hold an actuator at its bound gets almost
+no gradient there, and stays there (``squash``).
 """
 
 from __future__ import annotations
@@ -94,10 +101,33 @@ def _straight_through_argmax_jvp(temperature, primals, tangents):
     return straight_through_argmax(z, temperature), dp
 
 
-def apply_head(head: str, z: Array, low: Array, high: Array) -> Array:
-    """Map the network's raw output ``z`` through an action head (see the module docstring)."""
+_SQUASH = {"tanh": (jnp.tanh, 1.0), "sigmoid": (jax.nn.sigmoid, 0.25)}
+"""A bounded head's squashing function and its slope at 0."""
+
+
+@functools.partial(jax.custom_jvp, nondiff_argnums=(0, 2))
+def squash(head: str, z: Array, floor: float) -> Array:
+    """The ``"tanh"`` or ``"sigmoid"`` head's squashing function of ``z``, whose derivative in
+    the backward pass is at least ``floor`` times its slope at 0 (see the module docstring)."""
+    return _SQUASH[head][0](z)
+
+
+@squash.defjvp
+def _squash_jvp(head, floor, primals, tangents):
+    (z,), (dz,) = primals, tangents
+    f, peak = _SQUASH[head]
+    y, slope = jax.jvp(f, (z,), (jnp.ones_like(z),))
+    return y, jnp.maximum(slope, floor * peak) * dz
+
+
+def apply_head(head: str, z: Array, low: Array, high: Array, floor: float = 0.0) -> Array:
+    """Map the network's raw output ``z`` through an action head (see the module docstring);
+    ``floor``: the bounded heads' slope floor in the backward pass (0: their own slope)."""
     if head == "linear":
         return z
+    if head in _SQUASH and floor:
+        s = squash(head, z, floor)
+        return low + (high - low) * ((s + 1) / 2 if head == "tanh" else s)
     if head == "tanh":
         return low + (high - low) * (jnp.tanh(z) + 1) / 2
     if head == "sigmoid":
@@ -137,6 +167,7 @@ class MLPController(eqx.Module):
     action_high: Float[Array, " act"]
     activation: str = eqx.field(static=True)
     head: str = eqx.field(static=True)
+    head_floor: float = eqx.field(static=True)
 
     def __init__(
         self,
@@ -153,6 +184,7 @@ class MLPController(eqx.Module):
         action_high: Sequence[float] | None = None,
         final_scale: float = 0.1,
         init: str = "equinox",
+        head_floor: float = 0.0,
     ):
         """Build a randomly initialised controller.
 
@@ -172,6 +204,8 @@ class MLPController(eqx.Module):
             init: ``"equinox"`` (Equinox's default: weights and biases uniform in
                 ``+-1/sqrt(fan_in)``) or ``"glorot"`` (Glorot-uniform weights, zero biases:
                 the default of Flux and DiffEqFlux, used by the 2019-2020 posts).
+            head_floor: the bounded heads' slope floor in training's backward pass, a
+                fraction of the slope at 0 in ``[0, 1]`` (module docstring; 0: none).
         """
         if activation not in ACTIVATIONS:
             raise ValueError(
@@ -179,6 +213,8 @@ class MLPController(eqx.Module):
             )
         if head not in HEADS:
             raise ValueError(f"unknown action head {head!r}; choose one of {HEADS}")
+        if not 0 <= head_floor <= 1:
+            raise ValueError(f"head_floor must be in [0, 1], got {head_floor!r}")
         if init not in INITS:
             raise ValueError(f"unknown init {init!r}; choose one of {INITS}")
         if head == "argmax" and action_size < 2:
@@ -192,10 +228,11 @@ class MLPController(eqx.Module):
         self.action_high = _vector(action_high, action_size, 1.0)
         self.activation = activation
         self.head = head
+        self.head_floor = float(head_floor)
 
     def __call__(self, obs: Float[Array, " obs"]) -> Float[Array, " act"]:
         low, high = jax.lax.stop_gradient((self.action_low, self.action_high))
-        return apply_head(self.head, self.logits(obs), low, high)
+        return apply_head(self.head, self.logits(obs), low, high, self.head_floor)
 
     def logits(self, obs: Float[Array, " obs"]) -> Float[Array, " out"]:
         """The network's raw output ``z``, before the action head."""

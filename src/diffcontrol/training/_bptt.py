@@ -116,7 +116,13 @@ class Trainer(eqx.Module):
         kwargs = controller_kwargs(self.task)
         if cfg.head:
             kwargs["head"] = cfg.head
-        controller = MLPController(k_ctrl, hidden=cfg.hidden, activation=cfg.activation, **kwargs)
+        controller = MLPController(
+            k_ctrl,
+            hidden=cfg.hidden,
+            activation=cfg.activation,
+            head_floor=cfg.head_slope_floor,
+            **kwargs,
+        )
         env_state = jax.vmap(lambda k: self.task.reset(k, params))(
             jax.random.split(k_env, cfg.batch)
         )

@@ -186,7 +186,7 @@ def train(
             f"{type(config).__name__}; start from task.default_config()"
         )
     say = progress or (lambda line: None)
-    _check_head(task, config.head)
+    _check_head(task, config)
     log = open_log(log_dir) if is_writer() else None  # a missing tensorboardX: said at once
     params = task_params(task, config.params)
     validate_task(task, params)  # a wrong shape named here, not as a lax.scan type error
@@ -457,9 +457,10 @@ def _started_from(ts: Any, init: Any) -> Any:
     new, old = jax.tree.leaves(given), jax.tree.leaves(fresh)
     # the ODE trainer's controller has a leading population axis (of 1) on every array
     lead = old[0].ndim - new[0].ndim if new and old else 0
-    fits = (
+    fits = (  # the network, not its training-only slope floor (_network)
         isinstance(init, MLPController)
-        and jax.tree.structure(init) == jax.tree.structure(ts.controller)
+        and _network(init) == _network(ts.controller)
+        and len(new) == len(old)
         and all(np.shape(a) == b.shape[lead:] for a, b in zip(new, old, strict=True))
     )
     if not fits:
@@ -468,8 +469,9 @@ def _started_from(ts: Any, init: Any) -> Any:
             f"makes ({_network(ts.controller)}); use its hidden sizes, activation and head "
             "(--hidden, --activation, --head)"
         )
-    arrays = jax.tree.map(
-        lambda a, b: jnp.broadcast_to(jnp.asarray(a, b.dtype), b.shape), given, fresh
+    arrays = jax.tree.unflatten(
+        jax.tree.structure(fresh),
+        [jnp.broadcast_to(jnp.asarray(a, b.dtype), b.shape) for a, b in zip(new, old)],
     )
     return eqx.tree_at(lambda t: t.controller, ts, eqx.combine(arrays, static))
 
@@ -605,9 +607,16 @@ def interrupts_deferred() -> Iterator[None]:
 _CONTINUOUS_HEADS = ("linear", "tanh", "sigmoid")
 
 
-def _check_head(task: AnyTask, head: str) -> None:
+def _check_head(task: AnyTask, config: Any) -> None:
     """A head override must make the same kind of action as the task's own head: a discrete
-    head cannot replace a continuous one (or the reverse), and a bounded one needs bounds."""
+    head cannot replace a continuous one (or the reverse), and a bounded one needs bounds. A
+    slope floor needs a tanh or sigmoid head."""
+    head, floor = config.head, getattr(config, "head_slope_floor", 0.0)
+    if floor and (head or task.action_head) not in ("tanh", "sigmoid"):
+        raise ConfigError(
+            f"head_slope_floor={floor} is for a tanh or sigmoid head, and this run's head is "
+            f"{head or task.action_head!r}; leave it at 0"
+        )
     if not head or head == task.action_head:
         return
     own_continuous = task.action_head in _CONTINUOUS_HEADS

@@ -246,7 +246,7 @@ def check_members(task: Task, configs: Sequence[TrainConfig], devices: int | Non
                 f"a sweep member trains one controller (population 1), got population "
                 f"{c.population}; a sweep is itself a population of runs"
             )
-        _check_head(task, c.head)
+        _check_head(task, c)
         if c.value_grid:
             check_value_grid(task, c)  # before any member trains
     check_devices(devices)
@@ -338,7 +338,7 @@ def _run_program(
     curves written to ``logged``'s event log under its names; ``""``: the summary only)."""
     t_start = time.perf_counter()
     cfg = configs[0]
-    _check_head(task, cfg.head)
+    _check_head(task, cfg)
     params = task_params(task, cfg.params)
     validate_task(task, params)
     if step_loss is None:
