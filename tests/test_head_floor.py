@@ -66,7 +66,7 @@ def test_training_builds_its_controller_with_the_floor_and_init_ignores_it():
     [
         (
             ["cartpole", "--head-slope-floor", "0.1"],
-            ["head_slope_floor=0.1 is for a tanh or sigmoid head", "'sign'"],
+            ["head_slope_floor=0.1 (--head-slope-floor) is for a tanh or sigmoid", "'sign'"],
         ),
         (
             ["pendulum", "--head-slope-floor", "1.5"],

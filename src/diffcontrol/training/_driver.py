@@ -614,8 +614,8 @@ def _check_head(task: AnyTask, config: Any) -> None:
     head, floor = config.head, getattr(config, "head_slope_floor", 0.0)
     if floor and (head or task.action_head) not in ("tanh", "sigmoid"):
         raise ConfigError(
-            f"head_slope_floor={floor} is for a tanh or sigmoid head, and this run's head is "
-            f"{head or task.action_head!r}; leave it at 0"
+            f"head_slope_floor={floor} (--head-slope-floor) is for a tanh or sigmoid head, and "
+            f"this run's head is {head or task.action_head!r}; leave it at 0"
         )
     if not head or head == task.action_head:
         return
