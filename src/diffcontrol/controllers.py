@@ -125,13 +125,11 @@ def apply_head(head: str, z: Array, low: Array, high: Array, floor: float = 0.0)
     ``floor``: the bounded heads' slope floor in the backward pass (0: their own slope)."""
     if head == "linear":
         return z
-    if head in _SQUASH and floor:
-        s = squash(head, z, floor)
-        return low + (high - low) * ((s + 1) / 2 if head == "tanh" else s)
-    if head == "tanh":
-        return low + (high - low) * (jnp.tanh(z) + 1) / 2
-    if head == "sigmoid":
-        return low + (high - low) * jax.nn.sigmoid(z)
+    if head in _SQUASH:
+        s = squash(head, z, floor) if floor else _SQUASH[head][0](z)
+        if head == "tanh":
+            return low + (high - low) * (s + 1) / 2
+        return low + (high - low) * s
     if head == "sign":
         return straight_through_sign(jnp.tanh(z))
     if head == "argmax":
