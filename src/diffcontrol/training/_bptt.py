@@ -27,6 +27,7 @@ from ..controllers import MLPController
 from ..errors import ConfigError, TrainingDiverged
 from ..rollout import batch_returns
 from ..tasks import StepLoss, Task, controller_kwargs, task_params
+from ._interface import register_trainer
 
 
 class TrainState(eqx.Module):
@@ -546,11 +547,13 @@ def make_trainer(
     step_loss: StepLoss | None = None,
     params: PyTree = None,
     progress: Any = None,
+    optimizer: optax.GradientTransformation | None = None,
 ) -> Trainer | PopulationTrainer:
     """Build the ``Trainer`` for ``task`` and ``config`` (validating the loss name); a
     ``PopulationTrainer`` of them when ``config.population > 1``. ``params`` (default the
     task's with ``config.params`` applied) are the physics a terminal value
-    (``config.value_grid``) is solved with."""
+    (``config.value_grid``) is solved with; ``optimizer`` replaces ``make_optimizer(config)``
+    (a sweep's, whose learning rate is in its state)."""
     if step_loss is None:
         step_loss = task.step_loss(builtin_loss_name(task, config.loss, "step_loss"))
     if params is None and config.value_grid:
@@ -559,7 +562,7 @@ def make_trainer(
         task=task,
         config=config,
         step_loss=step_loss,
-        optimizer=make_optimizer(config),
+        optimizer=optimizer or make_optimizer(config),
         horizon=config.horizon or task.episode_length,
         window=config.window,
         value=terminal_value(task, config, params, progress, step_loss),
@@ -567,3 +570,6 @@ def make_trainer(
     if config.population > 1:
         return PopulationTrainer(trainer, config.population)
     return trainer
+
+
+register_trainer(TrainConfig, make_trainer)

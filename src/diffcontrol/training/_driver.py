@@ -28,12 +28,13 @@ from ..checks import validate_task
 from ..controllers import MLPController
 from ..errors import ConfigError, ModelFileError, TrainingDiverged
 from ..tasks import AnyTask, ContinuousTask, StepLoss, TrajectoryLoss, as_task, task_params
-from ._bptt import make_trainer
 from ._checkpoint import load_checkpoint, save_checkpoint
 from ._devices import batch_placement, check_devices, divisible, gathered, is_writer, placer
 from ._diagnostics import Diagnostics
 from ._events import learning_rates, open_log
-from ._ode import FAIL_MAX_STEPS, FAIL_NAN, FAIL_SOLVER, failure_message, make_ode_trainer
+from ._interface import trainer_factory
+from ._loop import Loop
+from ._ode import FAIL_MAX_STEPS, FAIL_NAN, FAIL_SOLVER, failure_message
 
 CHECKPOINT_FILE = "checkpoint.npz"
 
@@ -257,61 +258,35 @@ def train(
         lowered = evaluate.lower(ts.controller, params, k_eval)
         evaluate = compiled_once(lowered, *compile_options(task, "evaluate"))
 
-    curve: list[dict[str, Any]] = list(meta["curve"])
-    seconds_before = float(meta["seconds_before"])
-    eval_seconds = 0.0
-    callback_seconds = 0.0  # time spent in on_point, left out of the training time
-    callback_compile = 0.0  # compilation in on_point, left out of the compile time
-
-    def compiled() -> float:
-        """This call's compilation so far (every program: ``_timing``)."""
-        return _timing.compile_seconds() - compiled_before - callback_compile
-
-    best_index = int(meta["best_index"])
-    last_returns = None
-    diagnostics = Diagnostics(say, config.updates, int(ts.update), meta.get("warnings"))
-
-    def record(ts: Any, loss: float, grad_norm: float) -> dict[str, Any]:
-        nonlocal eval_seconds, best, best_index, last_returns, callback_seconds, callback_compile
-        t_eval = time.perf_counter()
-        returns = np.asarray(evaluate(ts.controller, params, k_eval))
-        eval_seconds += time.perf_counter() - t_eval
-        last_returns = returns
-        eval_return, eval_std = trainer.summarize(returns)
-        point = {
-            "update": int(ts.update),
-            **trainer.counts(ts),
-            "seconds": seconds_before + time.perf_counter() - t_start - callback_seconds,
-            "loss": loss,
-            "grad_norm": grad_norm,
-            "eval_return": eval_return,
-            "eval_return_std": eval_std,
-            **trainer.point_extras(ts, returns),
-        }
-        curve.append(point)
-        if log is not None:
-            log.point(point)
-        # ">=": among equal returns (CartPole's 500s) the later, longer-trained controller.
-        so_far = curve[best_index]["eval_return"]
-        if best is None or len(curve) == 1 or math.isnan(so_far) or eval_return >= so_far:
-            best, best_index = trainer.pick(ts.controller, returns), len(curve) - 1
-        say(_progress_line(point, config.updates))
-        if on_point is not None:
-            t_cb, c_cb = time.perf_counter(), _timing.compile_seconds()
-            on_point(point, trainer.pick(ts.controller, returns))
-            callback_seconds += time.perf_counter() - t_cb
-            callback_compile += _timing.compile_seconds() - c_cb
-        return point
-
+    chunks: list[tuple[int, Any]] = []  # (end update, compiled chunk) per stage still to run
+    loop = TrainLoop(
+        trainer,
+        [config],
+        params,
+        evaluate,
+        k_eval,
+        chunks,
+        say,
+        config=config,
+        meta=meta,
+        best=best,
+        t_start=t_start,
+        log=log,
+        on_point=on_point,
+        diagnostics=Diagnostics(say, config.updates, int(ts.update), meta.get("warnings")),
+        checkpoint=None if out is None else out / CHECKPOINT_FILE,
+        compiled_before=compiled_before,
+    )
+    curve = loop.curves[0]
     if not curve:
-        first = record(ts, math.nan, math.nan)
-        if isinstance(task, ContinuousTask) and not math.isfinite(first["eval_return"]):
+        nan = np.full(1, math.nan)
+        loop.record(ts, nan, nan, np.ones(1, bool))
+        if isinstance(task, ContinuousTask) and not math.isfinite(curve[0]["eval_return"]):
             _check_first_solve(trainer, ts, params)
-    elif best is None:
-        best = trainer.pick(ts.controller, np.zeros(_population(config)))
+    elif loop.best is None:
+        loop.best = trainer.pick(ts.controller, np.zeros(_population(config)))
 
     total = np.int32(config.updates)
-    chunks = []  # (end update, compiled chunk) per stage still to run: see Trainer.stages
     with interrupts_deferred():
         for i, (end, stage) in enumerate(kept.stages):
             if end > int(ts.update):
@@ -319,63 +294,22 @@ def train(
                 lowered = chunk.lower(ts, params, total)
                 chunks.append((end, compiled_once(lowered, *compile_options(task, "chunk"))))
 
-    stopped_early = False
-    target = config.target_return
-    while int(ts.update) < config.updates:
-        if not math.isnan(target) and curve and curve[-1]["eval_return"] >= target:
-            stopped_early = True
-            break
-        end, chunk = next((end, c) for end, c in chunks if int(ts.update) < end)
-        new_ts, stats = chunk(ts, params, np.int32(end))  # a stage's last chunk may be short
-        done = int(new_ts.update) - int(ts.update)  # updates past the budget were skipped
-        losses = np.asarray(stats.loss)[:done]
-        try:
-            notes = trainer.check(ts, new_ts, losses)
-        except TrainingDiverged as e:
-            kept = out is not None and (out / CHECKPOINT_FILE).exists()
-            where = f"; the last good checkpoint is in {out}" if kept else ""
-            raise type(e)(f"{e}{where}") from None
-        for note in notes:
-            say("note: " + note)
-        grad_norms = np.asarray(stats.grad_norm)[:done]
-        diagnostics.after_chunk(losses, grad_norms, config.learning_rate)
-        if log is not None:
-            first = int(ts.update)
-            log.updates(first, losses, grad_norms, learning_rates(config, first, done))
-        ts = new_ts
-        with np.errstate(all="ignore"):  # chunks whose members all failed hold only nan
-            record(ts, float(np.nanmean(losses)), float(np.nanmean(grad_norms)))
-        if out is not None:
-            whole_state = gathered((ts, best))  # every process takes part; process 0 writes
-        if out is not None and is_writer():
-            save_checkpoint(
-                out / CHECKPOINT_FILE,
-                whole_state,
-                {
-                    "curve": curve,
-                    "best_index": best_index,
-                    "seconds_before": seconds_before
-                    + time.perf_counter()
-                    - t_start
-                    - callback_seconds,
-                    "compile_seconds_before": float(meta["compile_seconds_before"]) + compiled(),
-                    "warnings": diagnostics.warnings,
-                },
-            )
-
+    ts = loop.run(ts)
     if log is not None:
         log.close()
-    wall = seconds_before + time.perf_counter() - t_start - callback_seconds
-    chosen = curve[best_index] if config.keep_best else curve[-1]
+    wall = loop.seconds()
+    chosen = curve[loop.best_index[0]] if config.keep_best else curve[-1]
     if config.keep_best:
-        controller = best
+        controller = loop.best
     else:
-        if last_returns is None:  # resumed after the last chunk: evaluate once more
-            last_returns = np.asarray(evaluate(ts.controller, params, k_eval))
-        controller = trainer.pick(ts.controller, last_returns)
-    diagnostics.finish(config, curve, chosen["update"])
+        returns = loop.last_returns
+        if returns is None:  # resumed after the last chunk: evaluate once more
+            returns = np.asarray(evaluate(ts.controller, params, k_eval))
+        controller = trainer.pick(ts.controller, returns)
+    loop.diagnostics.finish(config, curve, chosen["update"])
     counts = trainer.counts(ts)
-    compile_seconds = compiled()
+    compile_seconds = loop.compiled()
+    seconds_before = loop.seconds_before
     metrics = {
         "task": task.name,
         "gym_id": task.gym_id,
@@ -388,19 +322,19 @@ def train(
             "compile_programs": _timing.compiled_programs() - programs_before,
             "train": wall - (seconds_before + compile_seconds),
         },
-        "eval_seconds_in_training": eval_seconds,
-        "callback_seconds": callback_seconds,
+        "eval_seconds_in_training": loop.eval_seconds,
+        "callback_seconds": loop.callback_seconds,
         "updates": int(ts.update),
         **counts,
         "episode_length": trainer.episode_length,
-        "stopped_early": stopped_early,
+        "stopped_early": bool(loop.stopped[0]),
         "returned_update": chosen["update"],
         "final_eval_return": chosen["eval_return"],
         "final_eval_return_std": chosen["eval_return_std"],
         "eval_episodes": getattr(config, "eval_episodes", 1),
         "num_parameters": trainer.num_parameters(controller),
         "curve": curve,
-        "warnings": diagnostics.warnings,
+        "warnings": loop.diagnostics.warnings,
         "config": config.to_json(),
         "jax_version": jax.__version__,
         "device": str(jax.devices()[0].platform),
@@ -419,6 +353,84 @@ def train(
         metrics=metrics,
         out_dir=None if out is None else Path(out),
     )
+
+
+class TrainLoop(Loop):
+    """``train``'s turn of the loop: one run (a controller or a population), its progress
+    lines, TensorBoard ``log``, ``on_point`` callback, ``diagnostics`` and, where
+    ``checkpoint`` names a file, a checkpoint after every chunk (``meta``: what it holds besides
+    the state; a resumed run's curve, best index and times so far). The time spent in
+    ``on_point`` is left out of the run's seconds and compile time."""
+
+    def __init__(
+        self,
+        *args: Any,
+        config: Any,
+        meta: dict[str, Any],
+        log: Any,
+        on_point: Callable[[dict[str, Any], MLPController], None] | None,
+        diagnostics: Diagnostics,
+        checkpoint: Path | None,
+        compiled_before: float,
+        **kwargs: Any,
+    ) -> None:
+        super().__init__(
+            *args, curves=[list(meta["curve"])], best_index=[int(meta["best_index"])], **kwargs
+        )
+        self.config, self.meta, self.log, self.on_point = config, meta, log, on_point
+        self.diagnostics, self.checkpoint = diagnostics, checkpoint
+        self.compiled_before, self.seconds_before = compiled_before, float(meta["seconds_before"])
+        self.callback_seconds = self.callback_compile = 0.0
+
+    def compiled(self) -> float:
+        """This call's compilation so far (every program: ``_timing``)."""
+        return _timing.compile_seconds() - self.compiled_before - self.callback_compile
+
+    def lost(self, old: Any, new: Any, losses: list[np.ndarray], means: np.ndarray) -> np.ndarray:
+        try:
+            return super().lost(old, new, losses, means)
+        except TrainingDiverged as e:
+            kept = self.checkpoint is not None and self.checkpoint.exists()
+            where = f"; the last good checkpoint is in {self.checkpoint.parent}" if kept else ""
+            raise type(e)(f"{e}{where}") from None
+
+    def seconds(self) -> float:
+        return self.seconds_before + super().seconds() - self.callback_seconds
+
+    def points_made(self, ts: Any, returns: np.ndarray, points: list[dict | None]) -> None:
+        point = points[0]
+        if self.log is not None:
+            self.log.point(point)
+        self.say(_progress_line(point, self.config.updates))
+        if self.on_point is not None:
+            t_cb, c_cb = time.perf_counter(), _timing.compile_seconds()
+            self.on_point(point, self.trainer.pick(ts.controller, returns))
+            self.callback_seconds += time.perf_counter() - t_cb
+            self.callback_compile += _timing.compile_seconds() - c_cb
+
+    def chunk_done(
+        self, updates: np.ndarray, done: np.ndarray, losses: list[np.ndarray], grads: list
+    ) -> None:
+        self.diagnostics.after_chunk(losses[0], grads[0], self.config.learning_rate)
+        if self.log is not None:
+            first = int(updates[0])
+            rates = learning_rates(self.config, first, int(done[0]))
+            self.log.updates(first, losses[0], grads[0], rates)
+
+    def saved(self, ts: Any) -> None:
+        if self.checkpoint is None:
+            return
+        whole_state = gathered((ts, self.best))  # every process takes part; process 0 writes
+        if is_writer():
+            meta = {
+                "curve": self.curves[0],
+                "best_index": int(self.best_index[0]),
+                "seconds_before": self.seconds(),
+                "compile_seconds_before": float(self.meta["compile_seconds_before"])
+                + self.compiled(),
+                "warnings": self.diagnostics.warnings,
+            }
+            save_checkpoint(self.checkpoint, whole_state, meta)
 
 
 def _finite(tree: PyTree) -> bool:
@@ -568,11 +580,9 @@ def _kept_trainer(
     key = (None if shared else id(task), type(task), fingerprint, type(general), fields)
     kept = _TRAINERS.pop(key, None) if fingerprint is not None else None
     if kept is None or (kept.task is not task and not shared):
-        if isinstance(task, ContinuousTask):
-            trainer = make_ode_trainer(task, general, trajectory_loss)
-        else:
-            trainer = make_trainer(task, general, step_loss, params, progress)
-        kept = _KeptTrainer(task=task, trainer=trainer, stages=_stages(trainer))
+        loss = trajectory_loss if isinstance(task, ContinuousTask) else step_loss
+        trainer = trainer_factory(general)(task, general, loss, params, progress)
+        kept = _KeptTrainer(task=task, trainer=trainer, stages=trainer.stages())
     if fingerprint is not None:
         _TRAINERS[key] = kept
         while len(_TRAINERS) > TRAINERS_KEPT:
@@ -717,12 +727,6 @@ def clear_compiled() -> None:
 def _outputs(shardings: Any) -> dict[str, Any]:
     """``jax.jit``'s keyword for the outputs' placement, when there is one to keep."""
     return {} if shardings is None else {"out_shardings": shardings}
-
-
-def _stages(trainer: Any) -> list[tuple[int, Any]]:
-    """The trainer's stages, ``(end update, trainer)`` (one for continuous-time runs)."""
-    stages = getattr(trainer, "stages", None)
-    return stages() if stages else [(trainer.config.updates, trainer)]
 
 
 def _population(config: Any) -> int:

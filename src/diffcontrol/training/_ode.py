@@ -31,6 +31,7 @@ from ..errors import ConfigError, SolverFailed
 from ..rollout import force_fn, solve_closed_loop, value_and_grad
 from ..tasks import ContinuousTask, TrajectoryLoss, controller_kwargs
 from ._bptt import builtin_loss_name, make_optimizer
+from ._interface import register_trainer
 
 FAIL_NONE, FAIL_MAX_STEPS, FAIL_SOLVER, FAIL_NAN = 0, 1, 2, 3
 
@@ -338,6 +339,10 @@ class ODETrainer(eqx.Module):
 
     # --- the driver's hooks (plain Python, between chunks) --------------------------------
 
+    def stages(self) -> list[tuple[int, ODETrainer]]:
+        """One stage: the horizon curriculum runs inside the programs (``horizon_at``)."""
+        return [(self.config.updates, self)]
+
     def summarize(self, returns: np.ndarray) -> tuple[float, float]:
         """The best member's return, and the spread over the members that are finite."""
         ok = np.isfinite(returns)
@@ -473,3 +478,10 @@ def _check_loss(trainer: ODETrainer) -> None:
                 f"the loss must return a scalar, but it returned shape {shape}{where}; reduce "
                 "it (e.g. with jnp.sum or jnp.mean)"
             )
+
+
+def _ode_factory(task, config, trajectory_loss, params=None, progress=None) -> ODETrainer:
+    return make_ode_trainer(task, config, trajectory_loss)
+
+
+register_trainer(ODETrainConfig, _ode_factory)

@@ -22,6 +22,7 @@ import os
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import equinox as eqx
@@ -35,16 +36,11 @@ from ..checks import validate_task
 from ..config import TrainConfig
 from ..errors import ConfigError
 from ..tasks import ContinuousTask, StepLoss, Task
-from ._bptt import (
-    Trainer,
-    builtin_loss_name,
-    check_value_grid,
-    make_optimizer,
-    terminal_value,
-)
+from ._bptt import check_value_grid, make_optimizer, make_trainer
 from ._devices import check_devices, mesh_placements, placer
 from ._driver import TrainResult, _check_head, compiled_once, interrupts_deferred, task_params
 from ._events import EventLog, learning_rates, open_log, summary
+from ._loop import Loop
 
 MAX_MEMBERS = 2**16
 """The most members one sweep may have."""
@@ -341,22 +337,12 @@ def _run_program(
     _check_head(task, cfg)
     params = task_params(task, cfg.params)
     validate_task(task, params)
-    if step_loss is None:
-        step_loss = task.step_loss(builtin_loss_name(task, cfg.loss, "step_loss"))
 
     def factory(learning_rate):
         return make_optimizer(cfg, learning_rate)
 
-    value = terminal_value(task, cfg, params, say, step_loss)
-    trainer = Trainer(
-        task=task,
-        config=cfg,
-        step_loss=step_loss,
-        optimizer=optax.inject_hyperparams(factory)(learning_rate=cfg.learning_rate),
-        horizon=cfg.horizon or task.episode_length,
-        window=cfg.window,
-        value=value,
-    )
+    swept = optax.inject_hyperparams(factory)(learning_rate=cfg.learning_rate)
+    trainer = make_trainer(task, cfg, step_loss, params, say, optimizer=swept)
     n = len(configs)
     # every member's keys by one program: a key stacked per member would be a concatenation of
     # as many operands, which XLA compiles for minutes when there are thousands
@@ -400,110 +386,27 @@ def _run_program(
             ]
     compile_seconds = time.perf_counter() - t0
 
-    curves: list[list[dict[str, Any]]] = [[] for _ in range(n)]
-    best_index = np.zeros(n, int)
-    best = None
-    stopped = np.zeros(n, bool)  # early stop (target reached)
-    diverged = np.zeros(n, bool)
-    target = cfg.target_return
-
-    def record(ts, losses: np.ndarray, grads: np.ndarray, active: np.ndarray) -> None:
-        nonlocal best
-        returns = np.asarray(evaluate(ts.controller, params, shard(k_eval)))
-        updates = np.asarray(ts.update)
-        finished = np.asarray(ts.finished_episodes)
-        finished_sum = np.asarray(ts.finished_return_sum)
-        seconds = time.perf_counter() - t_start
-        improved = np.zeros(n, bool)
-        for i in np.flatnonzero(active):
-            mean, std = trainer.summarize(returns[i])
-            steps = cfg.simulated_steps(int(updates[i]))
-            fin = int(finished[i])
-            curves[i].append(
-                {
-                    "update": int(updates[i]),
-                    "simulated_steps": steps,
-                    "simulated_episodes": steps / task.episode_length,
-                    "seconds": seconds,
-                    "loss": float(losses[i]),
-                    "grad_norm": float(grads[i]),
-                    "eval_return": mean,
-                    "eval_return_std": std,
-                    "train_episodes_finished": fin,
-                    "train_return_mean": float(finished_sum[i]) / fin if fin else math.nan,
-                }
-            )
-            so_far = curves[i][best_index[i]]["eval_return"]
-            if len(curves[i]) == 1 or math.isnan(so_far) or mean >= so_far:
-                improved[i], best_index[i] = True, len(curves[i]) - 1
-        mask = jnp.asarray(improved)
-        best = (
-            ts.controller
-            if best is None
-            else jax.tree.map(
-                lambda new, old: (
-                    jnp.where(mask.reshape((-1,) + (1,) * (new.ndim - 1)), new, old)
-                    if eqx.is_array(new)
-                    else new
-                ),
-                ts.controller,
-                best,
-            )
-        )
-        means = np.array([c[-1]["eval_return"] for c in curves])
-        if logged is not None:
-            _log_points(logged, curves, active, means, int(updates.max()))
-        top = int(np.nanargmax(np.where(diverged, np.nan, means))) if not diverged.all() else 0
-        running = int(np.sum(~(stopped | diverged) & (updates < cfg.updates)))
-        say(
-            f"[{100.0 * updates.max() / max(cfg.updates, 1):5.1f}%] update {updates.max():>5}/"
-            f"{cfg.updates}  members {n} ({running} training)  best eval return "
-            f"{means[top]:9.2f} (#{top})  median {np.nanmedian(means):9.2f}  {seconds:6.1f} s"
-        )
-
+    loop = SweepLoop(
+        trainer,
+        configs,
+        params,
+        evaluate,
+        shard(k_eval),
+        chunks,
+        say,
+        t_start=t_start,
+        shard=shard,
+        logged=logged,
+    )
     nan = np.full(n, math.nan)
-    record(ts, nan, nan, np.ones(n, bool))
-    while True:
-        last = np.array([c[-1]["eval_return"] for c in curves])
-        if not math.isnan(target):
-            stopped |= ~diverged & (last >= target)
-        updates = np.asarray(ts.update)
-        totals = np.where(stopped | diverged, updates, cfg.updates).astype(np.int32)
-        if np.all(updates >= totals):
-            break
-        # the stage of the members still training (they step together)
-        end, chunk = next((e, c) for e, c in chunks if np.min(updates[updates < totals]) < e)
-        totals = np.minimum(totals, end).astype(np.int32)
-        new, stats = chunk(ts, params, shard(jnp.asarray(totals)))
-        losses, grads = np.asarray(stats.loss), np.asarray(stats.grad_norm)
-        done = np.asarray(new.update) - updates
-        active = done > 0
-        with np.errstate(all="ignore"):
-            loss_mean = np.array(
-                [np.nanmean(losses[i, : done[i]]) if done[i] else math.nan for i in range(n)]
-            )
-            grad_mean = np.array(
-                [np.nanmean(grads[i, : done[i]]) if done[i] else math.nan for i in range(n)]
-            )
-        finite = _finite_members(new.controller, n)
-        lost = active & ~(np.isfinite(loss_mean) & finite)
-        for i in np.flatnonzero(lost):
-            say(
-                f"note: member {i} (seed {configs[i].seed}, learning rate "
-                f"{configs[i].learning_rate:g}) diverged near update {int(updates[i]) + 1}; "
-                "the others train on"
-            )
-        diverged |= lost
-        if logged is not None:
-            _log_updates(logged, configs, updates, done, losses, grads)
-        ts = new
-        record(ts, loss_mean, grad_mean, active & ~lost)
-
+    loop.record(ts, nan, nan, np.ones(n, bool))
+    ts = loop.run(ts)
     wall = time.perf_counter() - t_start
     results = []
     for i, c in enumerate(configs):
-        chosen = curves[i][best_index[i]] if c.keep_best else curves[i][-1]
-        controller = _member(best if c.keep_best else ts.controller, i)
+        curve = loop.curves[i]
+        chosen = curve[loop.best_index[i]] if c.keep_best else curve[-1]
+        controller = _member(loop.best if c.keep_best else ts.controller, i)
         done_updates = int(ts.update[i])
         steps = c.simulated_steps(done_updates)
         metrics = {
@@ -516,14 +419,14 @@ def _run_program(
             "simulated_steps": steps,
             "simulated_episodes": steps / task.episode_length,
             "episode_length": task.episode_length,
-            "stopped_early": bool(stopped[i]),
-            "diverged": bool(diverged[i]),
+            "stopped_early": bool(loop.stopped[i]),
+            "diverged": bool(loop.diverged[i]),
             "returned_update": chosen["update"],
             "final_eval_return": chosen["eval_return"],
             "final_eval_return_std": chosen["eval_return_std"],
             "eval_episodes": c.eval_episodes,
             "num_parameters": controller.num_parameters,
-            "curve": curves[i],
+            "curve": curve,
             "warnings": [],
             "config": c.to_json(),
             "jax_version": jax.__version__,
@@ -536,6 +439,79 @@ def _run_program(
     return results
 
 
+class SweepLoop(Loop):
+    """A sweep program's turn of the loop: its members step together under ``vmap``, each with
+    its own budget, target, keep-best and divergence (a diverged member stops; the others
+    train on); one progress line per point for all of them, and their logs (``logged``)."""
+
+    def __init__(self, *args: Any, shard: Callable[[PyTree], PyTree], logged: Any, **kw: Any):
+        super().__init__(*args, **kw)
+        self.shard, self.logged = shard, logged
+        self._counts: tuple[Any, list[np.ndarray]] | None = None
+
+    def per_run(self, x: np.ndarray) -> np.ndarray:
+        return x
+
+    def state_of(self, ts: Any, i: int) -> SimpleNamespace:
+        if self._counts is None or self._counts[0] is not ts:  # once per point, not per member
+            names = ("update", "finished_episodes", "finished_return_sum")
+            self._counts = (ts, [np.asarray(getattr(ts, k)) for k in names])
+        update, finished, finished_sum = self._counts[1]
+        return SimpleNamespace(
+            update=update[i], finished_episodes=finished[i], finished_return_sum=finished_sum[i]
+        )
+
+    def keep(self, ts: Any, returns: np.ndarray, improved: np.ndarray) -> None:
+        mask = jnp.asarray(improved)
+        self.best = (
+            ts.controller
+            if self.best is None
+            else jax.tree.map(
+                lambda new, old: (
+                    jnp.where(mask.reshape((-1,) + (1,) * (new.ndim - 1)), new, old)
+                    if eqx.is_array(new)
+                    else new
+                ),
+                ts.controller,
+                self.best,
+            )
+        )
+
+    def total(self, totals: np.ndarray) -> Any:
+        return self.shard(jnp.asarray(totals.astype(np.int32)))
+
+    def lost(self, old: Any, new: Any, losses: list[np.ndarray], means: np.ndarray) -> np.ndarray:
+        lost = ~(np.isfinite(means) & _finite_members(new.controller, self.n))
+        updates = self.updates(old)
+        for i in np.flatnonzero(lost & (self.updates(new) > updates)):
+            c = self.configs[i]
+            self.say(
+                f"note: member {i} (seed {c.seed}, learning rate {c.learning_rate:g}) diverged "
+                f"near update {int(updates[i]) + 1}; the others train on"
+            )
+        return lost
+
+    def points_made(self, ts: Any, returns: np.ndarray, points: list[dict | None]) -> None:
+        updates, budget, diverged = self.updates(ts), self.configs[0].updates, self.diverged
+        means = np.array([c[-1]["eval_return"] for c in self.curves])
+        if self.logged is not None:
+            _log_points(self.logged, points, means, int(updates.max()))
+        top = int(np.nanargmax(np.where(diverged, np.nan, means))) if not diverged.all() else 0
+        running = int(np.sum(~(self.stopped | diverged) & (updates < budget)))
+        self.say(
+            f"[{100.0 * updates.max() / max(budget, 1):5.1f}%] update {updates.max():>5}/"
+            f"{budget}  members {self.n} ({running} training)  best eval return "
+            f"{means[top]:9.2f} (#{top})  median {np.nanmedian(means):9.2f}  "
+            f"{self.seconds():6.1f} s"
+        )
+
+    def chunk_done(
+        self, updates: np.ndarray, done: np.ndarray, losses: list[np.ndarray], grads: list
+    ) -> None:
+        if self.logged is not None:
+            _log_updates(self.logged, self.configs, updates, done, losses, grads)
+
+
 LOGGED_MEMBERS = 64
 """A sweep of more members logs one summary run instead of a run per member."""
 
@@ -545,8 +521,8 @@ def _log_updates(
     configs: Sequence[TrainConfig],
     updates: np.ndarray,
     done: np.ndarray,
-    losses: np.ndarray,
-    grads: np.ndarray,
+    losses: list[np.ndarray],
+    grads: list[np.ndarray],
 ) -> None:
     """Each member's updates of the chunk just run (or, for the summary, their median)."""
     log, names = logged
@@ -555,13 +531,13 @@ def _log_updates(
     if names[0]:
         for i in np.flatnonzero(done > 0):
             k = int(done[i])
-            log.updates(int(updates[i]), losses[i, :k], grads[i, :k], rates[i], run=names[i])
+            log.updates(int(updates[i]), losses[i][:k], grads[i][:k], rates[i], run=names[i])
         return
     k = int(done.max())
     members = [i for i in range(len(configs)) if done[i] == k]
     with np.errstate(all="ignore"):
         median = [
-            np.nanmedian(np.stack([x[i, :k] for i in members]), axis=0) for x in (losses, grads)
+            np.nanmedian(np.stack([x[i][:k] for i in members]), axis=0) for x in (losses, grads)
         ]
     rate = np.median(np.stack([rates[i] for i in members]), axis=0)
     log.updates(int(updates[members[0]]), median[0], median[1], rate, run="summary")
@@ -569,16 +545,16 @@ def _log_updates(
 
 def _log_points(
     logged: tuple[EventLog, list[str]],
-    curves: list[list[dict[str, Any]]],
-    active: np.ndarray,
+    points: list[dict[str, Any] | None],
     means: np.ndarray,
     step: int,
 ) -> None:
     """Each member's evaluation point (or the members' median, best and worst)."""
     log, names = logged
     if names[0]:
-        for i in np.flatnonzero(active):
-            log.point(curves[i][-1], run=names[i])
+        for i, point in enumerate(points):
+            if point is not None:
+                log.point(point, run=names[i])
         return
     stats = summary(means)
     log.scalars({f"eval/return_{k}": v for k, v in stats.items()}, step, run="summary")
