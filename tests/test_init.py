@@ -57,3 +57,22 @@ def test_init_names_a_missing_run(tmp_path, capsys):
     argv = ["train", "cartpole", "--init", str(tmp_path / "none"), "--out", str(tmp_path / "x")]
     assert main([*argv, "--quiet"]) == 2
     assert f"--init {tmp_path / 'none'}: " in capsys.readouterr().err
+
+
+def test_a_resume_before_the_first_checkpoint_starts_from_the_same_controller(
+    cartpole_run, tmp_path
+):
+    # a run killed before its first checkpoint leaves its run.json alone, which records --init:
+    # its resume starts from the controller that names, read again, not from random weights
+    out = tmp_path / "tuned"
+    argv = ["train", "cartpole", "--init", str(cartpole_run), "--out", str(out), "--quiet"]
+    assert main([*argv, "--no-animation", *TINY_CARTPOLE]) == 0
+    run = json.loads((out / "run.json").read_text())
+    for path in out.iterdir():
+        path.unlink()
+    del run["complete"]
+    (out / "run.json").write_text(json.dumps(run))
+    assert main(["train", "--resume", "--out", str(out), "--quiet"]) == 0
+    before = json.loads((cartpole_run / "metrics.json").read_text())
+    after = json.loads((out / "metrics.json").read_text())
+    assert after["curve"][0]["eval_return"] == before["final_eval_return"]

@@ -267,7 +267,6 @@ def train(
         k_eval,
         chunks,
         say,
-        config=config,
         meta=meta,
         best=best,
         t_start=t_start,
@@ -365,7 +364,6 @@ class TrainLoop(Loop):
     def __init__(
         self,
         *args: Any,
-        config: Any,
         meta: dict[str, Any],
         log: Any,
         on_point: Callable[[dict[str, Any], MLPController], None] | None,
@@ -377,7 +375,7 @@ class TrainLoop(Loop):
         super().__init__(
             *args, curves=[list(meta["curve"])], best_index=[int(meta["best_index"])], **kwargs
         )
-        self.config, self.meta, self.log, self.on_point = config, meta, log, on_point
+        self.config, self.meta, self.log, self.on_point = self.configs[0], meta, log, on_point
         self.diagnostics, self.checkpoint = diagnostics, checkpoint
         self.compiled_before, self.seconds_before = compiled_before, float(meta["seconds_before"])
         self.callback_seconds = self.callback_compile = 0.0
