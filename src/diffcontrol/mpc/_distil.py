@@ -12,9 +12,11 @@ round the MLP is fitted to all the data so far by minibatch regression.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Callable
+from types import SimpleNamespace
 from typing import Any
 
 import equinox as eqx
@@ -31,6 +33,7 @@ from ..errors import ConfigError, SolverFailed
 from ..rollout import batch_returns
 from ..tasks import controller_kwargs
 from ..training import TrainResult
+from ..training._loop import Loop
 from ._planner import Planner
 
 _CONTINUOUS_HEADS = ("linear", "tanh", "sigmoid")
@@ -250,91 +253,33 @@ def distil(
     schedule = optax.cosine_decay_schedule(lr, rounds * fit_steps, alpha=0.05)
     optimizer = optax.chain(optax.clip_by_global_norm(1.0), optax.adam(schedule))
     opt_state = optimizer.init(eqx.filter(controller, eqx.is_inexact_array))
-    rollout = jax.jit(labelled_episodes, static_argnums=5)
     evaluate = jax.jit(batch_returns, static_argnums=(0, 4))
     eval_keys = jax.random.split(k_eval, eval_episodes)
 
-    capacity = rounds * episodes * steps
-    obs_buf = np.zeros((capacity, task.observation_size), np.float32)
-    label_buf = np.zeros((capacity, planner.action_size), np.float32)
-    target_buf = np.zeros_like(label_buf)  # the labels as the network's raw outputs
-    n = 0
-    curve: list[dict[str, Any]] = []
     say(
         f"distilling the planner into the MLP: {rounds} rounds of {episodes} episodes "
         f"({episodes * steps} planner calls each), {fit_steps} fit steps per round; "
         "compiling first"
     )
-    best, best_index, planner_return, non_finite = controller, 0, math.nan, 0
-    for r in range(rounds):
-        k_run, k_starts, k_mix, k_fit = jax.random.split(k_run, 4)
-        starts = jax.vmap(task.reset, in_axes=(0, None))(
-            jax.random.split(k_starts, episodes), params
-        )
-        mix = jnp.asarray(1.0 if r == 0 else beta**r, jnp.float32)
-        obs, labels, valid, returns, finite = rollout(
-            planner, controller, starts, jax.random.split(k_mix, episodes), mix, steps
-        )
-        # Kept: the states before any termination whose solve was finite (where it was not,
-        # the label would be the planner's fallback, not its plan).
-        valid, finite = np.asarray(valid).reshape(-1), np.asarray(finite).reshape(-1)
-        non_finite += int(np.sum(valid & ~finite))
-        keep = valid & finite
-        new_obs = np.asarray(obs).reshape(-1, task.observation_size)[keep]
-        new_labels = np.asarray(labels).reshape(-1, planner.action_size)[keep]
-        if r == 0:
-            planner_return = float(np.mean(returns))
-        rows = slice(n, n + len(new_obs))
-        obs_buf[rows], label_buf[rows] = new_obs, new_labels
-        low, high = controller.action_low, controller.action_high
-        target_buf[rows] = np.asarray(head_inverse(controller.head, new_labels, low, high))
-        obs_all, label_all = jnp.asarray(obs_buf), jnp.asarray(label_buf)
-        # The MLP's error on the states it (or the planner, in round 0) just visited, before
-        # it is fitted to them: DAgger's measure of how far its own distribution is from the
-        # data's.
-        on_policy = float(
-            _rms_error(controller, obs_all, label_all, span, jnp.int32(n), jnp.int32(rows.stop))
-        )
-        n = rows.stop
-        if n == 0:
-            raise SolverFailed(
-                "every planner solve of round 0 was non-finite, so there is nothing to fit; "
-                "check the planner on one state (planner.plan) and its cost for NaN"
-            )
-        controller, opt_state, losses = _fit(
-            controller, opt_state, optimizer, obs_all, jnp.asarray(target_buf),
-            jnp.int32(n), k_fit, fit_steps, batch_size,
-        )  # fmt: skip
-        fitted = float(_rms_error(controller, obs_all, label_all, span, jnp.int32(0), jnp.int32(n)))
-        eval_returns = np.asarray(evaluate(task, params, controller, eval_keys, steps))
-        point = {
-            "update": (r + 1) * fit_steps,
-            "round": r,
-            "simulated_steps": (r + 1) * episodes * steps,
-            "simulated_episodes": float((r + 1) * episodes),
-            "planner_calls": (r + 1) * episodes * steps,
-            "labelled_states": n,
-            "planner_share": float(mix),
-            "rollout_return": float(np.mean(returns)),
-            "on_policy_error": on_policy,
-            "fitted_error": fitted,
-            "loss": float(np.mean(np.asarray(losses)[-max(1, fit_steps // 10) :])),
-            "eval_return": float(np.mean(eval_returns)),
-            "eval_return_std": float(np.std(eval_returns)),
-            "seconds": time.perf_counter() - t_start,
-        }
-        curve.append(point)
-        if r == 0 or point["eval_return"] >= curve[best_index]["eval_return"]:
-            best, best_index = controller, r
-        who = "planner" if r == 0 else f"MLP (planner share {float(mix):.2f})"
-        say(
-            f"round {r + 1}/{rounds}  rollouts by {who}: return {point['rollout_return']:8.2f}  "
-            f"labelled {n:7d}  error before fit {on_policy:.4f}  after {fitted:.4f}"
-            f"  MLP eval return {point['eval_return']:8.2f}  {point['seconds']:6.1f} s"
-        )
-
-    chosen = curve[best_index] if keep_best else curve[-1]
-    controller = best if keep_best else controller
+    distiller = _Distiller(
+        task, planner, optimizer, rounds, episodes, beta, fit_steps, batch_size, span
+    )
+    budget = SimpleNamespace(updates=rounds * fit_steps, target_return=math.nan)
+    loop = _DistilLoop(
+        distiller,
+        [budget],
+        params,
+        lambda ctrl, params, keys: evaluate(task, params, ctrl, keys, steps),
+        eval_keys,
+        [(budget.updates, distiller.chunk)],
+        say,
+        best=controller,
+        t_start=t_start,
+    )
+    ts = loop.run(_Round(update=0, controller=controller, opt_state=opt_state, key=k_run))
+    curve, n = loop.curves[0], distiller.n
+    chosen = curve[loop.best_index[0]] if keep_best else curve[-1]
+    controller = loop.best if keep_best else ts.controller
     wall = time.perf_counter() - t_start
     compile_s = _timing.compile_seconds() - compiled_before
     metrics = {
@@ -372,10 +317,10 @@ def distil(
             "keep_best": keep_best,
             "returned_round": chosen["round"],
             "planner": _describe(planner),
-            "planner_return": planner_return,
+            "planner_return": distiller.planner_return,
             "planner_calls": rounds * episodes * steps,
             "labelled_states": n,
-            "non_finite_solves": non_finite,
+            "non_finite_solves": distiller.non_finite,
         },
         "jax_version": jax.__version__,
         "device": str(jax.devices()[0].platform),
@@ -385,6 +330,134 @@ def distil(
     return TrainResult(
         task=task, config=config, params=params, controller=controller, metrics=metrics
     )
+
+
+@dataclasses.dataclass
+class _Round:
+    """A distillation's state between rounds (the loop's training state)."""
+
+    update: int  # fit steps so far
+    controller: MLPController
+    opt_state: Any
+    key: PRNGKeyArray
+    point: dict[str, Any] = dataclasses.field(default_factory=dict)  # the last round's figures
+
+
+class _Distiller:
+    """DAgger as a trainer on the training loop (``training._loop``): one chunk is one round
+    (roll out, label every visited state with the planner's action, fit the MLP to all the
+    data so far), its evaluation point the MLP's return; the data set is kept here, in
+    fixed-size buffers (one compiled fit whatever its size)."""
+
+    def __init__(
+        self, task, planner, optimizer, rounds, episodes, beta, fit_steps, batch_size, span
+    ) -> None:
+        self.task, self.planner, self.optimizer, self.span = task, planner, optimizer, span
+        self.episodes, self.beta = episodes, beta
+        self.fit_steps, self.batch_size = fit_steps, batch_size
+        self.steps = task.episode_length
+        capacity = rounds * episodes * self.steps
+        self.obs = np.zeros((capacity, task.observation_size), np.float32)
+        self.labels = np.zeros((capacity, planner.action_size), np.float32)
+        self.targets = np.zeros_like(self.labels)  # the labels as the network's raw outputs
+        self.n, self.non_finite, self.planner_return = 0, 0, math.nan
+        self.rollout = jax.jit(labelled_episodes, static_argnums=5)
+
+    def chunk(self, ts: _Round, params: Any, total: Any) -> tuple[_Round, SimpleNamespace]:
+        """One round of DAgger."""
+        task, planner, episodes, steps = self.task, self.planner, self.episodes, self.steps
+        r = ts.update // self.fit_steps
+        k_run, k_starts, k_mix, k_fit = jax.random.split(ts.key, 4)
+        starts = jax.vmap(task.reset, in_axes=(0, None))(
+            jax.random.split(k_starts, episodes), params
+        )
+        mix = jnp.asarray(1.0 if r == 0 else self.beta**r, jnp.float32)
+        controller = ts.controller
+        obs, labels, valid, returns, finite = self.rollout(
+            planner, controller, starts, jax.random.split(k_mix, episodes), mix, steps
+        )
+        # Kept: the states before any termination whose solve was finite (where it was not,
+        # the label would be the planner's fallback, not its plan).
+        valid, finite = np.asarray(valid).reshape(-1), np.asarray(finite).reshape(-1)
+        self.non_finite += int(np.sum(valid & ~finite))
+        keep = valid & finite
+        new_obs = np.asarray(obs).reshape(-1, task.observation_size)[keep]
+        new_labels = np.asarray(labels).reshape(-1, planner.action_size)[keep]
+        if r == 0:
+            self.planner_return = float(np.mean(returns))
+        n, rows = self.n, slice(self.n, self.n + len(new_obs))
+        self.obs[rows], self.labels[rows] = new_obs, new_labels
+        low, high = controller.action_low, controller.action_high
+        self.targets[rows] = np.asarray(head_inverse(controller.head, new_labels, low, high))
+        obs_all, label_all = jnp.asarray(self.obs), jnp.asarray(self.labels)
+        # The MLP's error on the states it (or the planner, in round 0) just visited, before
+        # it is fitted to them: DAgger's measure of how far its own distribution is from the
+        # data's.
+        on_policy = float(
+            _rms_error(
+                controller, obs_all, label_all, self.span, jnp.int32(n), jnp.int32(rows.stop)
+            )
+        )
+        self.n = n = rows.stop
+        if n == 0:
+            raise SolverFailed(
+                "every planner solve of round 0 was non-finite, so there is nothing to fit; "
+                "check the planner on one state (planner.plan) and its cost for NaN"
+            )
+        controller, opt_state, losses = _fit(
+            controller, ts.opt_state, self.optimizer, obs_all, jnp.asarray(self.targets),
+            jnp.int32(n), k_fit, self.fit_steps, self.batch_size,
+        )  # fmt: skip
+        fitted = float(
+            _rms_error(controller, obs_all, label_all, self.span, jnp.int32(0), jnp.int32(n))
+        )
+        losses = np.asarray(losses)
+        point = {
+            "round": r,
+            "simulated_steps": (r + 1) * episodes * steps,
+            "simulated_episodes": float((r + 1) * episodes),
+            "planner_calls": (r + 1) * episodes * steps,
+            "labelled_states": n,
+            "planner_share": float(mix),
+            "rollout_return": float(np.mean(returns)),
+            "on_policy_error": on_policy,
+            "fitted_error": fitted,
+            "loss": float(np.mean(losses[-max(1, self.fit_steps // 10) :])),
+        }
+        new = _Round(ts.update + self.fit_steps, controller, opt_state, k_run, point)
+        return new, SimpleNamespace(loss=losses, grad_norm=np.full_like(losses, np.nan))
+
+    # --- the loop's hooks ----------------------------------------------------------------
+
+    def summarize(self, returns: np.ndarray) -> tuple[float, float]:
+        return float(np.mean(returns)), float(np.std(returns))
+
+    def pick(self, controller: MLPController, returns: np.ndarray) -> MLPController:
+        return controller
+
+    def check(self, old: _Round, new: _Round, losses: np.ndarray) -> list[str]:
+        return []
+
+
+class _DistilLoop(Loop):
+    """The training loop over DAgger's rounds: no point before the first round (the untrained
+    MLP is not a candidate), each round's point and progress line its own."""
+
+    def point(self, ts, i, update, returns, loss, grad_norm, seconds) -> dict[str, Any]:
+        mean, std = self.trainer.summarize(returns)
+        point = {"update": update, **ts.point, "eval_return": mean, "eval_return_std": std}
+        return {**point, "seconds": seconds}
+
+    def points_made(self, ts: _Round, returns: np.ndarray, points: list[dict | None]) -> None:
+        p = points[0]
+        r = p["round"]
+        who = "planner" if r == 0 else f"MLP (planner share {p['planner_share']:.2f})"
+        self.say(
+            f"round {r + 1}/{self.budgets[0] // self.trainer.fit_steps}  rollouts by {who}: "
+            f"return {p['rollout_return']:8.2f}  labelled {p['labelled_states']:7d}  error "
+            f"before fit {p['on_policy_error']:.4f}  after {p['fitted_error']:.4f}"
+            f"  MLP eval return {p['eval_return']:8.2f}  {p['seconds']:6.1f} s"
+        )
 
 
 def _describe(planner: Planner) -> dict[str, Any]:

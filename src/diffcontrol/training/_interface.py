@@ -1,7 +1,9 @@
 """What the driver (``train``, its ``_loop.Loop``) asks of a trainer: ``Trainer`` (BPTT, with
 ``PopulationTrainer`` for several controllers) and ``ODETrainer`` implement it, and a sweep
 runs ``Trainer`` under ``vmap`` on the same loop. ``train`` builds a run's trainer with the
-factory registered for its config's class (``register_trainer``).
+factory registered for its config's class (``register_trainer``). A planner's distillation
+(``mpc.distil``) turns the same loop with the hooks it needs (``summarize``, ``pick``,
+``check`` and its own points).
 
 The trainer is an ``equinox.Module`` of pure functions (``init``, ``chunk``, ``evaluate``:
 the driver compiles them once each) and plain-Python hooks that the loop calls between chunks.

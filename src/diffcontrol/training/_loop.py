@@ -1,11 +1,12 @@
 """The one loop every training turns: evaluate, keep each run's best point, step a chunk of
 updates, until each run has spent its updates or reached its target return.
 
-It turns for one run of a trainer (``train``: ``_driver.TrainLoop``) and for a sweep's members,
+It turns for one run of a trainer (``train``: ``_driver.TrainLoop``), for a sweep's members,
 the same trainer under ``vmap`` (``_sweep.SweepLoop``: every array of their training state
-leads with the member axis). The hooks say how the runs sit in the state (their defaults: one
-run) and what happens around each evaluation point and chunk; the loop, the keep-best rule
-and the early stop are the same for both.
+leads with the member axis), and for a planner's distillation, one DAgger round a chunk
+(``mpc._distil``). The hooks say how the runs sit in the state (their defaults: one run) and
+what happens around each evaluation point and chunk; the loop, the keep-best rule and the
+early stop are the same for all.
 """
 
 from __future__ import annotations
@@ -99,6 +100,31 @@ class Loop:
 
     # --- what happens around the points and chunks ------------------------------------------
 
+    def point(
+        self,
+        ts: Any,
+        i: int,
+        update: int,
+        returns: np.ndarray,
+        loss: float,
+        grad_norm: float,
+        seconds: float,
+    ) -> dict[str, Any]:
+        """Run ``i``'s evaluation point (its curve's entry): from its ``returns``, the mean
+        ``loss`` and ``grad_norm`` of the chunk before it and the trainer's hooks."""
+        mean, std = self.trainer.summarize(returns)
+        state = self.state_of(ts, i)
+        return {
+            "update": update,
+            **self.trainer.counts(state),
+            "seconds": seconds,
+            "loss": loss,
+            "grad_norm": grad_norm,
+            "eval_return": mean,
+            "eval_return_std": std,
+            **self.trainer.point_extras(state, returns),
+        }
+
     def seconds(self) -> float:
         """The runs' training time so far, for the points."""
         return time.perf_counter() - self.t_start
@@ -128,18 +154,10 @@ class Loop:
         improved = np.zeros(self.n, bool)
         points: list[dict | None] = [None] * self.n
         for i in np.flatnonzero(active):
-            mean, std = self.trainer.summarize(per_run[i])
-            state = self.state_of(ts, i)
-            point = points[i] = {
-                "update": int(updates[i]),
-                **self.trainer.counts(state),
-                "seconds": seconds,
-                "loss": float(losses[i]),
-                "grad_norm": float(grads[i]),
-                "eval_return": mean,
-                "eval_return_std": std,
-                **self.trainer.point_extras(state, per_run[i]),
-            }
+            point = points[i] = self.point(
+                ts, i, int(updates[i]), per_run[i], float(losses[i]), float(grads[i]), seconds
+            )
+            mean = point["eval_return"]
             curve = self.curves[i]
             curve.append(point)
             so_far = curve[self.best_index[i]]["eval_return"]
@@ -153,7 +171,7 @@ class Loop:
         diverged; returns the last training state."""
         while True:
             updates = self.updates(ts)
-            last = np.array([c[-1]["eval_return"] for c in self.curves])
+            last = np.array([c[-1]["eval_return"] if c else math.nan for c in self.curves])
             going = ~(self.stopped | self.diverged) & (updates < self.budgets)
             with np.errstate(invalid="ignore"):  # no target (NaN), or a NaN return
                 self.stopped |= going & (last >= self.targets)
