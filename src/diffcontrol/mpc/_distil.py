@@ -445,8 +445,13 @@ class _DistilLoop(Loop):
 
     def point(self, ts, i, update, returns, loss, grad_norm, seconds) -> dict[str, Any]:
         mean, std = self.trainer.summarize(returns)
-        point = {"update": update, **ts.point, "eval_return": mean, "eval_return_std": std}
-        return {**point, "seconds": seconds}
+        return {
+            "update": update,
+            **ts.point,
+            "eval_return": mean,
+            "eval_return_std": std,
+            "seconds": seconds,
+        }
 
     def points_made(self, ts: _Round, returns: np.ndarray, points: list[dict | None]) -> None:
         p = points[0]
