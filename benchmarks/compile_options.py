@@ -105,7 +105,7 @@ def programs(spec: str, updates: int):
     task = make(name)
     config = _driver.resolve_config(task, recipe or None)
     params = _driver.task_params(task, config.params)
-    kept = _driver._kept_trainer(task, config, None, None, params, lambda line: None)
+    kept = _driver._kept_trainer(task, config, None, params, lambda line: None)
     ts, k_eval = _driver._first_state(kept, config.seed, params)
     args = (ts.controller, params, k_eval)
     yield task, "evaluate", jax.jit(kept.trainer.evaluate).lower(*args), args

@@ -56,7 +56,7 @@ gc.callbacks.append(lambda phase, info: events.append((phase, info["generation"]
 task = diffcontrol.make(name)
 config = task.default_config()
 params = _driver.task_params(task, config.params)
-kept = _driver._kept_trainer(task, config, None, None, params, lambda line: None)
+kept = _driver._kept_trainer(task, config, None, params, lambda line: None)
 t0 = time.perf_counter()
 _driver._START.lower(kept.trainer, np.int32(config.seed), params)
 t1 = time.perf_counter()

@@ -142,3 +142,20 @@ def test_each_trainer_implements_the_interface(trainer):
     fields = getattr(trainer, "__dataclass_fields__", {})
     for name in ("episode_length", "config"):
         assert name in fields or hasattr(trainer, name), (trainer.__name__, name)
+
+
+@pytest.mark.parametrize(
+    "task, given, message",
+    [
+        ("cartpole", "trajectory_loss", "is discrete-time: pass step_loss"),
+        ("cartpole-swingup", "step_loss", "is continuous-time: pass trajectory_loss"),
+    ],
+)
+def test_train_takes_the_loss_its_registered_trainer_takes(task, given, message):
+    """``train`` asks the trainer registered for the config's class which loss it takes, and
+    refuses the other by name before anything compiles."""
+    import diffcontrol
+    from diffcontrol.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=message):
+        diffcontrol.train(diffcontrol.make(task), **{given: lambda *args: 0.0})

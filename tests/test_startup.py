@@ -229,7 +229,7 @@ def test_a_tasks_fast_compile_options_give_the_defaults_bits():
     task = diffcontrol.make("cartpole-swingup-limited")
     config = task.default_config()
     params = _driver.task_params(task, config.params)
-    kept = _driver._kept_trainer(task, config, None, None, params, lambda line: None)
+    kept = _driver._kept_trainer(task, config, None, params, lambda line: None)
     ts, k_eval = _driver._first_state(kept, config.seed, params)
     args = (ts.controller, params, k_eval)
     lowered = jax.jit(kept.trainer.evaluate).lower(*args)

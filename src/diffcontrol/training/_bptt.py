@@ -27,7 +27,7 @@ from ..controllers import MLPController
 from ..errors import ConfigError, TrainingDiverged
 from ..rollout import batch_returns
 from ..tasks import StepLoss, Task, controller_kwargs, task_params
-from ._interface import register_trainer
+from ._interface import TrainerKind, register_trainer
 
 
 class TrainState(eqx.Module):
@@ -295,6 +295,9 @@ class Trainer(eqx.Module):
     def num_parameters(self, controller: MLPController) -> int:
         return controller.num_parameters
 
+    def check_start(self, ts: Any, params: PyTree) -> None:
+        """Nothing to add: a non-finite first evaluation shows on the curve and in ``check``."""
+
 
 class PopulationState(eqx.Module):
     """The training states of ``population`` controllers (a leading axis on every array of
@@ -400,6 +403,9 @@ class PopulationTrainer(eqx.Module):
 
     def num_parameters(self, controller: MLPController) -> int:
         return controller.num_parameters
+
+    def check_start(self, ts: Any, params: PyTree) -> None:
+        """Nothing to add: a non-finite first evaluation shows on the curve and in ``check``."""
 
 
 def builtin_loss_name(task: Any, requested: str, argument: str) -> str:
@@ -572,4 +578,4 @@ def make_trainer(
     return trainer
 
 
-register_trainer(TrainConfig, make_trainer)
+register_trainer(TrainConfig, TrainerKind(make_trainer, "discrete-time", "step_loss"))

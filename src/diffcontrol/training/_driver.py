@@ -27,14 +27,13 @@ from .._run_files import save_run
 from ..checks import validate_task
 from ..controllers import MLPController
 from ..errors import ConfigError, ModelFileError, TrainingDiverged
-from ..tasks import AnyTask, ContinuousTask, StepLoss, TrajectoryLoss, as_task, task_params
+from ..tasks import AnyTask, StepLoss, TrajectoryLoss, as_task, task_params
 from ._checkpoint import load_checkpoint, save_checkpoint
 from ._devices import batch_placement, check_devices, divisible, gathered, is_writer, placer
 from ._diagnostics import Diagnostics
 from ._events import learning_rates, open_log
-from ._interface import trainer_factory
+from ._interface import trainer_kind
 from ._loop import Loop
-from ._ode import FAIL_MAX_STEPS, FAIL_NAN, FAIL_SOLVER, failure_message
 
 CHECKPOINT_FILE = "checkpoint.npz"
 
@@ -191,29 +190,24 @@ def train(
     log = open_log(log_dir) if is_writer() else None  # a missing tensorboardX: said at once
     params = task_params(task, config.params)
     validate_task(task, params)  # a wrong shape named here, not as a lax.scan type error
-    if isinstance(task, ContinuousTask):
-        if step_loss is not None:
-            raise ConfigError(f"task {task.name!r} is continuous-time: pass trajectory_loss")
-    elif trajectory_loss is not None:
-        raise ConfigError(f"task {task.name!r} is discrete-time: pass step_loss")
+    kind = trainer_kind(config)
+    losses = {"step_loss": step_loss, "trajectory_loss": trajectory_loss}
+    if any(f is not None for name, f in losses.items() if name != kind.loss):
+        raise ConfigError(f"task {task.name!r} is {kind.time}: pass {kind.loss}")
     run = {"format": "diffcontrol-run", "task": task.name, "config": config.to_json()}
     if invocation:
         run["invocation"] = invocation
     if out_dir is not None and is_writer():  # before a terminal value's grid is solved
         _run_dir.check_run_dir(out_dir, run, resume)
-    kept = _kept_trainer(task, config, step_loss, trajectory_loss, params, say)
+    kept = _kept_trainer(task, config, losses[kind.loss], params, say)
     trainer = kept.trainer
-    custom = step_loss is not None or trajectory_loss is not None
-    if custom and out_dir is not None and resume:
+    if losses[kind.loss] is not None and out_dir is not None and resume:
         say("note: resuming with a custom loss; it must be the same function as before")
 
     devices = check_devices(devices)
     if devices > 1:
-        if isinstance(task, ContinuousTask):
-            raise ConfigError(
-                f"task {task.name!r} is continuous-time: its solves run on one device "
-                "(devices > 1 splits the batch of discrete-time tasks)"
-            )
+        if kind.one_device:
+            raise ConfigError(f"task {task.name!r} is {kind.time}: {kind.one_device}")
         divisible(config.batch, devices, "batch", "--batch")
     if init is not None and _population(config) > 1:  # refused before anything compiles
         raise ConfigError(
@@ -280,8 +274,8 @@ def train(
     if not curve:
         nan = np.full(1, math.nan)
         loop.record(ts, nan, nan, np.ones(1, bool))
-        if isinstance(task, ContinuousTask) and not math.isfinite(curve[0]["eval_return"]):
-            _check_first_solve(trainer, ts, params)
+        if not math.isfinite(curve[0]["eval_return"]):
+            trainer.check_start(ts, params)
     elif loop.best is None:
         loop.best = trainer.pick(ts.controller, np.zeros(_population(config)))
 
@@ -541,8 +535,7 @@ TRAINERS_KEPT = 8
 def _kept_trainer(
     task: Any,
     config: Any,
-    step_loss: Any,
-    trajectory_loss: Any,
+    loss: Any,
     params: PyTree = None,
     progress: Any = None,
 ) -> _KeptTrainer:
@@ -557,7 +550,7 @@ def _kept_trainer(
     """
     general = dataclasses.replace(config, seed=0)
     ours = type(task).__module__.startswith("diffcontrol.")
-    builtin = ours and step_loss is None and trajectory_loss is None
+    builtin = ours and loss is None
     fingerprint = _fingerprint.fingerprint(task) if builtin else None
     # A built-in wrapper whose programs read of it only its plain attributes, its classes,
     # the task it wraps and what ``_programs_key`` names (``FittedSwingUp``: its network is a
@@ -578,8 +571,7 @@ def _kept_trainer(
     key = (None if shared else id(task), type(task), fingerprint, type(general), fields)
     kept = _TRAINERS.pop(key, None) if fingerprint is not None else None
     if kept is None or (kept.task is not task and not shared):
-        loss = trajectory_loss if isinstance(task, ContinuousTask) else step_loss
-        trainer = trainer_factory(general)(task, general, loss, params, progress)
+        trainer = trainer_kind(general).factory(task, general, loss, params, progress)
         kept = _KeptTrainer(task=task, trainer=trainer, stages=trainer.stages())
     if fingerprint is not None:
         _TRAINERS[key] = kept
@@ -730,19 +722,3 @@ def _outputs(shardings: Any) -> dict[str, Any]:
 def _population(config: Any) -> int:
     """How many controllers a run trains side by side (1 for discrete-time runs)."""
     return getattr(config, "population", 1)
-
-
-def _check_first_solve(trainer: Any, ts: Any, params: PyTree) -> None:
-    """Before any update, no member's loss is finite: the loss or the solve is at fault."""
-    ctrl = trainer.pick(ts.controller, np.zeros(_population(trainer.config)))
-    loss, (ok, hit_max, _) = jax.jit(trainer.member_loss)(
-        ctrl, params, jnp.asarray(trainer.config.horizon_s)
-    )
-    code = FAIL_MAX_STEPS if bool(hit_max) else FAIL_SOLVER if not bool(ok) else FAIL_NAN
-    what = failure_message(code, trainer.config)
-    if code == FAIL_NAN:
-        raise ConfigError(
-            f"the loss is {float(loss)} for the untrained controller although the ODE solve "
-            "succeeded; the loss function must return a finite number"
-        )
-    raise ConfigError(f"the untrained controller's closed loop cannot be solved: {what}")

@@ -12,6 +12,7 @@ Its state is a module too, with at least ``update`` (the updates done) and ``con
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from typing import Any, Protocol, runtime_checkable
 
@@ -62,28 +63,46 @@ class TrainerInterface(Protocol):
     def num_parameters(self, controller: Any) -> int:
         """The returned controller's number of weights."""
 
+    def check_start(self, ts: Any, params: PyTree) -> None:
+        """Called when the untrained controller's evaluation is not finite, before any update:
+        raise ``ConfigError`` where the trainer can say why (an ODE solve that fails)."""
+
 
 TrainerFactory = Callable[..., TrainerInterface]
 """``factory(task, config, loss, params, progress)``: the trainer of a run (``loss``: the
 user's step or trajectory loss, or ``None`` for the task's own; ``params``: the task's
 parameters; ``progress``: where to say what takes long)."""
 
-_FACTORIES: dict[type, TrainerFactory] = {}
+
+@dataclasses.dataclass(frozen=True)
+class TrainerKind:
+    """A registered trainer: its factory and what ``train`` checks before building it."""
+
+    factory: TrainerFactory
+    time: str
+    """The kind of task it trains, in words (``"discrete-time"``, ``"continuous-time"``)."""
+    loss: str
+    """``train``'s keyword for a user's loss of this trainer (``"step_loss"``, ...)."""
+    one_device: str | None = None
+    """Why its runs do not split over devices (``train``'s ``devices``); ``None``: they may."""
 
 
-def register_trainer(config_class: type, factory: TrainerFactory) -> None:
-    """Train the runs whose config is a ``config_class`` (or a subclass) with ``factory``'s
+_KINDS: dict[type, TrainerKind] = {}
+
+
+def register_trainer(config_class: type, kind: TrainerKind) -> None:
+    """Train the runs whose config is a ``config_class`` (or a subclass) with ``kind``'s
     trainers."""
-    _FACTORIES[config_class] = factory
+    _KINDS[config_class] = kind
 
 
-def trainer_factory(config: Any) -> TrainerFactory:
-    """The factory registered for ``config``'s class or its nearest base.
+def trainer_kind(config: Any) -> TrainerKind:
+    """The trainer registered for ``config``'s class or its nearest base.
 
     Raises:
         TypeError: no trainer is registered for it.
     """
     for cls in type(config).__mro__:
-        if cls in _FACTORIES:
-            return _FACTORIES[cls]
+        if cls in _KINDS:
+            return _KINDS[cls]
     raise TypeError(f"no trainer is registered for {type(config).__name__}")

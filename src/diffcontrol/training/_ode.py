@@ -31,7 +31,7 @@ from ..errors import ConfigError, SolverFailed
 from ..rollout import force_fn, solve_closed_loop, value_and_grad
 from ..tasks import ContinuousTask, TrajectoryLoss, controller_kwargs
 from ._bptt import builtin_loss_name, make_optimizer
-from ._interface import register_trainer
+from ._interface import TrainerKind, register_trainer
 
 FAIL_NONE, FAIL_MAX_STEPS, FAIL_SOLVER, FAIL_NAN = 0, 1, 2, 3
 
@@ -390,6 +390,21 @@ class ODETrainer(eqx.Module):
     def num_parameters(self, controller: MLPController) -> int:
         return sum(int(np.prod(l.weight.shape[-2:])) + l.bias.shape[-1] for l in controller.layers)
 
+    def check_start(self, ts: ODETrainState, params: PyTree) -> None:
+        """No member's loss is finite before any update: the loss or the solve is at fault."""
+        ctrl = self.pick(ts.controller, np.zeros(self.config.population))
+        loss, (ok, hit_max, _) = jax.jit(self.member_loss)(
+            ctrl, params, jnp.asarray(self.config.horizon_s)
+        )
+        code = FAIL_MAX_STEPS if bool(hit_max) else FAIL_SOLVER if not bool(ok) else FAIL_NAN
+        what = failure_message(code, self.config)
+        if code == FAIL_NAN:
+            raise ConfigError(
+                f"the loss is {float(loss)} for the untrained controller although the ODE solve "
+                "succeeded; the loss function must return a finite number"
+            )
+        raise ConfigError(f"the untrained controller's closed loop cannot be solved: {what}")
+
 
 def _only(members: PyTree) -> PyTree:
     """The one member of a population of 1 (its arrays without the members' axis)."""
@@ -484,4 +499,13 @@ def _ode_factory(task, config, trajectory_loss, params=None, progress=None) -> O
     return make_ode_trainer(task, config, trajectory_loss)
 
 
-register_trainer(ODETrainConfig, _ode_factory)
+register_trainer(
+    ODETrainConfig,
+    TrainerKind(
+        _ode_factory,
+        "continuous-time",
+        "trajectory_loss",
+        one_device="its solves run on one device (devices > 1 splits the batch of "
+        "discrete-time tasks)",
+    ),
+)

@@ -35,11 +35,12 @@ from jaxtyping import PyTree
 from ..checks import validate_task
 from ..config import TrainConfig
 from ..errors import ConfigError
-from ..tasks import ContinuousTask, StepLoss, Task
+from ..tasks import StepLoss, Task
 from ._bptt import check_value_grid, make_optimizer, make_trainer
 from ._devices import check_devices, mesh_placements, placer
 from ._driver import TrainResult, _check_head, compiled_once, interrupts_deferred, task_params
 from ._events import EventLog, learning_rates, open_log, summary
+from ._interface import trainer_kind
 from ._loop import Loop
 
 MAX_MEMBERS = 2**16
@@ -207,14 +208,16 @@ def sweep(
 
 
 def check_discrete(task: Any) -> None:
-    """Refuse a continuous-time task: a sweep trains discrete-time tasks by BPTT.
+    """Refuse a task that is not trained with a ``TrainConfig``: a sweep's members are BPTT
+    runs (a continuous-time task's are not).
 
     Raises:
         ConfigError: naming what to use instead.
     """
-    if isinstance(task, ContinuousTask):
+    config = task.default_config()
+    if not isinstance(config, TrainConfig):
         raise ConfigError(
-            f"task {task.name!r} is continuous-time; sweep its seeds with "
+            f"task {task.name!r} is {trainer_kind(config).time}; sweep its seeds with "
             "ODETrainConfig.population (--population) or run `diffcontrol train` per setting"
         )
 
