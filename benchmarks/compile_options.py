@@ -99,14 +99,14 @@ def programs(spec: str, updates: int):
     import numpy as np
 
     from diffcontrol.tasks import make
-    from diffcontrol.training import _driver
+    from diffcontrol.training import _driver, _programs
 
     name, _, recipe = spec.partition(":")
     task = make(name)
     config = _driver.resolve_config(task, recipe or None)
     params = _driver.task_params(task, config.params)
-    kept = _driver._kept_trainer(task, config, None, params, lambda line: None)
-    ts, k_eval = _driver._first_state(kept, config.seed, params)
+    kept = _programs._kept_trainer(task, config, None, params, lambda line: None)
+    ts, k_eval = _programs._first_state(kept, config.seed, params)
     args = (ts.controller, params, k_eval)
     yield task, "evaluate", jax.jit(kept.trainer.evaluate).lower(*args), args
     for i, (end, stage) in enumerate(kept.stages):
@@ -119,7 +119,7 @@ def measure(spec: str, updates: int) -> list[dict]:
     import jax
 
     from diffcontrol._jax_setup import FAST_COMPILE, ONE_CORE
-    from diffcontrol.training._driver import compile_options
+    from diffcontrol.training._programs import compile_options
 
     rows = []
     for task, program, lowered, args in programs(spec, updates):

@@ -44,7 +44,7 @@ os.environ["DIFFCONTROL_NO_COMPILE_CACHE"] = "1"
 import jax, numpy as np
 import diffcontrol
 from diffcontrol._jax_setup import GC_THRESHOLDS
-from diffcontrol.training import _driver
+from diffcontrol.training import _driver, _programs
 
 setting, name = sys.argv[1], sys.argv[2]
 if setting == "console script":
@@ -56,11 +56,11 @@ gc.callbacks.append(lambda phase, info: events.append((phase, info["generation"]
 task = diffcontrol.make(name)
 config = task.default_config()
 params = _driver.task_params(task, config.params)
-kept = _driver._kept_trainer(task, config, None, params, lambda line: None)
+kept = _programs._kept_trainer(task, config, None, params, lambda line: None)
 t0 = time.perf_counter()
-_driver._START.lower(kept.trainer, np.int32(config.seed), params)
+_programs._START.lower(kept.trainer, np.int32(config.seed), params)
 t1 = time.perf_counter()
-ts, k_eval = _driver._first_state(kept, config.seed, params)
+ts, k_eval = _programs._first_state(kept, config.seed, params)
 t2 = time.perf_counter()
 jax.jit(kept.trainer.evaluate).lower(ts.controller, params, k_eval)
 t3 = time.perf_counter()

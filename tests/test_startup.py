@@ -184,7 +184,7 @@ def test_the_start_program_at_its_level_gives_the_default_levels_bits(name):
 
     import diffcontrol
     from diffcontrol import _jax_setup
-    from diffcontrol.training import _driver
+    from diffcontrol.training import _driver, _programs
     from diffcontrol.training._bptt import make_trainer
     from diffcontrol.training._ode import make_ode_trainer
 
@@ -192,7 +192,7 @@ def test_the_start_program_at_its_level_gives_the_default_levels_bits(name):
     config = task.default_config()
     maker = make_ode_trainer if isinstance(task, diffcontrol.ContinuousTask) else make_trainer
     args = (maker(task, config, None), np.int32(3), _driver.task_params(task, config.params))
-    lowered = _driver._START.lower(*args)
+    lowered = _programs._START.lower(*args)
 
     def leaves(options):
         out = lowered.compile(options)(*args)
@@ -205,7 +205,7 @@ def test_the_start_program_at_its_level_gives_the_default_levels_bits(name):
 
     # The users' compiler: XLA's defaults (level 3, the fusion emitters), named, since the
     # session's XLA_FLAGS (conftest.py) choose others
-    fast = {n: _jax_setup.FAST_COMPILE[n] for n in _driver.START_COMPILER_OPTIONS}
+    fast = {n: _jax_setup.FAST_COMPILE[n] for n in _programs.START_COMPILER_OPTIONS}
     ours = leaves(fast)
     default = leaves(_DEFAULTS)
     assert len(ours) == len(default) > 5
@@ -224,16 +224,16 @@ def test_a_tasks_fast_compile_options_give_the_defaults_bits():
 
     import diffcontrol
     from diffcontrol import _jax_setup
-    from diffcontrol.training import _driver
+    from diffcontrol.training import _driver, _programs
 
     task = diffcontrol.make("cartpole-swingup-limited")
     config = task.default_config()
     params = _driver.task_params(task, config.params)
-    kept = _driver._kept_trainer(task, config, None, params, lambda line: None)
-    ts, k_eval = _driver._first_state(kept, config.seed, params)
+    kept = _programs._kept_trainer(task, config, None, params, lambda line: None)
+    ts, k_eval = _programs._first_state(kept, config.seed, params)
     args = (ts.controller, params, k_eval)
     lowered = jax.jit(kept.trainer.evaluate).lower(*args)
-    declared = _driver.compile_options(task, "evaluate")
+    declared = _programs.compile_options(task, "evaluate")
     fast = {**_DEFAULTS, **{n: _jax_setup.FAST_COMPILE[n] for n in declared}}
     ours, default = (np.asarray(lowered.compile(o)(*args)) for o in (fast, _DEFAULTS))
     assert declared and ours.size > 0 and np.isfinite(ours).all()
@@ -247,10 +247,10 @@ def test_fast_compile_options_are_read_from_the_tasks_own_class_and_kept_apart()
     import jax.numpy as jnp
 
     import diffcontrol
-    from diffcontrol.training import _driver
+    from diffcontrol.training import _programs
 
     cartpole = diffcontrol.make("cartpole")
-    options = _driver.compile_options
+    options = _programs.compile_options
     assert options(cartpole, "chunk") and options(cartpole, "evaluate")
     assert options(type("Heavier", (type(cartpole),), {})(), "chunk") == ()
     assert options(diffcontrol.make("mountain-car-continuous"), "chunk") == ()
@@ -260,8 +260,8 @@ def test_fast_compile_options_are_read_from_the_tasks_own_class_and_kept_apart()
             options(typo, "chunk")
     lowered = jax.jit(lambda x: x * 3).lower(jnp.ones(2))
     level = ("xla_backend_optimization_level",)
-    assert _driver.compiled_once(lowered, *level) is _driver.compiled_once(lowered, *level)
-    assert _driver.compiled_once(lowered) is not _driver.compiled_once(lowered, *level)
+    assert _programs.compiled_once(lowered, *level) is _programs.compiled_once(lowered, *level)
+    assert _programs.compiled_once(lowered) is not _programs.compiled_once(lowered, *level)
 
 
 class _Lowered:

@@ -14,7 +14,7 @@ from diffcontrol.cli import main
 from diffcontrol.errors import RunDirectoryError
 from diffcontrol.mpc._config import default_plan_config, loop_planner
 from diffcontrol.training import make_trainer, train
-from diffcontrol.training._driver import _start
+from diffcontrol.training._programs import _start
 
 PENDULUM = dc.make("pendulum")
 NAN = float("nan")

@@ -9,7 +9,7 @@ import pytest
 
 import diffcontrol as dc
 from diffcontrol.training import make_trainer, resolve_config, train
-from diffcontrol.training._driver import _start
+from diffcontrol.training._programs import _start
 
 PENDULUM = dc.make("pendulum")
 WINDOWS = resolve_config(PENDULUM, "windows")  # the curriculum's base (long-windows), no value

@@ -4,8 +4,9 @@ vmapped program."""
 
 from ..errors import SolverFailed, TrainingDiverged
 from ._bptt import Trainer, TrainState, make_optimizer, make_trainer
-from ._driver import TrainResult, clear_compiled, resolve_config, task_params, train
+from ._driver import TrainResult, resolve_config, task_params, train
 from ._ode import ODETrainer, ODETrainState, make_ode_trainer
+from ._programs import clear_compiled
 from ._sweep import SweepResult, grid, sweep
 
 __all__ = [

@@ -38,10 +38,11 @@ from ..errors import ConfigError
 from ..tasks import StepLoss, Task
 from ._bptt import check_value_grid, make_optimizer, make_trainer
 from ._devices import check_devices, mesh_placements, placer
-from ._driver import TrainResult, _check_head, compiled_once, interrupts_deferred, task_params
+from ._driver import TrainResult, _check_head, interrupts_deferred, task_params
 from ._events import EventLog, learning_rates, open_log, summary
 from ._interface import trainer_kind
 from ._loop import Loop
+from ._programs import compiled_once
 
 MAX_MEMBERS = 2**16
 """The most members one sweep may have."""

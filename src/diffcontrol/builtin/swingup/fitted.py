@@ -222,7 +222,7 @@ class FittedSwingUp(CartPoleSwingUp):
 
     def _programs_key(self) -> tuple[CartPoleSwingUp, tuple, tuple[str, ...]]:
         """What this task's compiled programs depend on besides its plain attributes, for
-        ``training._driver`` to reuse the trainer of an equal key: the wrapped task, and the
+        ``training._programs`` to reuse the trainer of an equal key: the wrapped task, and the
         kind of model and the shapes of its network, not its weights or physical parameters,
         which are arguments (``default_params``); and the names of the attributes those
         stand for."""
