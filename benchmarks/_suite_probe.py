@@ -3,7 +3,7 @@
 Through JAX's public monitoring events only: tracing (``jaxpr_trace_duration``), lowering
 (``jaxpr_to_mlir_module_duration``) and the backend's compile or persistent-cache load
 (``backend_compile_duration``, with ``cache_hits`` telling a load from a compile), each with
-the program's name. Each process (an xdist worker, or pytest itself) writes its records to
+the program's name; and the setup time of each module- or session-scoped fixture. Each process (an xdist worker, or pytest itself) writes its records to
 ``$SUITE_PROBE_DIR/<worker>.json`` at the end of the session.
 """
 
@@ -55,6 +55,17 @@ def pytest_runtest_protocol(item, nextitem):
     yield
     _records.append((item.nodeid, "wall", "", time.perf_counter() - t0, False))
     _state["test"] = None
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_fixture_setup(fixturedef, request):
+    """A shared fixture's setup (module or session scope), which the first test of each
+    process that asks for it pays: recorded under the fixture's name."""
+    t0 = time.perf_counter()
+    yield
+    if fixturedef.scope in ("module", "session"):
+        name = f"{fixturedef.baseid.split('::')[0] or 'conftest'}::{fixturedef.argname}"
+        _records.append((_state["test"], "fixture", name, time.perf_counter() - t0, False))
 
 
 def pytest_sessionfinish(session):

@@ -60,9 +60,14 @@ def summarize(records: dict[str, list]) -> dict:
     """Per test, per program name and per file: the wall time and JAX's part of it."""
     tests: dict[str, collections.Counter] = collections.defaultdict(collections.Counter)
     programs: dict[str, collections.Counter] = collections.defaultdict(collections.Counter)
+    fixtures: dict[str, collections.Counter] = collections.defaultdict(collections.Counter)
     workers = {}
     for worker, rows in records.items():
         for test, kind, name, seconds, hit in rows:
+            if kind == "fixture":  # within its test's wall time, not added to it
+                fixtures[name]["seconds"] += seconds
+                fixtures[name]["setups"] += 1
+                continue
             kind = "load" if hit else kind
             if name.startswith("jit(") and name.endswith(")"):  # lowered as jit(NAME)
                 name = name[4:-1]
@@ -90,6 +95,10 @@ def summarize(records: dict[str, list]) -> dict:
         "programs": [{"name": n, **programs[n]} for n in by_cost[:40]],
         "files": [
             {"file": f, **files[f]} for f in sorted(files, key=lambda f: -files[f]["wall"])[:30]
+        ],
+        "fixtures": [
+            {"fixture": f, **fixtures[f]}
+            for f in sorted(fixtures, key=lambda f: -fixtures[f]["seconds"])[:30]
         ],
     }
 
@@ -124,6 +133,9 @@ def report(run: dict, top: int) -> None:
     print(f"\n{'wall s':>7} {'JAX s':>6}  file")
     for row in run["files"][:top]:
         print(f"{row['wall']:7.1f} {sum(row.get(k, 0.0) for k in KINDS):6.1f}  {row['file']}")
+    print(f"\n{'setup s':>7} {'setups':>6}  shared fixture (one setup per process that uses it)")
+    for row in run.get("fixtures", [])[:top]:
+        print(f"{row['seconds']:7.1f} {row['setups']:6d}  {row['fixture']}")
 
 
 def main() -> int:

@@ -80,7 +80,9 @@ def test_evaluation_throws_share_one_compiled_program(monkeypatch):
 def test_direct_aiming_hits_reachable_targets():
     target = np.array([25.0, 50.0, 80.0, 95.0])
     wind = np.array([3.0, -5.0, -2.0, 4.0])
-    angle, weight, miss = (np.asarray(x) for x in aim_directly(target, wind))
+    # one target a call, as `diffcontrol aim --direct` calls it: the same compiled program
+    aims = [aim_directly(float(t), float(w)) for t, w in zip(target, wind, strict=True)]
+    angle, weight, miss = (np.array([float(a[i]) for a in aims]) for i in range(3))
     assert np.all(np.abs(miss) < 0.01), miss
     assert np.all((angle >= 5) & (angle <= 85) & (weight >= 30) & (weight <= 450))
     np.testing.assert_allclose(np.asarray(shoot(wind, angle, weight)), target, atol=0.01)
