@@ -3,8 +3,9 @@
 Through JAX's public monitoring events only: tracing (``jaxpr_trace_duration``), lowering
 (``jaxpr_to_mlir_module_duration``) and the backend's compile or persistent-cache load
 (``backend_compile_duration``, with ``cache_hits`` telling a load from a compile), each with
-the program's name; and the setup time of each module- or session-scoped fixture. Each process (an xdist worker, or pytest itself) writes its records to
-``$SUITE_PROBE_DIR/<worker>.json`` at the end of the session.
+the program's name; and the setup time of each module- or session-scoped fixture. Each process
+(an xdist worker, or pytest itself) writes its records to ``$SUITE_PROBE_DIR/<worker>.json`` at
+the end of the session.
 """
 
 from __future__ import annotations

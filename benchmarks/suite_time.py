@@ -57,7 +57,8 @@ def run_once(extra: list[str], probe: bool) -> dict:
 
 
 def summarize(records: dict[str, list]) -> dict:
-    """Per test, per program name and per file: the wall time and JAX's part of it."""
+    """Per test, per program name and per file: the wall time and JAX's part of it; per shared
+    fixture, its setups and their time."""
     tests: dict[str, collections.Counter] = collections.defaultdict(collections.Counter)
     programs: dict[str, collections.Counter] = collections.defaultdict(collections.Counter)
     fixtures: dict[str, collections.Counter] = collections.defaultdict(collections.Counter)
