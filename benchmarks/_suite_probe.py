@@ -1,15 +1,17 @@
 """A pytest plugin for ``suite_time.py``: each test's wall time and what JAX spent on it.
 
-Through JAX's public monitoring events only: tracing (``jaxpr_trace_duration``), lowering
-(``jaxpr_to_mlir_module_duration``) and the backend's compile or persistent-cache load
+JAX's part comes from its public monitoring events only: tracing (``jaxpr_trace_duration``),
+lowering (``jaxpr_to_mlir_module_duration``) and the backend's compile or persistent-cache load
 (``backend_compile_duration``, with ``cache_hits`` telling a load from a compile), each with
-the program's name; and the setup time of each module- or session-scoped fixture. Each process
-(an xdist worker, or pytest itself) writes its records to ``$SUITE_PROBE_DIR/<worker>.json`` at
-the end of the session.
+the program's name. Also recorded: the setup time of each module- or session-scoped fixture,
+and matplotlib's rendering (``Figure.savefig`` and the Agg canvas's ``draw``). Each process (an
+xdist worker, or pytest itself) writes its records to ``$SUITE_PROBE_DIR/<worker>.json`` at the
+end of the session.
 """
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import time
@@ -24,7 +26,7 @@ EVENTS = {
 }
 _records: list[tuple[str | None, str, str, float, bool]] = []
 """(test id, kind, program, seconds, loaded from the cache) in the order they happened."""
-_state: dict = {"test": None, "hits": 0}
+_state: dict = {"test": None, "hits": 0, "drawing": False}
 
 
 def _duration(event: str, duration: float, **kwargs) -> None:
@@ -42,11 +44,36 @@ def _event(event: str, **kwargs) -> None:
         _state["hits"] += 1
 
 
+def _drawing_timed(cls: type, method: str) -> None:
+    """Record the time of ``cls.method`` as drawing, where no drawing is already timed (a
+    ``savefig`` draws its canvas)."""
+    original = getattr(cls, method)
+
+    @functools.wraps(original)
+    def timed(*args, **kwargs):
+        if _state["drawing"]:
+            return original(*args, **kwargs)
+        _state["drawing"] = True
+        t0 = time.perf_counter()
+        try:
+            return original(*args, **kwargs)
+        finally:
+            _state["drawing"] = False
+            _records.append((_state["test"], "draw", method, time.perf_counter() - t0, False))
+
+    setattr(cls, method, timed)
+
+
 def pytest_configure(config):
     import jax.monitoring
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
 
     jax.monitoring.register_event_duration_secs_listener(_duration)
     jax.monitoring.register_event_listener(_event)
+    # matplotlib's rendering: the pictures (savefig) and the animations' frames (canvas draws)
+    _drawing_timed(Figure, "savefig")
+    _drawing_timed(FigureCanvasAgg, "draw")
 
 
 @pytest.hookimpl(hookwrapper=True)

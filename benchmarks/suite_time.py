@@ -119,6 +119,7 @@ def report(run: dict, top: int) -> None:
         f"{t.get('load', 0):.0f} s ({t.get('loads', 0):,} from the cache): {jax_s:.0f} of the "
         f"tests' {t.get('wall', 0):.0f} s ({jax_s / max(t.get('wall', 1), 1e-9):.0%})"
     )
+    print(f"matplotlib's drawing: {t.get('draw', 0):.0f} s")
     head = f"{'wall s':>7} {'trace':>6} {'lower':>6} {'comp.':>6} {'load':>6} {'progs':>5}"
     print(f"\n{head}  slowest tests")
     for row in run["slowest_tests"][:top]:
