@@ -25,7 +25,8 @@ EVENTS = {
     "/jax/core/compile/backend_compile_duration": "compile",
 }
 _records: list[tuple[str | None, str, str, float, bool]] = []
-"""(test id, kind, program, seconds, loaded from the cache) in the order they happened."""
+"""(test id, kind, name, seconds, loaded from the cache) in the order they happened; the name is
+the program's, the fixture's or the drawing method's."""
 _state: dict = {"test": None, "hits": 0, "drawing": False}
 
 
