@@ -6,7 +6,8 @@ wall time and JAX's tracing, lowering, compiling and cache loads in it (``_suite
     python benchmarks/suite_time.py -- tests/test_sweep.py  # a part (pytest's own arguments)
 
 Run it on idle cores: the suite uses every core (``-n auto``). Prints the run's seconds, the
-JAX share of the tests' time, the costliest tests, programs and files; writes
+JAX share of the tests' time and matplotlib's drawing, the costliest tests, programs and files,
+and the shared fixtures' setups; writes
 benchmarks/results/suite_time.json (machine, date, every figure).
 """
 

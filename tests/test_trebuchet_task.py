@@ -82,7 +82,7 @@ def test_direct_aiming_hits_reachable_targets():
     wind = np.array([3.0, -5.0, -2.0, 4.0])
     # one target a call, as `diffcontrol aim --direct` calls it: the same compiled program
     aims = [aim_directly(float(t), float(w)) for t, w in zip(target, wind, strict=True)]
-    angle, weight, miss = (np.array([float(a[i]) for a in aims]) for i in range(3))
+    angle, weight, miss = np.asarray(aims, np.float64).T
     assert np.all(np.abs(miss) < 0.01), miss
     assert np.all((angle >= 5) & (angle <= 85) & (weight >= 30) & (weight <= 450))
     np.testing.assert_allclose(np.asarray(shoot(wind, angle, weight)), target, atol=0.01)
