@@ -6,8 +6,9 @@ and the gaits trained controllers settle in.
    the grid; one episode each (reset seed 0, 1000 steps), the best phase per period.
 2. ``--runs DIR ...``: each trained run's controller (its ``model.json``) on Gymnasium's reset
    seed 1000, described over the episode's second half: the return, each joint's mean and
-   spread, the period of its largest Fourier component, the mean |action|, the share of
-   actions within 2 % of a bound and the share of steps within 0.01 rad of a joint limit.
+   spread, the period of its largest Fourier component (none for a joint held still), the
+   mean |action|, the share of actions within 2 % of a bound and the share of steps within
+   0.01 rad of a joint limit.
 
 A controller that holds a pose shows a spread near 0 (often at a joint limit); one that
 strokes shows its period beside the open-loop optimum's.
@@ -77,7 +78,8 @@ def gait(env: gym.Env, run: Path) -> dict:
     ret, joints, actions = episode(env, lambda _t, obs: policy(obs), seed=1000)
     half = joints[len(joints) // 2 :]
     spectrum = np.abs(np.fft.rfft(half - half.mean(0), axis=0))
-    peak = np.maximum(spectrum[1:].argmax(0) + 1, 1)
+    peak = spectrum[1:].argmax(0) + 1  # the strongest nonzero frequency
+    still = half.std(0) < 1e-3  # a held joint has no period
     limit = env.unwrapped.model.jnt_range[-2:, 1]  # the two hinges' upper limits (symmetric)
     config = json.loads((run / "run.json").read_text()).get("config", {})
     return {
@@ -86,7 +88,7 @@ def gait(env: gym.Env, run: Path) -> dict:
         "return": ret,
         "joint_mean": half.mean(0).tolist(),
         "joint_std": half.std(0).tolist(),
-        "period_steps": (len(half) / peak).tolist(),
+        "period_steps": [None if s else len(half) / k for s, k in zip(still, peak)],
         "mean_abs_action": np.abs(actions[len(actions) // 2 :]).mean(0).tolist(),
         "saturated_share": float(np.mean(np.abs(actions[len(actions) // 2 :]) > 0.98)),
         "at_limit_share": float(np.mean(np.abs(half) > limit - 0.01)),
@@ -118,7 +120,7 @@ def main() -> None:
         )
     for g in gaits:
         std = "/".join(f"{s:.2f}" for s in g["joint_std"])
-        period = "/".join(f"{p:.0f}" for p in g["period_steps"])
+        period = "/".join("-" if p is None else f"{p:.0f}" for p in g["period_steps"])
         print(
             f"{Path(g['run']).name:<28} {g['return']:>7.1f} {std:>12} {period:>12} "
             f"{g['saturated_share']:>5.2f} {g['at_limit_share']:>5.2f}"
