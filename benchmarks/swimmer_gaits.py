@@ -107,8 +107,13 @@ def main() -> None:
     for run in args.runs:
         if not (run / "model.json").is_file():
             parser.error(f"{run} has no model.json: name a finished run's folder")
+    try:
+        periods = [int(p) for p in args.periods.split(",")]
+    except ValueError:
+        parser.error(f"--periods {args.periods!r}: give whole steps, for example 32,40,50")
+    if min(periods) < 2 or args.phases < 1:
+        parser.error("--periods needs periods of 2 steps or more and --phases at least 1")
     env = gym.make("Swimmer-v5")
-    periods = [int(p) for p in args.periods.split(",")]
     loops = open_loop(env, periods, args.phases)
     print(f"{'open loop':<10} {'period':>6} {'phase':>6} {'return':>8}")
     for r in loops:
