@@ -10,6 +10,10 @@ and the gaits trained controllers settle in.
    mean |action|, the share of actions within 2 % of a bound and the share of steps within
    0.01 rad of a joint limit.
 
+3. The stroke search (``--search``): the best clipped sinusoid per joint, by an evolution
+   strategy on the C engine; ``diffcontrol.builtin.mujoco.Swimmer.stroke`` is its result, the
+   open-loop stroke that Swimmer's training starts from.
+
 A controller that holds a pose shows a spread near 0 (often at a joint limit); one that
 strokes shows its period beside the open-loop optimum's.
 
@@ -70,6 +74,43 @@ def open_loop(env: gym.Env, periods: list[int], phases: int) -> list[dict]:
     return rows
 
 
+def search_stroke(env: gym.Env, generations: int) -> dict:
+    """The best clipped sinusoid per joint, ``clip(a_i sin(w t) + b_i cos(w t), -1, 1)`` with
+    the period ``20 + 80 sigmoid(p)`` steps: a (4, 16) evolution strategy (log-rank weights,
+    step size 0.5 shrunk 3 % a generation) from the bang-bang optimum's neighbourhood, each
+    candidate one 600-step episode on reset seed ``generation % 5``. Returns the stroke as
+    ``Stroke``'s period, amplitudes and phases, and its return over reset seeds 1000-1009."""
+    plain = env.unwrapped
+
+    def drive(theta: np.ndarray, t: np.ndarray) -> np.ndarray:
+        w = 2 * np.pi * t / (20 + 80 / (1 + np.exp(-theta[0])))
+        c = theta[1:].reshape(2, 2)
+        return np.clip(np.outer(c[:, 0], np.sin(w)) + np.outer(c[:, 1], np.cos(w)), -1, 1)
+
+    def ret(theta: np.ndarray, seed: int, steps: int = 1000) -> float:
+        plain.reset(seed=seed)
+        return float(sum(plain.step(u)[1] for u in drive(theta, np.arange(steps)).T))
+
+    rng = np.random.default_rng(0)
+    mean = np.array([np.log(1 / 3), 3.0, 0.0, 2.1, -2.1])  # 40 steps, phase lag pi/4
+    sigma, lam, mu = 0.5, 16, 4
+    w = np.log(mu + 0.5) - np.log(np.arange(1, mu + 1))
+    w /= w.sum()
+    for g in range(generations):
+        x = mean + sigma * rng.standard_normal((lam, mean.size))
+        f = np.array([ret(xi, seed=g % 5, steps=600) for xi in x])
+        mean = w @ x[np.argsort(-f)[:mu]]
+        sigma *= 0.97
+    c = mean[1:].reshape(2, 2)
+    return {
+        "period": float(20 + 80 / (1 + np.exp(-mean[0]))),
+        "amplitude": np.hypot(c[:, 0], c[:, 1]).tolist(),
+        "phase": np.arctan2(c[:, 1], c[:, 0]).tolist(),
+        "generations": generations,
+        "return_seeds_1000_1009": [ret(mean, seed) for seed in range(1000, 1010)],
+    }
+
+
 def gait(env: gym.Env, run: Path) -> dict:
     """The trained controller's gait over the second half of one episode (reset seed 1000)."""
     from diffcontrol.policies import NumpyPolicy, read_model
@@ -102,6 +143,13 @@ def main() -> None:
     parser.add_argument("--runs", type=Path, nargs="*", default=[], help="trained run folders")
     parser.add_argument("--periods", default="16,24,32,40,50,64,80,100,125")
     parser.add_argument("--phases", type=int, default=8, help="phases tried per period")
+    parser.add_argument(
+        "--search",
+        type=int,
+        default=60,
+        metavar="GENERATIONS",
+        help="generations of the stroke search (0: none)",
+    )
     parser.add_argument("--out", type=Path, default=HERE / "results" / "swimmer_gaits.json")
     args = parser.parse_args()
     for run in args.runs:
@@ -111,13 +159,24 @@ def main() -> None:
         periods = [int(p) for p in args.periods.split(",")]
     except ValueError:
         parser.error(f"--periods {args.periods!r}: give whole steps, for example 32,40,50")
-    if min(periods) < 2 or args.phases < 1:
-        parser.error("--periods needs periods of 2 steps or more and --phases at least 1")
+    if min(periods) < 2 or args.phases < 1 or args.search < 0:
+        parser.error(
+            "--periods needs periods of 2 steps or more, --phases at least 1 and --search 0 or more"
+        )
     env = gym.make("Swimmer-v5")
     loops = open_loop(env, periods, args.phases)
     print(f"{'open loop':<10} {'period':>6} {'phase':>6} {'return':>8}")
     for r in loops:
         print(f"{r['shape']:<10} {r['period']:>6} {r['phase']:>6.2f} {r['return']:>8.1f}")
+    stroke = search_stroke(env, args.search) if args.search > 0 else None
+    if stroke:
+        rets = stroke["return_seeds_1000_1009"]
+        print(
+            f"\nstroke: period {stroke['period']:.2f} steps, amplitude "
+            f"{np.round(stroke['amplitude'], 3).tolist()}, phase "
+            f"{np.round(stroke['phase'], 3).tolist()}: return {np.mean(rets):.1f} "
+            f"+- {np.std(rets):.1f} (reset seeds 1000-1009, open loop)"
+        )
     gaits = [gait(env, run) for run in args.runs]
     if gaits:
         print(
@@ -134,6 +193,7 @@ def main() -> None:
         machine=machine(),
         command=" ".join(["python", "benchmarks/swimmer_gaits.py", *sys.argv[1:]]),
         open_loop=loops,
+        stroke=stroke,
         gaits=gaits,
     )
     args.out.write_text(json.dumps(doc, indent=1) + "\n")

@@ -27,6 +27,7 @@ from ._base import (
     controller_kwargs,
     task_params,
 )
+from ._stroke import Stroke
 
 AnyTask = Task | ContinuousTask
 _REGISTRY: dict[str, AnyTask] = {}
@@ -277,6 +278,7 @@ __all__ = [
     "task_params",
     "check_params",
     "controller_kwargs",
+    "Stroke",
     "ENTRY_POINT_GROUP",
     "Pendulum",
     "PendulumUnclipped",

@@ -31,6 +31,7 @@ from ._events import learning_rates, open_log
 from ._interface import trainer_kind
 from ._loop import Loop
 from ._programs import _first_state, _kept_trainer, compile_options, compiled_once
+from ._stroke import imitate, stroke
 
 CHECKPOINT_FILE = "checkpoint.npz"
 
@@ -213,6 +214,8 @@ def train(
         )
     with interrupts_deferred():  # one program (the keys too), not op by op
         ts, k_eval = _first_state(kept, config.seed, params)
+    if init is None and _population(config) == 1 and not _checkpointed(out_dir, resume):
+        init = _stroke_start(task, ts.controller, params, config.seed, say)
     if init is not None:
         ts = _started_from(ts, init)
     ts_sharding, whole = batch_placement(ts, devices, 1 if _population(config) > 1 else 0)
@@ -426,6 +429,28 @@ def _finite(tree: PyTree) -> bool:
     """Whether every floating-point array of ``tree`` is finite."""
     leaves = jax.tree.leaves(eqx.filter(tree, eqx.is_inexact_array))
     return all(bool(np.all(np.isfinite(np.asarray(x)))) for x in leaves)
+
+
+def _checkpointed(out_dir: str | Path | None, resume: bool) -> bool:
+    """Whether this run continues from a checkpoint (which holds its controller)."""
+    return resume and out_dir is not None and (Path(out_dir) / CHECKPOINT_FILE).exists()
+
+
+def _stroke_start(
+    task: AnyTask, controller: MLPController, params: PyTree, seed: int, say: Any
+) -> MLPController | None:
+    """The controller fitted to the task's open-loop stroke (``_stroke``), if it declares one."""
+    drive = stroke(task)
+    if drive is None:
+        return None
+    t0 = time.perf_counter()
+    key = jax.random.fold_in(jax.random.PRNGKey(seed), 1)  # apart from the training's keys
+    fitted, error = imitate(task, controller, params, key, drive)
+    say(
+        f"starting from the task's stroke (period {drive.period:g} steps), fitted in "
+        f"{time.perf_counter() - t0:.0f} s (mean squared action error {error:.2g})"
+    )
+    return fitted
 
 
 def _started_from(ts: Any, init: Any) -> Any:
