@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 import diffcontrol
+from diffcontrol.errors import ConfigError
 from diffcontrol.tasks import Pendulum, Stroke
 from diffcontrol.training import make_trainer
 from diffcontrol.training._stroke import imitate
@@ -91,3 +92,24 @@ def test_training_starts_from_the_stroke_of_a_task_that_declares_one(runs):
 def test_a_population_starts_from_random_weights(runs):
     _, said = runs(StrokedPendulum(), population=2)
     assert not any("stroke" in line for line in said)
+
+
+@pytest.mark.parametrize(
+    ("drive", "needle"),
+    [
+        (Stroke(40.0, (1.0, 1.0), (0.0, 0.0)), "2 amplitudes and 2 phases: give one of each per"),
+        (Stroke(0.0, (1.0,), (0.0,)), "give a positive period and finite numbers"),
+        (Stroke(40.0, (float("nan"),), (0.0,)), "give a positive period and finite numbers"),
+        ((40.0, (1.0,), (0.0,)), "return a diffcontrol.tasks.Stroke"),
+    ],
+)
+def test_a_stroke_that_cannot_be_played_is_one_line(drive, needle):
+    class Bad(StrokedPendulum):
+        name = "bad-stroke"
+
+        def stroke(self):
+            return drive
+
+    with pytest.raises(ConfigError, match="task 'bad-stroke'") as e:
+        diffcontrol.train(Bad(), _config(Bad()))
+    assert needle in str(e.value) and "\n" not in str(e.value)

@@ -23,7 +23,7 @@ from .._run_files import save_run
 from ..checks import validate_task
 from ..controllers import MLPController
 from ..errors import ConfigError, ModelFileError, TrainingDiverged
-from ..tasks import AnyTask, StepLoss, TrajectoryLoss, as_task, task_params
+from ..tasks import AnyTask, StepLoss, Stroke, Task, TrajectoryLoss, as_task, task_params
 from ._checkpoint import load_checkpoint, save_checkpoint
 from ._devices import batch_placement, check_devices, divisible, gathered, is_writer, placer
 from ._diagnostics import Diagnostics
@@ -443,6 +443,7 @@ def _stroke_start(
     drive = stroke(task)
     if drive is None:
         return None
+    _check_stroke(task, drive)
     t0 = time.perf_counter()
     key = jax.random.fold_in(jax.random.PRNGKey(seed), 1)  # apart from the training's keys
     fitted, error = imitate(task, controller, params, key, drive)
@@ -451,6 +452,27 @@ def _stroke_start(
         f"{time.perf_counter() - t0:.0f} s (mean squared action error {error:.2g})"
     )
     return fitted
+
+
+def _check_stroke(task: AnyTask, drive: Any) -> None:
+    """Refuse, in one line, a stroke that ``imitate`` cannot play on ``task``."""
+    where = f"task {task.name!r}'s stroke()"
+    if not isinstance(task, Task):
+        raise ConfigError(f"{where}: only a discrete-time task can start from a stroke")
+    if not isinstance(drive, Stroke):
+        raise ConfigError(f"{where} returned {drive!r}: return a diffcontrol.tasks.Stroke")
+    try:
+        period = float(drive.period)
+        amplitude, phase = (np.asarray(v, float).reshape(-1) for v in drive[1:])
+    except (TypeError, ValueError):
+        raise ConfigError(f"{where}: {drive}: give numbers") from None
+    if not (amplitude.size == phase.size == task.action_size):
+        raise ConfigError(
+            f"{where} has {amplitude.size} amplitudes and {phase.size} phases: give one of "
+            f"each per action ({task.action_size})"
+        )
+    if not (np.isfinite([period, *amplitude, *phase]).all() and period > 0):
+        raise ConfigError(f"{where}: {drive}: give a positive period and finite numbers")
 
 
 def _started_from(ts: Any, init: Any) -> Any:
