@@ -422,7 +422,10 @@ class TrainLoop(Loop):
                 + self.compiled(),
                 "warnings": self.diagnostics.warnings,
             }
-            save_checkpoint(self.checkpoint, whole_state, meta)
+            # an interrupt inside np.savez leaves its ZipFile open, whose finaliser then prints
+            # a traceback: the signal waits for the whole write (atomic either way)
+            with interrupts_deferred():
+                save_checkpoint(self.checkpoint, whole_state, meta)
 
 
 def _finite(tree: PyTree) -> bool:
