@@ -148,6 +148,8 @@ def train(
             trained run's ``open_run(dir).controller`` at a lower learning rate). It must have
             the network this run would make (the same sizes, activation and head); one
             controller only (``population`` 1). A resumed run starts from its checkpoint.
+            Without ``init``, a task that declares a ``stroke`` starts from a network fitted to
+            play it (``training._stroke``); others from random weights.
 
     Returns:
         A ``TrainResult`` whose controller is the one of the best evaluation point when
